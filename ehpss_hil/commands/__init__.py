@@ -1,0 +1,1 @@
+"""One module per ``ehpss-hil`` subcommand (discovered by ``ehpss_hil.cli``)."""

@@ -1,0 +1,171 @@
+"""Process configuration (``configs/controller.yaml``, ``configs/emulator.yaml``) as frozen
+dataclasses, validated with precise errors (file, key path, expectation)."""
+
+from __future__ import annotations
+
+import ipaddress
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from .control.tuning import ControlTuning
+from .errors import ConfigError
+from .scenario import Reference
+from .schema import build, load_yaml, rng
+
+Mode = Literal["nrc", "smac", "mmac-paper", "mmac", "oracle"]
+DAEMON_MODES = ("nrc", "smac", "mmac-paper", "mmac")
+
+#: the embedded default bus: an administratively scoped IPv4 group, TTL 0 (never leaves the host)
+DEFAULT_MULTICAST_GROUP = "239.74.163.2"
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """python-can bus selection, like python-can's own config keys.
+
+    ``udp_multicast`` (the embedded default) is confined to this host: the group must be IPv4 in
+    239.0.0.0/8 (or IPv6 link/interface-local ff01::/16, ff02::/16) and ``hop_limit`` must be 0.
+    """
+
+    interface: Literal["udp_multicast", "socketcan", "virtual"] = "udp_multicast"
+    channel: str = DEFAULT_MULTICAST_GROUP
+    bitrate: int = field(default=1_000_000, metadata=rng(10_000, 1_000_000))
+    port: int = field(default=43113, metadata=rng(1024, 65535))
+    hop_limit: int = field(default=0, metadata=rng(0, 0))
+    receive_buffer_bytes: int = field(default=4 * 1024 * 1024, metadata=rng(65536, 256 * 2**20))
+
+    def __post_init__(self) -> None:
+        if self.interface == "udp_multicast":
+            try:
+                addr = ipaddress.ip_address(self.channel)
+            except ValueError as exc:
+                raise ConfigError("", "channel", f"not an IP multicast group: {self.channel!r}") from exc
+            ok = (addr.version == 4 and addr in ipaddress.ip_network("239.0.0.0/8")) or (
+                addr.version == 6 and any(addr in ipaddress.ip_network(n)
+                                          for n in ("ff01::/16", "ff02::/16")))
+            if not ok:
+                raise ConfigError("", "channel", "udp_multicast group must be in 239.0.0.0/8 "
+                                  f"(or ff01::/16, ff02::/16) so frames stay on this host; "
+                                  f"got {self.channel}")
+        elif not self.channel:
+            raise ConfigError("", "channel", "must name the interface (e.g. vcan0, can0)")
+
+
+@dataclass(frozen=True)
+class CanIds:
+    """Frame ID layout: the DBC's application frames shifted to ``id_base``; heartbeats at
+    0x700 + node id. ``max_delta_counter``: E2E counter jumps accepted as OK_SOME_LOST."""
+
+    id_base: int = field(default=0x100, metadata=rng(0, 0x790))
+    controller_node: int = field(default=1, metadata=rng(1, 127))
+    emulator_node: int = field(default=2, metadata=rng(1, 127))
+    max_delta_counter: int = field(default=3, metadata=rng(1, 14))
+
+    def __post_init__(self) -> None:
+        if self.controller_node == self.emulator_node:
+            raise ConfigError("", "emulator_node", "must differ from controller_node")
+
+
+@dataclass(frozen=True)
+class LogConfig:
+    """candump ``-L`` log: empty path = no log. Rotation by size; writer queue bound (lines)."""
+
+    path: str = ""
+    max_bytes: int = field(default=256 * 2**20, metadata=rng(4096))
+    backups: int = field(default=5, metadata=rng(0, 1000))
+    queue_lines: int = field(default=200_000, metadata=rng(1000))
+
+
+@dataclass(frozen=True)
+class RtOptions:
+    """Real-time options; each warns clearly when not permitted. ``cpu`` −1 = no affinity."""
+
+    priority: int = field(default=0, metadata=rng(0, 99))
+    cpu: int = field(default=-1, metadata=rng(-1, 1023))
+    lock_memory: bool = False
+    gc_freeze: bool = True
+
+
+@dataclass(frozen=True)
+class Watchdog:
+    """Fail-safe: no valid sensor frame for ``timeout_cycles`` → ``failsafe`` action, state FAULT.
+
+    Leaves FAULT after ``recovery_cycles`` fresh cycles only when ``auto_recover`` is true.
+    """
+
+    timeout_cycles: int = field(default=3, metadata=rng(1, 10000))
+    recovery_cycles: int = field(default=50, metadata=rng(1, 1_000_000))
+    auto_recover: bool = False
+    failsafe: Literal["zero", "hold"] = "zero"
+    max_e2e_errors: int = field(default=10, metadata=rng(1, 1_000_000))
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """``configs/controller.yaml``."""
+
+    bus: BusConfig = field(default_factory=BusConfig)
+    ids: CanIds = field(default_factory=CanIds)
+    mode: Mode = "mmac"
+    rate_hz: float = field(default=1000.0, metadata=rng(10.0, 10000.0))
+    reference: Reference = field(default_factory=Reference)
+    watchdog: Watchdog = field(default_factory=Watchdog)
+    status_rate_hz: float = field(default=50.0, metadata=rng(1.0, 1000.0))
+    heartbeat_rate_hz: float = field(default=10.0, metadata=rng(0.1, 100.0))
+    stats_interval_s: float = field(default=10.0, metadata=rng(0.0))
+    rt: RtOptions = field(default_factory=RtOptions)
+    log: LogConfig = field(default_factory=LogConfig)
+    tuning: ControlTuning = field(default_factory=ControlTuning)
+    params: str = ""
+    dbc: str = ""
+
+    def __post_init__(self) -> None:
+        if self.mode not in DAEMON_MODES:
+            raise ConfigError("", "mode", "oracle is for benchmarks only, not for the daemon "
+                              f"(expected one of {', '.join(DAEMON_MODES)})")
+
+
+@dataclass(frozen=True)
+class EmulatorConfig:
+    """``configs/emulator.yaml``."""
+
+    bus: BusConfig = field(default_factory=BusConfig)
+    ids: CanIds = field(default_factory=CanIds)
+    rate_hz: float = field(default=1000.0, metadata=rng(10.0, 10000.0))
+    mode: Literal["realtime", "lockstep"] = "realtime"
+    command_timeout_s: float = field(default=0.010, metadata=rng(0.0, 10.0, lo_open=True))
+    truth: bool = False
+    fault_inject: bool = False
+    scenario: str = ""
+    heartbeat_rate_hz: float = field(default=10.0, metadata=rng(0.1, 100.0))
+    rt: RtOptions = field(default_factory=RtOptions)
+    log: LogConfig = field(default_factory=LogConfig)
+    params: str = ""
+    dbc: str = ""
+
+
+def _resolve(base: Path, value: str) -> str:
+    if not value:
+        return value
+    p = Path(value)
+    return str(p if p.is_absolute() else (base / p).resolve())
+
+
+def load_controller_config(path: str | Path) -> ControllerConfig:
+    """Load ``controller.yaml``; relative ``params``/``dbc``/``log.path`` resolve against its dir."""
+    p = Path(path)
+    cfg = build(ControllerConfig, load_yaml(p), str(p))
+    base = p.resolve().parent
+    from dataclasses import replace
+    return replace(cfg, params=_resolve(base, cfg.params), dbc=_resolve(base, cfg.dbc))
+
+
+def load_emulator_config(path: str | Path) -> EmulatorConfig:
+    """Load ``emulator.yaml``; relative paths resolve against its directory."""
+    p = Path(path)
+    cfg = build(EmulatorConfig, load_yaml(p), str(p))
+    base = p.resolve().parent
+    from dataclasses import replace
+    return replace(cfg, params=_resolve(base, cfg.params), dbc=_resolve(base, cfg.dbc),
+                   scenario=_resolve(base, cfg.scenario))

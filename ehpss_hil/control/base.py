@@ -1,0 +1,72 @@
+"""The one controller contract shared by the lockstep simulator, the daemon and replay."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from ..physics.params import Params
+
+
+@dataclass(slots=True)
+class Measurement:
+    """One cycle's decoded sensor data, SI units.
+
+    ``position_m``: position sensor y_s = k_DFT·x (+ noise, bias) (m).
+    ``spool_m``: spool LVDT k_LOE·x_v (+ noise) (m).
+    ``coil_current_a``: current the valve amplifier applied during the last sample (A).
+    ``load_pressure_pa``: P_L (Pa), logged, not used for identification.
+    ``reference_m``: desired position x_d for this cycle (m).
+    ``fresh``: False when no valid sensor frame arrived this cycle (values are the last valid ones).
+    """
+
+    position_m: float = 0.0
+    spool_m: float = 0.0
+    coil_current_a: float = 0.0
+    load_pressure_pa: float = 0.0
+    reference_m: float = 0.0
+    fresh: bool = True
+
+
+@dataclass(slots=True)
+class ValveCommand:
+    """The controller's output for one cycle: coil current setpoint (A) and enable."""
+
+    current_a: float = 0.0
+    enable: bool = True
+
+
+@dataclass
+class ControllerStatus:
+    """Read-only view of a controller's internals (for CTRL_STATUS / CTRL_INDEX and reports).
+
+    ``active_model``: channel name → active model slot (DBC CTRL_INDEX ModelSlot numbering).
+    ``k_loe_hat``/``k_dft_hat``: the estimates used for compensation (dimensionless).
+    ``index``: slot → performance index J; ``theta``: slot → the model's parameter θ.
+    """
+
+    mode: str = "nrc"
+    active_model: dict[str, int] = field(default_factory=dict)
+    k_loe_hat: float = 1.0
+    k_dft_hat: float = 1.0
+    index: dict[int, float] = field(default_factory=dict)
+    theta: dict[int, float] = field(default_factory=dict)
+    switches: int = 0
+
+
+class Controller(Protocol):
+    """A discrete-time position controller running at a fixed sample time."""
+
+    mode: str
+
+    def configure(self, params: Params, ts_s: float) -> None:
+        """Build every matrix, gain and buffer; nothing is allocated in :meth:`step` afterwards."""
+
+    def reset(self) -> None:
+        """Back to the initial state (integrators, estimates, indices, active models)."""
+
+    def step(self, meas: Measurement) -> ValveCommand:
+        """One cycle: measurement in, valve command out."""
+
+    def status(self) -> ControllerStatus:
+        """The current status (may allocate; call at status-frame rate, not every cycle)."""

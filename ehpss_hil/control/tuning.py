@@ -1,0 +1,33 @@
+"""Tuning constants of the adaptive layer (DESIGN.md §5), as a frozen, YAML-loadable dataclass.
+
+Units: rates in 1/s, times in s; ε-related values are normalized (dimensionless).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..schema import rng
+
+
+@dataclass(frozen=True)
+class ControlTuning:
+    """Estimator, index and supervisor constants (defaults = DESIGN §5)."""
+
+    nlms_gain_per_ms: float = field(default=0.2, metadata=rng(0.0, 2.0, lo_open=True))
+    index_a1: float = field(default=1.0, metadata=rng(0.0))
+    index_a2: float = field(default=1.0, metadata=rng(0.0))
+    forgetting_1_s: float = field(default=10.0, metadata=rng(0.0, lo_open=True))
+    hysteresis: float = field(default=0.2, metadata=rng(0.0, 1.0))
+    epsilon0: float = field(default=0.005, metadata=rng(0.0))
+    noise_margin_factor: float = field(default=2.0, metadata=rng(0.0))
+    dwell_s: float = field(default=0.005, metadata=rng(0.0))
+    warmup_s: float = field(default=0.1, metadata=rng(0.0))
+    min_theta_separation: float = field(default=0.02, metadata=rng(0.0))
+    guard_epsilon: float = field(default=0.4, metadata=rng(0.0, lo_open=True))
+    sensor_failed_below: float = field(default=0.15, metadata=rng(0.0, 1.0))
+    anchor_rate_1_s: float = field(default=0.2, metadata=rng(0.0))
+    fixed_k_loe: tuple[float, ...] = (1.0, 0.5)
+    fixed_k_dft: tuple[float, ...] = (1.0, 0.5, 0.0)
+    k_loe_limits: tuple[float, ...] = (0.05, 1.5)
+    k_dft_limits: tuple[float, ...] = (0.0, 2.5)

@@ -1,0 +1,49 @@
+"""The project's one exception hierarchy.
+
+Every error raised on purpose derives from :class:`EhpssError`; each child also inherits the
+matching builtin so callers may catch either (the pattern of python-can's ``CanError``).
+"""
+
+from __future__ import annotations
+
+
+class EhpssError(Exception):
+    """Root of all ehpss-hil errors."""
+
+    #: process exit code the CLI uses for this error class
+    exit_code: int = 1
+
+
+class ConfigError(EhpssError, ValueError):
+    """A configuration or scenario file is invalid.
+
+    The message names the file, the key path (``events[2].k_loe``) and what was expected.
+    """
+
+    exit_code = 2
+
+    def __init__(self, source: str, key_path: str, reason: str) -> None:
+        self.source = source
+        self.key_path = key_path
+        self.reason = reason
+        where = f"{source}: " if source else ""
+        key = key_path if key_path else "<top level>"
+        super().__init__(f"{where}{key}: {reason}")
+
+
+class FrameError(EhpssError, ValueError):
+    """A CAN frame cannot be encoded or decoded (malformed, unknown, implausible)."""
+
+
+class BusUnavailableError(EhpssError, OSError):
+    """The configured CAN interface/channel cannot be opened (missing vcan0, no AF_CAN, ...)."""
+
+    exit_code = 3
+
+
+class ModelError(EhpssError, ArithmeticError):
+    """A physical/controller model cannot be built (unstable, singular, bad dimensions)."""
+
+
+class ControlTimeoutError(EhpssError, TimeoutError):
+    """Sensor or command data went stale for longer than the configured watchdog allows."""

@@ -1,0 +1,59 @@
+"""Physical and controller parameters (SI), loaded once from ``configs/params.yaml``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .. import PROJECT_ROOT
+from ..schema import build, load_yaml, rng
+
+DEFAULT_PARAMS = PROJECT_ROOT / "configs" / "params.yaml"
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """Servo valve + cylinder coefficients of the paper's eq 39 (SI units, see each name)."""
+
+    cylinder_damping_1_s: float = field(default=2576.0, metadata=rng(0.0, lo_open=True))
+    hydraulic_stiffness_1_s2: float = field(default=3.136e7, metadata=rng(0.0, lo_open=True))
+    flow_gain_1_s3: float = field(default=1.031e8, metadata=rng(0.0, lo_open=True))
+    valve_damping_1_s: float = field(default=3402.0, metadata=rng(0.0, lo_open=True))
+    valve_stiffness_1_s2: float = field(default=5.905e6, metadata=rng(0.0, lo_open=True))
+    valve_gain_m_per_a_s2: float = field(default=9.739e7, metadata=rng(0.0, lo_open=True))
+    load_mass_kg: float = field(default=20.0, metadata=rng(0.0, lo_open=True))
+    piston_area_m2: float = field(default=2.206e-4, metadata=rng(0.0, lo_open=True))
+
+    @property
+    def velocity_gain_1_s(self) -> float:
+        """K_c: steady piston velocity per metre of spool, flow_gain / hydraulic_stiffness (1/s)."""
+        return self.flow_gain_1_s3 / self.hydraulic_stiffness_1_s2
+
+    @property
+    def valve_static_gain_m_per_a(self) -> float:
+        """Steady spool displacement per ampere of coil current (m/A)."""
+        return self.valve_gain_m_per_a_s2 / self.valve_stiffness_1_s2
+
+
+@dataclass(frozen=True)
+class ControllerGains:
+    """PI gains of eq 39: ``e = K_f·x_d − y_f``, ``z' = K_i·e``, ``I = K_a·(K_p·e + K_i·z)``."""
+
+    k_f: float = field(default=12.71, metadata=rng(0.0, lo_open=True))
+    k_p: float = field(default=4.0, metadata=rng(0.0))
+    k_i: float = field(default=2.0, metadata=rng(0.0))
+    k_a: float = field(default=0.0861, metadata=rng(0.0, lo_open=True))
+
+
+@dataclass(frozen=True)
+class Params:
+    """Everything ``configs/params.yaml`` holds."""
+
+    plant: PlantParams = field(default_factory=PlantParams)
+    controller: ControllerGains = field(default_factory=ControllerGains)
+
+
+def load_params(path: str | Path | None = None) -> Params:
+    """Load parameters from YAML (default: the shipped ``configs/params.yaml``)."""
+    p = Path(path) if path is not None else DEFAULT_PARAMS
+    return build(Params, load_yaml(p), str(p))

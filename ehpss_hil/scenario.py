@@ -1,0 +1,191 @@
+"""Scenario files (DESIGN.md §9): reference, noise, frame loss, delay, disturbance, fault events.
+
+A scenario is loaded into frozen dataclasses; any unknown key, wrong type, missing key or
+out-of-range value raises :class:`~ehpss_hil.errors.ConfigError` naming file and key path.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from .errors import ConfigError
+from .physics.faults import FaultState
+from .schema import build, load_yaml, rng
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Desired position x_d(t) (m).
+
+    kinds: ``sine`` (amplitude·sin(ω t)), ``step`` (amplitude from ``start_s``), ``ramp``
+    (``rate_m_s``·(t − start_s), clipped to ±amplitude), ``file`` (CSV ``t_s,x_m``, linear
+    interpolation, held after the end).
+    """
+
+    kind: Literal["sine", "step", "ramp", "file"] = "sine"
+    amplitude_m: float = field(default=0.001, metadata=rng(0.0, 0.5))
+    omega_rad_s: float = field(default=5.0, metadata=rng(0.0, 2000.0))
+    start_s: float = field(default=0.0, metadata=rng(0.0))
+    rate_m_s: float = field(default=0.001, metadata=rng(-1.0, 1.0))
+    path: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind == "file" and not self.path:
+            raise ConfigError("", "path", "required when kind is 'file'")
+
+    def sample(self, t_s: np.ndarray, base_dir: Path | None = None) -> np.ndarray:
+        """x_d at the times ``t_s`` (m)."""
+        if self.kind == "sine":
+            return self.amplitude_m * np.sin(self.omega_rad_s * t_s)
+        if self.kind == "step":
+            return np.where(t_s >= self.start_s, self.amplitude_m, 0.0)
+        if self.kind == "ramp":
+            x = self.rate_m_s * np.maximum(t_s - self.start_s, 0.0)
+            return np.clip(x, -self.amplitude_m, self.amplitude_m)
+        p = Path(self.path)
+        if not p.is_absolute() and base_dir is not None:
+            p = base_dir / p
+        try:
+            data = np.loadtxt(p, delimiter=",", ndmin=2)
+        except (OSError, ValueError) as exc:
+            raise ConfigError(str(p), "reference.path", f"cannot read trajectory CSV: {exc}") from exc
+        return np.interp(t_s, data[:, 0], data[:, 1])
+
+    @property
+    def spool_amplitude_m(self) -> float:
+        """Nominal spool amplitude this reference needs, r·ω/K_c with K_c = 3.288 1/s (m).
+
+        For steps and ramps (no ω) the rate-equivalent amplitude is used.
+        """
+        k_c = 1.031e8 / 3.136e7
+        if self.kind == "sine":
+            return self.amplitude_m * max(self.omega_rad_s, 1.0) / k_c
+        if self.kind == "ramp":
+            return abs(self.rate_m_s) / k_c
+        return self.amplitude_m * 5.0 / k_c
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Standard deviations of white measurement noise (SI units)."""
+
+    position_m: float = field(default=0.0, metadata=rng(0.0, 0.01))
+    spool_m: float = field(default=0.0, metadata=rng(0.0, 0.001))
+    pressure_pa: float = field(default=0.0, metadata=rng(0.0, 1e7))
+
+
+@dataclass(frozen=True)
+class Disturbance:
+    """``ω(t) = offset + amplitude·sin(omega·t)`` from ``start_s`` (the paper's case 4), in metres.
+
+    ``enters: sensor`` subtracts it from the measured position, ``y_s = k_DFT·x − ω`` (the paper's
+    G = B: the loop sees it exactly like an offset added to x_d, so an uncompensated loop moves
+    the piston by ω); ``enters: valve`` adds ``ω·K_f·K_a·K_p`` amperes to the applied coil
+    current (a load-like disturbance the PI integrates away).
+    """
+
+    kind: Literal["none", "offset_sine"] = "offset_sine"
+    offset_m: float = field(default=0.0, metadata=rng(-0.1, 0.1))
+    amplitude_m: float = field(default=0.0, metadata=rng(0.0, 0.1))
+    omega_rad_s: float = field(default=10.0, metadata=rng(0.0, 2000.0))
+    start_s: float = field(default=0.0, metadata=rng(0.0))
+    enters: Literal["sensor", "valve"] = "sensor"
+
+    def value_m(self, t_s: float) -> float:
+        """ω(t) (m); 0 before ``start_s``."""
+        if self.kind == "none" or t_s < self.start_s:
+            return 0.0
+        return self.offset_m + self.amplitude_m * math.sin(self.omega_rad_s * t_s)
+
+
+@dataclass(frozen=True)
+class Event:
+    """A fault change at ``t_s``; every value given persists until changed by a later event."""
+
+    t_s: float = field(metadata=rng(0.0))
+    k_loe: float | None = field(default=None, metadata=rng(0.0, 1.5, lo_open=True))
+    k_q: float | None = field(default=None, metadata=rng(0.0, 1.5, lo_open=True))
+    k_dft: float | None = field(default=None, metadata=rng(0.0, 2.5))
+    position_bias_m: float | None = field(default=None, metadata=rng(-0.1, 0.1))
+    stuck: bool | None = None
+    current_limit_a: float | None = field(default=None, metadata=rng(0.0, 1.0, lo_open=True))
+    frame_loss: float | None = field(default=None, metadata=rng(0.0, 1.0))
+
+    def __post_init__(self) -> None:
+        if all(getattr(self, k) is None for k in _EVENT_KEYS):
+            raise ConfigError("", "", "an event must set at least one of " + ", ".join(_EVENT_KEYS))
+
+    def apply(self, faults: FaultState) -> FaultState:
+        """The fault state after this event."""
+        changes = {k: getattr(self, k) for k in _FAULT_KEYS if getattr(self, k) is not None}
+        return replace(faults, **changes)
+
+
+_FAULT_KEYS = ("k_loe", "k_q", "k_dft", "position_bias_m", "stuck", "current_limit_a")
+_EVENT_KEYS = _FAULT_KEYS + ("frame_loss",)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One test scenario (DESIGN.md §9). Times in s, lengths in m."""
+
+    name: str
+    duration_s: float = field(metadata=rng(0.0, 86400.0, lo_open=True))
+    sample_time_s: float = field(default=0.001, metadata=rng(1e-5, 0.1))
+    seed: int = field(default=1, metadata=rng(0, 2**32 - 1))
+    reference: Reference = field(default_factory=Reference)
+    noise: Noise = field(default_factory=Noise)
+    frame_loss: float = field(default=0.0, metadata=rng(0.0, 1.0))
+    transport_delay_samples: int = field(default=1, metadata=rng(0, 100))
+    disturbance: Disturbance = field(default_factory=lambda: Disturbance(kind="none"))
+    events: tuple[Event, ...] = ()
+    description: str = ""
+    #: directory of the file it came from (for relative trajectory paths); not a YAML key
+    base_dir: str = field(default="", metadata={"internal": True})
+
+    def __post_init__(self) -> None:
+        for i in range(1, len(self.events)):
+            if self.events[i].t_s < self.events[i - 1].t_s:
+                raise ConfigError("", f"events[{i}].t_s",
+                                  f"events must be in time order ({self.events[i].t_s} < "
+                                  f"{self.events[i - 1].t_s})")
+        for i, ev in enumerate(self.events):
+            if ev.t_s > self.duration_s:
+                raise ConfigError("", f"events[{i}].t_s",
+                                  f"event after the end of the run ({ev.t_s} > {self.duration_s})")
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples in the run."""
+        return int(round(self.duration_s / self.sample_time_s))
+
+    def fault_timeline(self) -> list[tuple[int, FaultState, float]]:
+        """``(sample index, fault state, frame loss)`` at the start and at every event."""
+        out: list[tuple[int, FaultState, float]] = [(0, FaultState(), self.frame_loss)]
+        faults, loss = FaultState(), self.frame_loss
+        for ev in self.events:
+            faults = ev.apply(faults)
+            if ev.frame_loss is not None:
+                loss = ev.frame_loss
+            out.append((int(round(ev.t_s / self.sample_time_s)), faults, loss))
+        return out
+
+    def reference_samples(self) -> np.ndarray:
+        """x_d at every sample (m)."""
+        t = np.arange(self.n_samples) * self.sample_time_s
+        return self.reference.sample(t, Path(self.base_dir) if self.base_dir else None)
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Load and validate a scenario YAML file."""
+    p = Path(path)
+    data = load_yaml(p)
+    if isinstance(data, dict) and "base_dir" in data:
+        raise ConfigError(str(p), "base_dir", "unknown key")
+    sc = build(Scenario, data, str(p))
+    return replace(sc, base_dir=str(p.resolve().parent))

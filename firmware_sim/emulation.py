@@ -1,0 +1,174 @@
+"""The emulated EHPSS, independent of any bus or clock: fault schedule, plant, sensors, noise.
+
+One implementation, used by the ``firmware-sim`` process and by the lockstep simulator.
+
+Sample convention (index k, period Ts): :meth:`PlantEmulation.measure` gives the sensor sample
+y[k] of the state x[k] with the faults in force at k; :meth:`PlantEmulation.advance` applies a
+coil current held over [k, k+1) and moves to k+1. A loop with a one-sample transport delay applies
+over [k, k+1) the command computed from y[k−1].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ehpss_hil.physics.faults import FaultState
+from ehpss_hil.physics.params import Params
+from ehpss_hil.physics.plant import PlantStepper
+from ehpss_hil.scenario import Scenario
+
+_BLOCK = 4096
+
+
+@dataclass(slots=True)
+class SensorSample:
+    """What the sensors report at sample k (SI), plus the truth kept for metrics.
+
+    ``coil_current_a`` is the current applied over the previous sample (the amplifier's echo).
+    """
+
+    k: int
+    t_s: float
+    position_m: float
+    spool_m: float
+    load_pressure_pa: float
+    coil_current_a: float
+    true_position_m: float
+    true_spool_m: float
+    faults: FaultState
+    current_saturated: bool
+
+
+class _Stream:
+    """Seeded random numbers drawn in blocks (cheap per sample, reproducible for any length)."""
+
+    def __init__(self, seed: int, stream: int, kind: str) -> None:
+        self._rng = np.random.default_rng([seed, stream])
+        self._kind = kind
+        self._buf = np.empty(0)
+        self._i = 0
+
+    def next(self) -> float:
+        if self._i >= len(self._buf):
+            self._buf = (self._rng.standard_normal(_BLOCK) if self._kind == "normal"
+                         else self._rng.random(_BLOCK))
+            self._i = 0
+        v = self._buf[self._i]
+        self._i += 1
+        return float(v)
+
+
+class PlantEmulation:
+    """Plant + sensors + the scenario's fault schedule, advanced one sample at a time."""
+
+    def __init__(self, params: Params, scenario: Scenario) -> None:
+        self.params = params
+        self.scenario = scenario
+        self.ts_s = scenario.sample_time_s
+        self.plant = PlantStepper(params, self.ts_s)
+        self._timeline = scenario.fault_timeline()
+        g = params.controller
+        self._valve_dist_gain_a_per_m = g.k_f * g.k_a * g.k_p
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to k = 0, at rest, with fresh (identically seeded) random streams."""
+        seed = self.scenario.seed
+        self._noise = [_Stream(seed, i, "normal") for i in range(3)]
+        self._loss = [_Stream(seed, 10 + i, "uniform") for i in range(2)]
+        self.plant.reset()
+        self.k = 0
+        self._next_event = 0
+        self.frame_loss = self.scenario.frame_loss
+        self._override: dict[str, float | bool] = {}
+        self._stuck_value_m = 0.0
+        self._last_applied_a = 0.0
+        self._saturated = False
+        self._apply_schedule()
+
+    # ---- faults -----------------------------------------------------------------------------
+    def _apply_schedule(self) -> None:
+        tl = self._timeline
+        changed = False
+        while self._next_event < len(tl) and tl[self._next_event][0] <= self.k:
+            _, faults, loss = tl[self._next_event]
+            self._scheduled = faults
+            self.frame_loss = loss
+            self._next_event += 1
+            changed = True
+        if changed:
+            self._set(replace(self._scheduled, **self._override))  # type: ignore[arg-type]
+
+    def _set(self, faults: FaultState) -> None:
+        if faults.stuck and not self.plant.faults.stuck:
+            self._stuck_value_m = self._measured_position()
+        self.plant.set_faults(faults)
+
+    def inject(self, **values: float | bool) -> FaultState:
+        """Set fault values at run time (FAULT_INJECT); they override the schedule until cleared.
+
+        Keys: ``k_loe``, ``k_q``, ``k_dft``, ``position_bias_m``, ``stuck``, ``current_limit_a``;
+        ``frame_loss`` sets the loss probability. Returns the new fault state.
+        """
+        if "frame_loss" in values:
+            self.frame_loss = float(values.pop("frame_loss"))
+        self._override.update(values)
+        self._set(replace(self.plant.faults, **values))  # type: ignore[arg-type]
+        return self.plant.faults
+
+    def clear_injected(self) -> FaultState:
+        """Drop every run-time override; the scheduled faults apply again."""
+        self._override.clear()
+        self._set(self._scheduled)
+        return self.plant.faults
+
+    @property
+    def faults(self) -> FaultState:
+        """The fault state in force at the current sample."""
+        return self.plant.faults
+
+    # ---- sensors ----------------------------------------------------------------------------
+    def _disturbance_m(self) -> float:
+        return self.scenario.disturbance.value_m(self.k * self.ts_s)
+
+    def _measured_position(self) -> float:
+        f = self.plant.faults
+        y = f.k_dft * self.plant.position_m + f.position_bias_m
+        if self.scenario.disturbance.enters == "sensor":
+            y -= self._disturbance_m()
+        return y
+
+    def measure(self) -> SensorSample:
+        """The sensor sample y[k] (draws this sample's noise; call exactly once per sample)."""
+        nz = self.scenario.noise
+        n_pos, n_spool, n_p = (s.next() for s in self._noise)
+        if self.plant.faults.stuck:
+            pos = self._stuck_value_m
+        else:
+            pos = self._measured_position() + nz.position_m * n_pos
+        return SensorSample(
+            k=self.k, t_s=self.k * self.ts_s, position_m=pos,
+            spool_m=self.plant.spool_actual_m + nz.spool_m * n_spool,
+            load_pressure_pa=self.plant.load_pressure_pa + nz.pressure_pa * n_p,
+            coil_current_a=self._last_applied_a, true_position_m=self.plant.position_m,
+            true_spool_m=self.plant.spool_actual_m, faults=self.plant.faults,
+            current_saturated=self._saturated)
+
+    def frame_lost(self, direction: int) -> bool:
+        """Seeded loss draw for this sample: direction 0 = sensor frames, 1 = command frames."""
+        return self._loss[direction].next() < self.frame_loss
+
+    # ---- dynamics ---------------------------------------------------------------------------
+    def advance(self, current_a: float) -> float:
+        """Hold ``current_a`` (A) over [k, k+1), step to k+1; returns the applied current (A)."""
+        i = current_a
+        if self.scenario.disturbance.enters == "valve":
+            i += self._valve_dist_gain_a_per_m * self._disturbance_m()
+        applied = self.plant.step(i)
+        self._saturated = applied != i
+        self._last_applied_a = applied
+        self.k += 1
+        self._apply_schedule()
+        return applied
