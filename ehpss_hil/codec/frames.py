@@ -79,6 +79,15 @@ def _data_ids(msg: DbcMessage) -> tuple[int, ...] | None:
     return ids
 
 
+def _bounds(sig: Any) -> tuple[str, float | None, float | None]:
+    """A signal's plausible range, widened by half an LSB so exact range ends survive rounding."""
+    lo, hi = sig.minimum, sig.maximum
+    if lo is None or hi is None or lo == hi:
+        return (sig.name, None, None)
+    half = abs(float(sig.scale)) / 2
+    return (sig.name, float(lo) - half, float(hi) + half)
+
+
 class FrameCodec:
     """Load-once codec for the project's DBC, with per-frame TX counters and RX state.
 
@@ -103,9 +112,7 @@ class FrameCodec:
                 can_id = HEARTBEAT_BASE + nodes[msg.name]
             else:
                 can_id = msg.frame_id - DBC_ID_BASE + id_base
-            bounds = tuple(
-                (s.name, s.minimum, s.maximum) for s in msg.signals
-                if s.name not in ("CRC", "Counter"))
+            bounds = tuple(_bounds(s) for s in msg.signals if s.name not in ("CRC", "Counter"))
             zeros = {s.name: 0 for s in msg.signals if s.multiplexer_ids is None}
             conv = {s.name: s.conversion for s in msg.signals}
             spec = _Spec(msg, can_id, _data_ids(msg), bounds, zeros, conv)
@@ -151,7 +158,7 @@ class FrameCodec:
                 continue
             if isinstance(v, float) and not math.isfinite(v):
                 return f"{sig} is not finite ({v})"
-            if lo is not None and hi is not None and lo != hi and not lo <= v <= hi:
+            if lo is not None and hi is not None and not lo <= v <= hi:
                 return f"{sig}={v} outside [{lo}, {hi}]"
         return None
 

@@ -31,3 +31,12 @@ class ControlTuning:
     fixed_k_dft: tuple[float, ...] = (1.0, 0.5, 0.0)
     k_loe_limits: tuple[float, ...] = (0.05, 1.5)
     k_dft_limits: tuple[float, ...] = (0.0, 2.5)
+    #: channel excitation gate: no switch while |φ| < excitation_floor·S (fraction of S)
+    excitation_floor: float = field(default=0.1, metadata=rng(0.0, 1.0))
+    #: NLMS regularization c = (nlms_c_fraction·S)²
+    nlms_c_fraction: float = field(default=0.1, metadata=rng(0.0, lo_open=True))
+    #: position-channel guard: when even the best position model leaves a normalized residual
+    #: above this, the sensor is not trusted (feedback from the model position x̂, no anchoring)
+    position_guard_epsilon: float = field(default=0.05, metadata=rng(0.0, lo_open=True))
+    #: mmac-paper / smac: window of the position-increment regression (samples)
+    increment_window: int = field(default=10, metadata=rng(1, 1000))

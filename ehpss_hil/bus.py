@@ -1,0 +1,114 @@
+"""python-can bus factory from :class:`~ehpss_hil.config.BusConfig` (DESIGN.md §7).
+
+Interfaces:
+
+- ``socketcan`` (``vcan0``/``can0``, production): ``can_filters`` are installed in the kernel.
+  Raise the interface's ``txqueuelen`` (``ip link set can0 txqueuelen 1000``) against ENOBUFS.
+- ``udp_multicast`` (the embedded default, no kernel module): the hop limit/TTL is always 0 so a
+  frame never leaves this host, and the receive buffer is raised to
+  ``cfg.receive_buffer_bytes`` (bursts of > 100 frames overflow the default buffer). The socket
+  loops multicast back, so **a process receives its own frames**: the loops must drop frames by
+  ID/direction (they only classify the IDs they consume).
+- ``virtual``: in-process tests and the lockstep simulator.
+
+Filters on ``udp_multicast``/``virtual`` are applied by python-can in user space, and
+``BusABC.recv(timeout=0)`` returns ``None`` as soon as one frame is filtered out even if more are
+queued — that would end a non-blocking drain early. So filters are passed only where the kernel
+applies them (socketcan); on the other interfaces the loops filter by ID themselves.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+from typing import Any
+
+import can
+
+from .config import BusConfig
+from .errors import BusUnavailableError
+
+log = logging.getLogger(__name__)
+
+#: Linux SO_RCVBUFFORCE (root may exceed net.core.rmem_max)
+_SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
+
+
+def af_can_available() -> bool:
+    """True when this kernel supports ``socket(AF_CAN, SOCK_RAW, CAN_RAW)``."""
+    family = getattr(socket, "AF_CAN", None)
+    if family is None:
+        return False
+    try:
+        socket.socket(family, socket.SOCK_RAW, socket.CAN_RAW).close()
+    except OSError:
+        return False
+    return True
+
+
+def open_bus(cfg: BusConfig, can_filters: list[dict[str, Any]] | None = None) -> can.BusABC:
+    """Open the bus ``cfg`` describes.
+
+    ``can_filters`` (python-can form, ``[{"can_id": .., "can_mask": ..}]``) are applied in the
+    kernel on socketcan and ignored elsewhere (see the module docstring).
+    Raises :class:`BusUnavailableError` when the interface or channel cannot be opened.
+    """
+    if cfg.interface == "socketcan":
+        return _open_socketcan(cfg, can_filters)
+    if cfg.interface == "udp_multicast":
+        return _open_udp_multicast(cfg)
+    if cfg.interface == "virtual":
+        return can.Bus(interface="virtual", channel=cfg.channel, receive_own_messages=False)
+    raise BusUnavailableError(f"unsupported bus interface {cfg.interface!r}")
+
+
+def _open_socketcan(cfg: BusConfig, can_filters: list[dict[str, Any]] | None) -> can.BusABC:
+    if not af_can_available():
+        raise BusUnavailableError(
+            f"socketcan:{cfg.channel}: this kernel has no SocketCAN (socket(AF_CAN) failed); "
+            "use interface udp_multicast (the embedded default) or load the can/vcan modules")
+    try:
+        return can.Bus(interface="socketcan", channel=cfg.channel, can_filters=can_filters,
+                       receive_own_messages=False, fd=False)
+    except (OSError, can.CanError) as exc:
+        raise BusUnavailableError(
+            f"socketcan:{cfg.channel}: cannot open the interface ({exc}); does it exist and is it "
+            f"up? (e.g. 'ip link add dev {cfg.channel} type vcan; ip link set {cfg.channel} up')"
+        ) from exc
+
+
+def _open_udp_multicast(cfg: BusConfig) -> can.BusABC:
+    if cfg.hop_limit != 0:  # BusConfig validates this too; never send beyond this host
+        raise BusUnavailableError("udp_multicast requires hop_limit 0 (frames stay on this host)")
+    try:
+        bus = can.Bus(interface="udp_multicast", channel=cfg.channel, port=cfg.port,
+                      hop_limit=0, fd=False)
+    except (OSError, can.CanError) as exc:
+        raise BusUnavailableError(
+            f"udp_multicast:{cfg.channel}:{cfg.port}: cannot open ({exc}); a multicast route is "
+            "needed (inside a private namespace: 'ip link set lo up; "
+            "ip route add 224.0.0.0/4 dev lo')") from exc
+    set_receive_buffer(bus, cfg.receive_buffer_bytes)
+    return bus
+
+
+def set_receive_buffer(bus: can.BusABC, size_bytes: int) -> int:
+    """Raise the UDP socket's receive buffer to ``size_bytes``; returns the size granted (bytes).
+
+    Tries SO_RCVBUFFORCE (root) first, then SO_RCVBUF (capped by net.core.rmem_max); warns when
+    the kernel grants less than asked. Returns 0 when the bus has no such socket.
+    """
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if sock is None:
+        return 0
+    for opt in (_SO_RCVBUFFORCE, socket.SO_RCVBUF):
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, opt, size_bytes)
+            break
+        except OSError:
+            continue
+    granted = int(sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
+    if granted < size_bytes:  # Linux reports twice the requested value when it is granted
+        log.warning("udp_multicast: receive buffer %d bytes < requested %d (raise "
+                    "net.core.rmem_max or run as root)", granted, size_bytes)
+    return granted

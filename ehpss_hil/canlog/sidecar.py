@@ -1,0 +1,119 @@
+"""The JSON sidecar ``<log>.json``: what produced a candump log and what it holds.
+
+Keys: ``format``, ``log``, ``iface``, ``versions`` (ehpss-hil, python-can, cantools, python),
+``dbc`` (path, sha256), ``start_time_utc``/``start_time_s``, ``clock`` (what ``msg.timestamp``
+is), ``rotation``, ``status`` (open/closed), ``counts`` (written, dropped, discarded_by_rotation),
+``files`` (oldest first: name, lines, bytes, first/last timestamp), ``error``, plus every key the
+caller passed (``config``, ``scenario``, ``process``, …).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import hashlib
+import json
+import os
+import platform
+import time
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from .. import DEFAULT_DBC, __version__
+
+DEFAULT_CLOCK = ("msg.timestamp as given by python-can: wall clock, seconds since the Unix epoch "
+                 "(time.time() for frames the process builds)")
+
+
+@dataclass
+class FileRecord:
+    """Lines and byte count of one file of a rotation set, with its first/last timestamp (s)."""
+
+    lines: int = 0
+    bytes: int = 0
+    first_t_s: float | None = None
+    last_t_s: float | None = None
+
+    def add(self, lines: int, nbytes: int, first_t_s: float, last_t_s: float) -> None:
+        """Account a chunk of ``lines`` lines, ``nbytes`` bytes."""
+        if self.first_t_s is None:
+            self.first_t_s = first_t_s
+        self.last_t_s = last_t_s
+        self.lines += lines
+        self.bytes += nbytes
+
+    def as_dict(self, name: str) -> dict[str, Any]:
+        """JSON form, with the file's current name."""
+        return {"name": name, "lines": self.lines, "bytes": self.bytes,
+                "first_t_s": self.first_t_s, "last_t_s": self.last_t_s}
+
+
+def sidecar_path(log_path: str | os.PathLike[str]) -> Path:
+    """``run.log`` → ``run.log.json``."""
+    p = Path(log_path)
+    return p.with_name(p.name + ".json")
+
+
+def _version(dist: str) -> str | None:
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str | None:
+    """Hex SHA-256 of a file, or None when it cannot be read."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def jsonable(obj: Any) -> Any:
+    """Dataclasses, paths, tuples and sets made JSON-serializable (recursively)."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return jsonable(dataclasses.asdict(obj))
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, set)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    if obj is None or isinstance(obj, (str, int, float, bool)):
+        return obj
+    return str(obj)
+
+
+def build_sidecar(log_path: Path, iface: str, caller: dict[str, Any] | None, max_bytes: int,
+                  backups: int, queue_lines: int) -> dict[str, Any]:
+    """The initial sidecar mapping (counts and files are filled in by the writer)."""
+    meta: dict[str, Any] = jsonable(dict(caller or {}))
+    dbc = meta.get("dbc")
+    dbc_path = dbc.get("path") if isinstance(dbc, dict) else dbc
+    dbc_path = str(dbc_path) if dbc_path else str(DEFAULT_DBC)
+    clock = meta.get("clock")
+    now = time.time()
+    meta.update({
+        "format": "candump -L",
+        "log": log_path.name,
+        "iface": iface,
+        "versions": {"ehpss-hil": __version__, "python-can": _version("python-can"),
+                     "cantools": _version("cantools"), "python": platform.python_version()},
+        "dbc": {"path": dbc_path, "sha256": file_sha256(dbc_path)},
+        "start_time_s": now,
+        "start_time_utc": dt.datetime.fromtimestamp(now, dt.timezone.utc).isoformat(),
+        "clock": clock if clock else DEFAULT_CLOCK,
+        "rotation": {"max_bytes": max_bytes, "backups": backups, "queue_lines": queue_lines},
+    })
+    return meta
+
+
+def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
+    """Write ``data`` to ``path`` via a temporary file and ``os.replace`` (never half a file)."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(data, fh, indent=2, sort_keys=False, default=str)
+        fh.write("\n")
+    os.replace(tmp, path)

@@ -1,0 +1,307 @@
+"""Non-blocking candump ``-L`` writer: bounded queue, one writer thread, size rotation, sidecar.
+
+The caller's hot path (:meth:`CandumpLogger.log`) only appends a small tuple to a bounded deque;
+formatting, writing and rotating happen in one writer thread. When the queue is full the line is
+counted as dropped (never blocked on, never silently lost): the count is in the sidecar and in the
+:class:`LogSummary` that :meth:`CandumpLogger.close` returns.
+
+Line format (can-utils ``lib.c``, ``candump -L``): ``(%010u.%06u) IFACE ID#DATA`` with a 3-digit
+(standard) or 8-digit (extended) upper-case hex ID, upper-case hex data, ``ID#R[dlc]`` for remote
+frames and ``ID##<flags>DATA`` for CAN FD. No comments and no header: every file of a rotation set
+is a standalone log that ``canplayer``, ``cantools decode`` and python-can's reader accept.
+
+Real-time note: the writer thread holds the GIL while it formats a batch (at most
+``_BATCH_LINES`` lines) and yields it after each batch. A process with a 1 kHz loop should also
+lower ``sys.setswitchinterval`` (e.g. 1e-4 s) so a waiting loop thread gets the GIL quickly.
+"""
+
+from __future__ import annotations
+
+import atexit
+import logging
+import os
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import can
+
+from .sidecar import FileRecord, build_sidecar, sidecar_path, write_json_atomic
+
+_log = logging.getLogger(__name__)
+
+CAN_ERR_FLAG = 0x20000000
+CAN_ERR_BUSERROR = 0x00000080
+_BATCH_LINES = 512
+_POLL_S = 0.02
+#: the longest line a frame can make (CAN FD, 64 bytes, 8-digit ID, 16-character interface name)
+MAX_LINE_BYTES = 20 + 16 + 1 + 8 + 3 + 128 + 1
+
+_Item = tuple[float, int, bool, bool, bool, bool, bool, bool, int, bytes]
+
+
+def format_line(item: _Item, iface: str) -> str:
+    """One ``candump -L`` line (with ``\\n``) for a queued frame tuple (see :meth:`_item`)."""
+    ts, can_id, ext, rtr, err, fd, brs, esi, dlc, data = item
+    usec = max(0, int(round(ts * 1e6)))
+    sec, usec = divmod(usec, 1_000_000)
+    if err:
+        ident = f"{CAN_ERR_FLAG | CAN_ERR_BUSERROR | (can_id & 0x1FFFFFFF):08X}"
+    elif ext:
+        ident = f"{can_id:08X}"
+    else:
+        ident = f"{can_id:03X}"
+    if rtr:
+        body = "R" + (f"{dlc:X}" if 0 < dlc <= 8 else "")
+    elif fd:
+        body = f"#{(1 if brs else 0) | (2 if esi else 0):X}{data.hex().upper()}"
+    else:
+        body = data.hex().upper()
+    return f"({sec:010d}.{usec:06d}) {iface} {ident}#{body}\n"
+
+
+@dataclass
+class LogSummary:
+    """What a closed logger did. ``dropped`` counts queue overflows, lines logged after close and
+    lines lost to write errors; ``discarded`` counts lines in rotated files deleted beyond
+    ``backups``. ``files``: oldest first. ``error``: the last write error, if any."""
+
+    path: str
+    written: int
+    dropped: int
+    discarded: int
+    files: list[str] = field(default_factory=list)
+    error: str | None = None
+
+    def __str__(self) -> str:
+        s = f"{self.path}: {self.written} frames written, {self.dropped} dropped"
+        if self.discarded:
+            s += f", {self.discarded} discarded by rotation"
+        if self.error:
+            s += f" (write error: {self.error})"
+        return s
+
+
+class CandumpLogger:
+    """Log CAN frames to ``path`` in ``candump -L`` format without ever blocking the caller.
+
+    ``max_bytes``: rotate before a file would exceed this size (``run.log`` → ``run.log.1`` …,
+    whole lines only); ``backups``: rotated files kept (0: never rotate, like
+    :class:`logging.handlers.RotatingFileHandler`). ``queue_lines``: queue bound (frames).
+    ``sidecar``: caller metadata for ``<path>.json`` (e.g. ``config``, ``scenario``, ``dbc``
+    (path, hashed here), ``clock`` (a description of where ``msg.timestamp`` comes from)).
+
+    Opening truncates ``path`` and removes stale ``path.N`` files of an earlier run.
+    :meth:`log` may be called from any thread; :meth:`close` is idempotent and safe to call from
+    a signal handler of the owning process (it also runs at interpreter exit).
+    """
+
+    def __init__(self, path: str | os.PathLike[str], iface: str = "can0",
+                 max_bytes: int = 256 * 2**20, backups: int = 5, queue_lines: int = 200_000,
+                 sidecar: dict[str, Any] | None = None) -> None:
+        if not iface or any(c.isspace() for c in iface):
+            raise ValueError(f"iface must be a non-empty name without spaces, got {iface!r}")
+        if max_bytes < 4 * MAX_LINE_BYTES:
+            raise ValueError(f"max_bytes must be >= {4 * MAX_LINE_BYTES}")
+        if backups < 0 or queue_lines < 1:
+            raise ValueError("backups must be >= 0 and queue_lines >= 1")
+        self.path = Path(path)
+        self.iface = iface
+        self.max_bytes = int(max_bytes)
+        self.backups = int(backups)
+        self.queue_lines = int(queue_lines)
+        self._queue: deque[_Item] = deque()
+        self._written = 0
+        self._dropped = 0
+        self._discarded = 0
+        self._error: str | None = None
+        self._drop_lock = threading.Lock()
+        self._close_lock = threading.RLock()
+        self._stop = threading.Event()
+        self._closed = False
+        self._summary: LogSummary | None = None
+        self._records: list[FileRecord] = [FileRecord()]  # [0] = current file, [i] = path.i
+        self._remove_stale_backups()
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh = open(self.path, "wb")  # noqa: SIM115 - owned by the writer thread
+        self._file_open = True
+        self._meta = build_sidecar(self.path, iface, sidecar, max_bytes, backups, queue_lines)
+        self._write_sidecar("open")
+        self._thread = threading.Thread(target=self._run, name=f"candump:{self.path.name}",
+                                        daemon=True)
+        self._thread.start()
+        atexit.register(self.close)
+
+    # ---- producer side -------------------------------------------------------------------
+    def log(self, msg: can.Message) -> None:
+        """Queue one frame (timestamp: ``msg.timestamp``, s). Never blocks; counts overflow."""
+        if self._closed or len(self._queue) >= self.queue_lines:
+            with self._drop_lock:
+                self._dropped += 1
+            return
+        self._queue.append((msg.timestamp or 0.0, msg.arbitration_id, msg.is_extended_id,
+                            msg.is_remote_frame, msg.is_error_frame, msg.is_fd,
+                            msg.bitrate_switch, msg.error_state_indicator, msg.dlc,
+                            bytes(msg.data)))
+
+    def __call__(self, msg: can.Message) -> None:
+        """Same as :meth:`log` (so the logger can be a python-can Notifier listener callable)."""
+        self.log(msg)
+
+    @property
+    def written(self) -> int:
+        """Frames written to disk so far."""
+        return self._written
+
+    @property
+    def dropped(self) -> int:
+        """Frames not written: queue full, logged after close, or lost to a write error."""
+        return self._dropped
+
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` has started."""
+        return self._closed
+
+    # ---- writer thread -------------------------------------------------------------------
+    def _run(self) -> None:
+        q = self._queue
+        while True:
+            if not q:
+                if self._stop.is_set():
+                    return
+                self._stop.wait(_POLL_S)
+                continue
+            n = min(len(q), _BATCH_LINES)
+            batch = [q.popleft() for _ in range(n)]
+            self._write_batch(batch)
+            time.sleep(0)  # hand the GIL to a waiting real-time thread
+
+    def _write_batch(self, batch: list[_Item]) -> None:
+        """Write whole lines; rotate first whenever the next line would overflow the file."""
+        rec = self._records[0]
+        chunk: list[bytes] = []
+        size = rec.bytes
+        start = 0
+        for i, item in enumerate(batch):
+            line = format_line(item, self.iface).encode("ascii")
+            if (self.backups > 0 and size + len(line) > self.max_bytes and size > 0):
+                self._flush_chunk(chunk, batch[start:i])
+                self._rotate()
+                chunk, size, start = [], 0, i
+            chunk.append(line)
+            size += len(line)
+        self._flush_chunk(chunk, batch[start:])
+
+    def _flush_chunk(self, chunk: list[bytes], items: list[_Item]) -> None:
+        if not chunk:
+            return
+        data = b"".join(chunk)
+        try:
+            self._fh.write(data)
+            self._fh.flush()
+        except (OSError, ValueError) as exc:
+            self._error = str(exc)
+            with self._drop_lock:
+                self._dropped += len(chunk)
+            return
+        rec = self._records[0]
+        rec.add(len(chunk), len(data), items[0][0], items[-1][0])
+        self._written += len(chunk)
+
+    def _rotate(self) -> None:
+        """``path`` → ``path.1`` → … → ``path.<backups>``; the oldest beyond that is deleted."""
+        try:
+            self._fh.close()
+            for i in range(self.backups - 1, 0, -1):
+                src = self._numbered(i)
+                if src.exists():
+                    os.replace(src, self._numbered(i + 1))
+            os.replace(self.path, self._numbered(1))
+            self._fh = open(self.path, "wb")  # noqa: SIM115
+        except OSError as exc:
+            self._error = f"rotation failed: {exc}"
+            self._fh = open(self.path, "ab")  # noqa: SIM115 - keep logging into the same file
+            return
+        self._records.insert(0, FileRecord())
+        while len(self._records) > self.backups + 1:
+            self._discarded += self._records.pop().lines
+        self._write_sidecar("open")
+
+    def _numbered(self, i: int) -> Path:
+        return self.path.with_name(f"{self.path.name}.{i}")
+
+    def _remove_stale_backups(self) -> None:
+        if not self.path.parent.is_dir():
+            return
+        prefix = self.path.name + "."
+        for p in self.path.parent.iterdir():
+            if p.name.startswith(prefix) and p.name[len(prefix):].isdigit():
+                p.unlink()
+
+    # ---- shutdown ------------------------------------------------------------------------
+    def close(self) -> LogSummary:
+        """Flush every queued line, join the writer, fsync, finalize the sidecar (idempotent).
+
+        Returns the :class:`LogSummary`; logs a warning when frames were dropped.
+        """
+        with self._close_lock:
+            if self._summary is not None:
+                return self._summary
+            self._closed = True
+            self._stop.set()
+            self._thread.join()
+            if self._summary is not None:  # a re-entrant call (signal handler) finished it
+                return self._summary
+            leftover = len(self._queue)
+            self._queue.clear()
+            with self._drop_lock:
+                self._dropped += leftover
+            self._close_file()
+            summary = LogSummary(str(self.path), self._written, self._dropped, self._discarded,
+                                 [str(self._file_name(i)) for i in
+                                  range(len(self._records) - 1, -1, -1)], self._error)
+            self._write_sidecar("closed")
+            self._summary = summary
+            atexit.unregister(self.close)
+        if summary.dropped:
+            _log.warning("candump log %s", summary)
+        return summary
+
+    def _close_file(self) -> None:
+        if not self._file_open:
+            return
+        self._file_open = False
+        try:
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
+        except (OSError, ValueError) as exc:
+            self._error = self._error or str(exc)
+        finally:
+            self._fh.close()
+
+    def _file_name(self, i: int) -> Path:
+        return self.path if i == 0 else self._numbered(i)
+
+    def _write_sidecar(self, status: str) -> None:
+        self._meta["status"] = status
+        self._meta["counts"] = {"written": self._written, "dropped": self._dropped,
+                                "discarded_by_rotation": self._discarded}
+        self._meta["files"] = [rec.as_dict(self._file_name(i).name) for i, rec in
+                               reversed(list(enumerate(self._records)))]
+        self._meta["error"] = self._error
+        if status == "closed":
+            self._meta["end_time_s"] = time.time()
+        try:
+            write_json_atomic(sidecar_path(self.path), self._meta)
+        except OSError as exc:
+            self._error = self._error or f"sidecar: {exc}"
+
+    def __enter__(self) -> CandumpLogger:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,74 @@
+"""Predictors that run beside the loop: the valve model and the model position x̂ (DESIGN §5).
+
+Both are built once (exact ZOH for the valve) and step with plain Python floats: for 2-state
+models a hand-written update is several times faster than numpy's small matvec.
+"""
+
+from __future__ import annotations
+
+from ..physics.discretize import zoh
+from ..physics.model import valve_matrices
+from ..physics.params import PlantParams
+
+
+class ValvePredictor:
+    """2-state exact-ZOH valve model ``[ẋ_v, x_v]`` driven by the applied-current echo.
+
+    The echo received at sample k is the current applied over [k−1, k), so after
+    :meth:`step` the state is the commanded spool at sample k (m), independent of k_LOE:
+    the spool LVDT then reads ``k_LOE·v``.
+    """
+
+    __slots__ = ("_a00", "_a01", "_a10", "_a11", "_b0", "_b1", "vel", "v")
+
+    def __init__(self, plant: PlantParams, ts_s: float) -> None:
+        a, b = valve_matrices(plant)
+        ad, bd = zoh(a, b, ts_s)
+        self._a00, self._a01 = float(ad[0, 0]), float(ad[0, 1])
+        self._a10, self._a11 = float(ad[1, 0]), float(ad[1, 1])
+        self._b0, self._b1 = float(bd[0, 0]), float(bd[1, 0])
+        self.vel = 0.0
+        self.v = 0.0
+
+    def reset(self) -> None:
+        """At rest."""
+        self.vel = 0.0
+        self.v = 0.0
+
+    def step(self, current_a: float) -> float:
+        """Advance with ``current_a`` (A) held over the last sample; returns v (m)."""
+        vel, v = self.vel, self.v
+        self.vel = self._a00 * vel + self._a01 * v + self._b0 * current_a
+        self.v = self._a10 * vel + self._a11 * v + self._b1 * current_a
+        return self.v
+
+
+class ModelPosition:
+    """Model piston position x̂ (m): trapezoidal integral of ``K_c·spool`` anchored slowly to the
+    (compensated) sensor while it is trusted: ``x̂ += Ts·α·(y_s/θ̂_D − x̂)`` (α in rad/s).
+
+    It carries the loop through a position-sensor failure; K_c = flow_gain/hydraulic_stiffness.
+    """
+
+    __slots__ = ("_h", "_anchor", "x", "_rate")
+
+    def __init__(self, plant: PlantParams, ts_s: float, anchor_rate_1_s: float) -> None:
+        self._h = 0.5 * ts_s * plant.velocity_gain_1_s
+        self._anchor = ts_s * anchor_rate_1_s
+        self.x = 0.0
+        self._rate = 0.0
+
+    def reset(self) -> None:
+        """At rest at the origin."""
+        self.x = 0.0
+        self._rate = 0.0
+
+    def integrate(self, spool_m: float) -> float:
+        """Trapezoid step with the actual spool at this sample (m); returns x̂ (m)."""
+        self.x += self._h * (spool_m + self._rate)
+        self._rate = spool_m
+        return self.x
+
+    def anchor(self, position_m: float) -> None:
+        """Pull x̂ toward a trusted position estimate ``position_m`` = y_s/θ̂_D (m)."""
+        self.x += self._anchor * (position_m - self.x)

@@ -1,0 +1,77 @@
+"""Loop statistics in preallocated numpy ring buffers (no allocation per sample).
+
+Three series per loop: cycle compute time, wake-up lateness and sensor→command latency (s). Each
+keeps the newest ``capacity`` samples plus an all-time max and count; the summary gives
+p50/p99/p99.9/max.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+SERIES = ("compute_s", "lateness_s", "latency_s")
+
+
+class Ring:
+    """A fixed-size ring of float samples (s) with all-time count and max."""
+
+    __slots__ = ("buf", "n", "max")
+
+    def __init__(self, capacity: int) -> None:
+        if capacity < 1:
+            raise ValueError("capacity must be >= 1")
+        self.buf = np.zeros(capacity)
+        self.n = 0
+        self.max = 0.0
+
+    def add(self, value: float) -> None:
+        """Record one sample."""
+        self.buf[self.n % self.buf.shape[0]] = value
+        self.n += 1
+        if value > self.max:
+            self.max = value
+
+    def values(self) -> np.ndarray:
+        """The samples held (newest ``capacity``), unordered."""
+        return self.buf[: min(self.n, self.buf.shape[0])]
+
+    def summary(self) -> dict[str, float]:
+        """``n``, ``p50``, ``p99``, ``p99_9`` (over the ring) and all-time ``max`` (s)."""
+        v = self.values()
+        if v.size == 0:
+            return {"n": 0, "p50": float("nan"), "p99": float("nan"), "p99_9": float("nan"),
+                    "max": float("nan")}
+        p50, p99, p999 = np.percentile(v, [50.0, 99.0, 99.9])
+        return {"n": self.n, "p50": float(p50), "p99": float(p99), "p99_9": float(p999),
+                "max": self.max}
+
+
+class LoopStats:
+    """The three rings of one loop plus its overrun count."""
+
+    def __init__(self, capacity: int = 600_000) -> None:
+        self.compute = Ring(capacity)
+        self.lateness = Ring(capacity)
+        self.latency = Ring(capacity)
+        self.overruns = 0
+        self.skipped = 0
+
+    def summary(self) -> dict[str, Any]:
+        """A JSON-able dict: one sub-dict per series (s), overruns, skipped periods."""
+        return {"compute_s": self.compute.summary(), "lateness_s": self.lateness.summary(),
+                "latency_s": self.latency.summary(), "overruns": self.overruns,
+                "skipped": self.skipped}
+
+    def text(self) -> str:
+        """Human-readable summary, one line per series in µs."""
+        s = self.summary()
+        lines = []
+        for key in SERIES:
+            d = s[key]
+            lines.append(f"{key[:-2]:9s} n={d['n']:<8d} p50={d['p50'] * 1e6:8.1f} µs "
+                         f"p99={d['p99'] * 1e6:8.1f} µs p99.9={d['p99_9'] * 1e6:8.1f} µs "
+                         f"max={d['max'] * 1e6:8.1f} µs")
+        lines.append(f"overruns={self.overruns} skipped_periods={self.skipped}")
+        return "\n".join(lines)
