@@ -127,7 +127,7 @@ class Event:
 
 
 _FAULT_KEYS = ("k_loe", "k_q", "k_dft", "position_bias_m", "stuck", "current_limit_a")
-_EVENT_KEYS = _FAULT_KEYS + ("frame_loss",)
+_EVENT_KEYS = (*_FAULT_KEYS, "frame_loss")
 
 
 @dataclass(frozen=True)
@@ -162,7 +162,7 @@ class Scenario:
     @property
     def n_samples(self) -> int:
         """Number of samples in the run."""
-        return int(round(self.duration_s / self.sample_time_s))
+        return round(self.duration_s / self.sample_time_s)
 
     def fault_timeline(self) -> list[tuple[int, FaultState, float]]:
         """``(sample index, fault state, frame loss)`` at the start and at every event."""
@@ -172,7 +172,7 @@ class Scenario:
             faults = ev.apply(faults)
             if ev.frame_loss is not None:
                 loss = ev.frame_loss
-            out.append((int(round(ev.t_s / self.sample_time_s)), faults, loss))
+            out.append((round(ev.t_s / self.sample_time_s), faults, loss))
         return out
 
     def reference_samples(self) -> np.ndarray:

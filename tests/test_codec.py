@@ -43,7 +43,7 @@ def test_round_trip_at_range_ends(name: str, end: str) -> None:
     values = {s: (lo if end == "min" else hi) for s, lo, hi, _ in sigs}
     dec = rx.classify(tx.encode(name, values))
     assert dec.verdict is Verdict.OK and dec.name == name and dec.values is not None
-    for s, lo, hi, lsb in sigs:
+    for s, _lo, _hi, lsb in sigs:
         assert abs(dec.values[s] - values[s]) <= lsb / 2 + 1e-15, s
 
 

@@ -116,7 +116,7 @@ def test_bad_params(tmp_path: Path) -> None:
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "ehpss_hil.cli", *args], capture_output=True,
-                          text=True, cwd=PROJECT_ROOT)
+                          text=True, cwd=PROJECT_ROOT, check=False)
 
 
 def test_cli_check_config_ok_and_exit_2_on_broken_scenario(tmp_path: Path) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -26,13 +27,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
 
 
-def _time_calls(fn: object, n: int) -> np.ndarray:
-    f = fn  # type: ignore[assignment]
+def _time_calls(fn: Callable[[], object], n: int) -> np.ndarray:
     out = np.empty(n)
     clock = time.perf_counter_ns
     for i in range(n):
         t0 = clock()
-        f()  # type: ignore[operator]
+        fn()
         out[i] = clock() - t0
     return out * 1e-9
 
@@ -42,22 +42,26 @@ def measure(n: int) -> list[dict[str, object]]:
     tx, rx = FrameCodec(), FrameCodec()
     rows: list[dict[str, object]] = []
     for name, values in _SAMPLES.items():
-        frames = [tx.encode(name, values) for _ in range(16)]
-        ids = tx.data_ids(name)
-        assert ids is not None
-        payload = bytearray(frames[0].data)
-        i = iter(range(10**9))
-        ops = {
-            "encode": lambda: tx.encode(name, values),
-            "classify": lambda: rx.classify(frames[next(i) & 15]),
-            "quantize": lambda: tx.quantize(name, values),
-            "e2e_protect": lambda: protect(payload, 5, ids),
-            "e2e_check": lambda: crc_ok(frames[0].data, ids),
-        }
-        for op, fn in ops.items():
+        for op, fn in _operations(tx, rx, name, values).items():
             _time_calls(fn, min(n, 2000))  # warm-up
             rows.append({"frame": name, "op": op, **percentiles_us(_time_calls(fn, n))})
     return rows
+
+
+def _operations(tx: FrameCodec, rx: FrameCodec, name: str,
+                values: dict[str, float]) -> dict[str, Callable[[], object]]:
+    frames = [tx.encode(name, values) for _ in range(16)]
+    ids = tx.data_ids(name)
+    assert ids is not None
+    payload = bytearray(frames[0].data)
+    i = iter(range(10**12))
+    return {
+        "encode": lambda: tx.encode(name, values),
+        "classify": lambda: rx.classify(frames[next(i) & 15]),
+        "quantize": lambda: tx.quantize(name, values),
+        "e2e_protect": lambda: protect(payload, 5, ids),
+        "e2e_check": lambda: crc_ok(frames[0].data, ids),
+    }
 
 
 def run(args: argparse.Namespace) -> int:

@@ -46,7 +46,7 @@ class CounterCheck:
     sequence after it resynchronize: the second is accepted as OK_SOME_LOST.
     """
 
-    __slots__ = ("max_delta", "_last", "_candidate")
+    __slots__ = ("_candidate", "_last", "max_delta")
 
     def __init__(self, max_delta: int = 3) -> None:
         if not 1 <= max_delta <= 14:

@@ -99,9 +99,12 @@ class FrameCodec:
                  node_ids: dict[str, int] | None = None, max_delta_counter: int = 3) -> None:
         path = Path(dbc_path) if dbc_path is not None else DEFAULT_DBC
         try:
-            self.db = cantools.database.load_file(str(path))
+            db = cantools.database.load_file(str(path))
         except (OSError, cantools.database.UnsupportedDatabaseFormatError) as exc:
             raise FrameError(f"cannot load DBC {path}: {exc}") from exc
+        if not isinstance(db, cantools.database.can.Database):
+            raise FrameError(f"{path} is not a CAN database")
+        self.db = db
         if not 0 <= id_base <= 0x7FF - 0x6F:
             raise FrameError(f"id_base 0x{id_base:X} puts frames outside the 11-bit ID range")
         nodes = {**_DBC_NODE_IDS, **(node_ids or {})}
@@ -210,7 +213,7 @@ class FrameCodec:
         name: str | None = None
         try:
             decoded = self._classify(frame)
-        except Exception:  # noqa: BLE001 - a decoder must never let a frame crash the loop
+        except Exception:
             spec = self._by_id.get(frame.arbitration_id)
             name = spec.msg.name if spec else None
             decoded = Decoded(Verdict.OUT_OF_RANGE, name, None, frame.timestamp)

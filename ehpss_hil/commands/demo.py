@@ -33,7 +33,7 @@ def _optional(module: str) -> object | None:
 
 def run(args: argparse.Namespace) -> int:
     print("== configuration ==")
-    files = sorted((PROJECT_ROOT / "configs").glob("*.yaml")) + [args.scenario]
+    files = [*sorted((PROJECT_ROOT / "configs").glob("*.yaml")), args.scenario]
     for f in files:
         print(f"{f.relative_to(PROJECT_ROOT)}: {check_config.summarize(f)}")
     for step in ("ehpss_hil.demo_run",):

@@ -3,6 +3,7 @@ emulator process and the lockstep simulator alike)."""
 
 from __future__ import annotations
 
+import typing
 from collections.abc import Hashable
 
 import numpy as np
@@ -32,7 +33,7 @@ class PlantStepper:
         self._select(self.faults)
 
     def _continuous(self, key: Hashable) -> tuple[Matrix, Matrix]:
-        k_loe, k_q = key  # type: ignore[misc]
+        k_loe, k_q = typing.cast(tuple[float, float], key)
         return plant_matrices(self.params.plant, k_loe, k_q)
 
     def _select(self, faults: FaultState) -> None:
