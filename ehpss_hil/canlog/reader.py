@@ -12,7 +12,7 @@ from typing import Any
 import can
 import numpy as np
 
-from ..codec import FrameCodec
+from ..codec import FrameCodec, Verdict
 from ..errors import EhpssError
 from .sidecar import sidecar_path
 
@@ -76,20 +76,28 @@ def read_sidecar(path: str | os.PathLike[str]) -> dict[str, Any] | None:
 
 def decode_log(path: str | os.PathLike[str], codec: FrameCodec | None = None,
                rotated: bool = True) -> dict[str, dict[str, np.ndarray]]:
-    """Decode a log with the DBC into per-frame-name arrays.
+    """Decode a log with the DBC into per-frame-name arrays, in file order.
 
     Each frame name maps to ``{"t_s": timestamps (s), <signal>: physical values (SI), …}``.
-    Only frames whose E2E check and plausibility pass are kept (``codec.counts_by_name`` then
-    holds every verdict, so rejected frames are counted, not hidden). A multiplexed frame
-    (CTRL_INDEX) has one array per signal with NaN where a row did not carry it.
+    Kept: frames with a good CRC and plausible values, including those a live receiver would
+    drop as WRONG_SEQUENCE (after lost frames the data itself is intact); REPEATED frames and
+    bad CRC/DLC/range are left out. ``codec.counts_by_name`` holds every verdict, so rejected
+    frames are counted, not hidden. A multiplexed frame (CTRL_INDEX) has one array per signal
+    with NaN where a row did not carry it.
     """
     codec = codec if codec is not None else FrameCodec()
     rows: dict[str, list[tuple[float, dict[str, Any]]]] = {}
     for msg in read_log(path, rotated):
         d = codec.classify(msg)
-        if d.name is None or d.values is None or not d.verdict.usable:
+        if d.name is None:
             continue
-        rows.setdefault(d.name, []).append((msg.timestamp, d.values))
+        values: Any = d.values
+        if d.verdict is Verdict.WRONG_SEQUENCE:
+            values = codec.message(d.name).decode(bytes(msg.data), decode_choices=False)
+        elif not d.verdict.usable:
+            continue
+        if values is not None:
+            rows.setdefault(d.name, []).append((msg.timestamp, values))
     return {name: _to_arrays(r) for name, r in rows.items()}
 
 

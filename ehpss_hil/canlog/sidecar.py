@@ -103,7 +103,7 @@ def build_sidecar(log_path: Path, iface: str, caller: dict[str, Any] | None, max
                      "cantools": _version("cantools"), "python": platform.python_version()},
         "dbc": {"path": dbc_path, "sha256": file_sha256(dbc_path)},
         "start_time_s": now,
-        "start_time_utc": dt.datetime.fromtimestamp(now, dt.timezone.utc).isoformat(),
+        "start_time_utc": dt.datetime.fromtimestamp(now, dt.UTC).isoformat(),
         "clock": clock if clock else DEFAULT_CLOCK,
         "rotation": {"max_bytes": max_bytes, "backups": backups, "queue_lines": queue_lines},
     })

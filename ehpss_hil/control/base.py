@@ -41,7 +41,8 @@ class ControllerStatus:
     """Read-only view of a controller's internals (for CTRL_STATUS / CTRL_INDEX and reports).
 
     ``active_model``: channel name → active model slot (DBC CTRL_INDEX ModelSlot numbering).
-    ``k_loe_hat``/``k_dft_hat``: the estimates used for compensation (dimensionless).
+    ``k_loe_hat``/``k_dft_hat``: the estimates used for compensation (dimensionless; in ``mmac``
+    ``k_loe_hat`` is the current divisor k̂_LOE·k̂_Q). ``k_q_hat``: the flow-gain attribution.
     ``index``: slot → performance index J; ``theta``: slot → the model's parameter θ.
     """
 
@@ -49,6 +50,7 @@ class ControllerStatus:
     active_model: dict[str, int] = field(default_factory=dict)
     k_loe_hat: float = 1.0
     k_dft_hat: float = 1.0
+    k_q_hat: float = 1.0
     index: dict[int, float] = field(default_factory=dict)
     theta: dict[int, float] = field(default_factory=dict)
     switches: int = 0

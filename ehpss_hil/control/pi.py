@@ -5,9 +5,11 @@ effective integral gain is K_i² (kept on purpose: the fault-free loop then equa
 model y_m). ``y_f`` is the fed-back position in sensor units (K_f·metres).
 
 Discretization: the output uses ``z[k]`` and the state advances with forward Euler,
-``z[k+1] = z[k] + Ts·K_i·e[k]``. With the one-sample transport delay this keeps the fault-free
-closed loop within a fraction of a micrometre of y_m for the 1 mm, 5 rad/s reference (the loop's
-bandwidth is ≈ 240 rad/s, so the sample delays only add an O((ω·Ts)²) error at 5 rad/s).
+``z[k+1] = z[k] + Ts·K_i·e[k]``. The reference enters as the two-sample mean
+``(x_d[k] + x_d[k−1])/2``: the reference model y_m is eq 39 driven by a zero-order-held x_d, which
+delays the reference by Ts/2 at low frequency, and the sampled loop (high loop gain, ≈ 240 rad/s
+bandwidth) otherwise leads y_m by exactly that half sample (2.5 µm amplitude on the 1 mm, 5 rad/s
+sine). The transport delay and the ZOH of the current only add O((ω·Ts)²) at 5 rad/s.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ class PiLaw:
     """Eq 39 PI with state ``z`` (sensor units·s). :meth:`step` returns the PI output
     ``u = K_a·(K_p·e + K_i·z)`` (A, before fault compensation) and advances ``z``."""
 
-    __slots__ = ("k_f", "_kp", "_ki", "_ka", "_ts_ki", "z", "u")
+    __slots__ = ("_ka", "_ki", "_kp", "_r_prev", "_ts_ki", "k_f", "u", "z")
 
     def __init__(self, gains: ControllerGains, ts_s: float) -> None:
         self.k_f = gains.k_f
@@ -29,11 +31,13 @@ class PiLaw:
         self._ts_ki = ts_s * gains.k_i
         self.z = 0.0
         self.u = 0.0
+        self._r_prev = 0.0
 
     def reset(self) -> None:
         """Integrator and output back to zero."""
         self.z = 0.0
         self.u = 0.0
+        self._r_prev = 0.0
 
     def step(self, reference_m: float, feedback: float) -> float:
         """One sample: ``reference_m`` = x_d (m), ``feedback`` = y_f (sensor units, K_f·m).
@@ -41,7 +45,9 @@ class PiLaw:
         Returns the PI output current (A) before compensation; z is never reset or jumped, so a
         change of the feedback path or of the compensation gain is bumpless in z.
         """
-        e = self.k_f * reference_m - feedback
+        r = 0.5 * (reference_m + self._r_prev)
+        self._r_prev = reference_m
+        e = self.k_f * r - feedback
         u = self._ka * (self._kp * e + self._ki * self.z)
         self.z += self._ts_ki * e
         self.u = u

@@ -19,7 +19,7 @@ class ValvePredictor:
     the spool LVDT then reads ``k_LOE·v``.
     """
 
-    __slots__ = ("_a00", "_a01", "_a10", "_a11", "_b0", "_b1", "vel", "v")
+    __slots__ = ("_a00", "_a01", "_a10", "_a11", "_b0", "_b1", "v", "vel")
 
     def __init__(self, plant: PlantParams, ts_s: float) -> None:
         a, b = valve_matrices(plant)
@@ -50,7 +50,7 @@ class ModelPosition:
     It carries the loop through a position-sensor failure; K_c = flow_gain/hydraulic_stiffness.
     """
 
-    __slots__ = ("_h", "_anchor", "x", "_rate")
+    __slots__ = ("_anchor", "_h", "_rate", "x")
 
     def __init__(self, plant: PlantParams, ts_s: float, anchor_rate_1_s: float) -> None:
         self._h = 0.5 * ts_s * plant.velocity_gain_1_s

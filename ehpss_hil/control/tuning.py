@@ -32,11 +32,21 @@ class ControlTuning:
     k_loe_limits: tuple[float, ...] = (0.05, 1.5)
     k_dft_limits: tuple[float, ...] = (0.0, 2.5)
     #: channel excitation gate: no switch while |φ| < excitation_floor·S (fraction of S)
-    excitation_floor: float = field(default=0.1, metadata=rng(0.0, 1.0))
+    excitation_floor: float = field(default=0.03, metadata=rng(0.0, 1.0))
     #: NLMS regularization c = (nlms_c_fraction·S)²
-    nlms_c_fraction: float = field(default=0.1, metadata=rng(0.0, lo_open=True))
+    nlms_c_fraction: float = field(default=0.03, metadata=rng(0.0, lo_open=True))
     #: position-channel guard: when even the best position model leaves a normalized residual
     #: above this, the sensor is not trusted (feedback from the model position x̂, no anchoring)
-    position_guard_epsilon: float = field(default=0.05, metadata=rng(0.0, lo_open=True))
+    position_guard_epsilon: float = field(default=0.02, metadata=rng(0.0, lo_open=True))
+    #: bumpless return from model-position feedback to the sensor: the sensor's share of the
+    #: fed-back position ramps from 0 to 1 over this time (s); 0 = switch at once
+    feedback_blend_s: float = field(default=0.02, metadata=rng(0.0))
+    #: a guard is released when the best J falls below guard_release·J_max
+    guard_release: float = field(default=0.25, metadata=rng(0.0, 1.0, lo_open=True))
+    #: mmac: attribute a position-channel gain change to the flow gain k_Q when the load pressure
+    #: says so (control/flowgain.py): switch, log-likelihood threshold, evidence window (s)
+    flow_gain_test: bool = True
+    flow_gain_threshold: float = field(default=8.0, metadata=rng(0.0, lo_open=True))
+    flow_gain_window_s: float = field(default=0.5, metadata=rng(0.0, lo_open=True))
     #: mmac-paper / smac: window of the position-increment regression (samples)
     increment_window: int = field(default=10, metadata=rng(1, 1000))

@@ -47,6 +47,10 @@ class DeadlineTimer:
         """The deadline the next :meth:`wait` sleeps to (monotonic s)."""
         return self._next
 
+    def shift(self, delta_s: float) -> None:
+        """Move the next deadline by ``delta_s`` (s): a bounded phase slew (see phaselock)."""
+        self._next += delta_s
+
     def wait(self) -> float:
         """Sleep until the next deadline; returns the wake-up lateness (s, ≥ 0 normally)."""
         now = self._clock()

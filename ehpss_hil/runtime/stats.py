@@ -17,7 +17,7 @@ SERIES = ("compute_s", "lateness_s", "latency_s")
 class Ring:
     """A fixed-size ring of float samples (s) with all-time count and max."""
 
-    __slots__ = ("buf", "n", "max")
+    __slots__ = ("buf", "max", "n")
 
     def __init__(self, capacity: int) -> None:
         if capacity < 1:

@@ -1,0 +1,173 @@
+"""``ehpss-hil bench control``: control quality of every mode on the shipped and unseen scenarios,
+each DESIGN §11 target printed with PASS/FAIL beside the measured figure."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from .. import PROJECT_ROOT
+from ..control.controllers import MODES
+from ..report.metrics import RunMetrics
+from ..sim.campaign import Job, default_jobs, run_campaign, scenario_paths
+from .common import write_json
+
+NAME = "control"
+HELP = "control quality of nrc/smac/mmac-paper/mmac/oracle against the DESIGN §11 targets"
+
+SHIPPED = ("fault-free", "case1-loe", "case2-drift", "case3-combined", "case4-disturbance")
+UNSEEN = ("unseen-loe35", "unseen-drift1p4", "unseen-combined", "unseen-noise1pct",
+          "unseen-frameloss2pct")
+KQ = "kq-loss"
+SPEED_TARGET = 50.0
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", metavar="FILE", help="write the metric rows and verdicts as JSON")
+    p.add_argument("--jobs", "-j", type=int, default=default_jobs(), help="worker processes")
+
+
+@dataclass
+class Verdict:
+    """One target line: what, the measured figure, the target, pass or fail (None: info only)."""
+
+    what: str
+    measured: str
+    target: str
+    ok: bool | None
+
+
+Table = dict[tuple[str, str], RunMetrics]
+
+
+def _um(v: float) -> str:
+    return f"{v * 1e6:.2f} µm"
+
+
+def _ms(v: float) -> str:
+    return "never" if math.isinf(v) else f"{v * 1e3:.0f} ms"
+
+
+def _fault_free(t: Table) -> list[Verdict]:
+    return [Verdict(f"fault-free RMS, {m}", _um(t["fault-free", m].rms_error_m), "≤ 3 µm",
+                    t["fault-free", m].rms_error_m <= 3e-6) for m in MODES]
+
+
+def _vs_oracle(t: Table) -> list[Verdict]:
+    out = []
+    for sc in ("case1-loe", "case3-combined"):
+        mm, orc = t[sc, "mmac"].rms_error_m, t[sc, "oracle"].rms_error_m
+        out.append(Verdict(f"{sc} mmac RMS", _um(mm), f"≤ oracle + 5 = {_um(orc + 5e-6)}",
+                           mm <= orc + 5e-6))
+    return out
+
+
+def _case2(t: Table) -> list[Verdict]:
+    m = t["case2-drift", "mmac"]
+    fail_peak = m.events[-1].peak_error_m if m.events else math.nan
+    other = min(t["case2-drift", "smac"].rms_error_m, t["case2-drift", "mmac-paper"].rms_error_m)
+    return [Verdict("case2-drift mmac RMS", _um(m.rms_error_m), "≤ 10 µm", m.rms_error_m <= 1e-5),
+            Verdict("case2-drift peak after sensor failure", _um(fail_peak), "≤ 10 µm",
+                    fail_peak <= 1e-5),
+            Verdict("case2-drift mmac vs best of smac/mmac-paper",
+                    f"{other / m.rms_error_m:.3g}× better", "≥ 2×", other >= 2 * m.rms_error_m)]
+
+
+def _case4(t: Table) -> list[Verdict]:
+    mm, nrc = t["case4-disturbance", "mmac"].rms_error_m, t["case4-disturbance", "nrc"].rms_error_m
+    return [Verdict("case4-disturbance mmac RMS", _um(mm), f"≤ 100 µm and < nrc {_um(nrc)}",
+                    mm <= 1e-4 and mm < nrc)]
+
+
+def _others(t: Table) -> list[Verdict]:
+    out = []
+    for sc in ("fault-free", "case1-loe", "case3-combined", "case4-disturbance"):
+        mm = t[sc, "mmac"].rms_error_m
+        best = min(t[sc, "smac"].rms_error_m, t[sc, "mmac-paper"].rms_error_m)
+        out.append(Verdict(f"{sc} mmac vs better of smac/mmac-paper", _um(mm),
+                           f"≤ {_um(best)} + 2 µm", mm <= best + 2e-6))
+    return out
+
+
+def _recovery(t: Table, scenarios: tuple[str, ...]) -> list[Verdict]:
+    worst_rec, worst_sw, where = 0.0, 0, ""
+    for sc in scenarios:
+        if (sc, "mmac") not in t:
+            continue
+        for em, eo in zip(t[sc, "mmac"].events, t[sc, "oracle"].events, strict=True):
+            if math.isfinite(eo.recovery_s) and em.recovery_s > worst_rec:
+                worst_rec, where = em.recovery_s, f"{sc} @ {em.t_s:g} s"
+            worst_sw = max(worst_sw, em.switches)
+    return [Verdict(f"worst mmac recovery where oracle recovers ({where or 'all events'})",
+                    _ms(worst_rec), "≤ 20 ms", worst_rec <= 0.02),
+            Verdict("most mmac switches in one fault event", str(worst_sw), "≤ 10", worst_sw <= 10)]
+
+
+def _unseen(t: Table) -> list[Verdict]:
+    return [Verdict(f"{sc} mmac RMS", _um(t[sc, "mmac"].rms_error_m), "≤ 20 µm",
+                    t[sc, "mmac"].rms_error_m <= 2e-5) for sc in UNSEEN if (sc, "mmac") in t]
+
+
+def _kq(t: Table) -> list[Verdict]:
+    if (KQ, "mmac") not in t:
+        return []
+    mm, nrc = t[KQ, "mmac"].rms_error_m, t[KQ, "nrc"].rms_error_m
+    return [Verdict("k_Q loss mmac RMS (goal: no worse than nrc)",
+                    f"{_um(mm)} ({mm / nrc:.2g}× nrc {_um(nrc)})", "≤ nrc (goal)", mm <= nrc)]
+
+
+def _speed(t: Table) -> list[Verdict]:
+    sp = sorted(m.speed for (sc, mode), m in t.items() if mode == "mmac" and m.speed > 0)
+    med = sp[len(sp) // 2] if sp else 0.0
+    return [Verdict("mmac sim speed (median run, loop CPU time on one core)",
+                    f"{med:.0f}× real time", f"≥ {SPEED_TARGET:.0f}×", med >= SPEED_TARGET)]
+
+
+def verdicts(t: Table) -> list[Verdict]:
+    """Every DESIGN §11 control target evaluated on the campaign table."""
+    return (_fault_free(t) + _vs_oracle(t) + _case2(t) + _case4(t) + _others(t)
+            + _recovery(t, SHIPPED[1:] + UNSEEN) + _unseen(t) + _kq(t) + _speed(t))
+
+
+def format_verdicts(vs: list[Verdict]) -> str:
+    """The one table: target, measured, limit, PASS/FAIL."""
+    w = max(len(v.what) for v in vs)
+    lines = [f"{'target':{w}s}  {'measured':>28s}  {'limit':30s}  result", "-" * (w + 72)]
+    for v in vs:
+        res = "info" if v.ok is None else ("PASS" if v.ok else "FAIL")
+        lines.append(f"{v.what:{w}s}  {v.measured:>28s}  {v.target:30s}  {res}")
+    return "\n".join(lines)
+
+
+def _progress() -> Callable[[int, int], None] | None:
+    if not sys.stderr.isatty():
+        return None
+
+    def show(done: int, total: int) -> None:
+        sys.stderr.write(f"\r  {done}/{total} runs" + ("\n" if done == total else ""))
+        sys.stderr.flush()
+    return show
+
+
+def run(args: argparse.Namespace) -> int:
+    sdir = PROJECT_ROOT / "scenarios"
+    paths = scenario_paths([sdir / f"{n}.yaml" for n in SHIPPED]
+                           + [sdir / "extra" / f"{n}.yaml" for n in (*UNSEEN, KQ)])
+    jobs = [Job(p, m) for p in paths for m in MODES]
+    t0 = time.perf_counter()
+    outcomes = run_campaign(jobs, args.jobs, progress=_progress())
+    wall = time.perf_counter() - t0
+    table: Table = {(o.metrics.scenario, o.metrics.controller): o.metrics for o in outcomes}
+    vs = verdicts(table)
+    print(format_verdicts(vs))
+    simulated = sum(o.metrics.duration_s for o in outcomes)
+    print(f"\n{len(jobs)} runs, {simulated:.0f} s simulated in {wall:.1f} s wall on "
+          f"{min(args.jobs, len(jobs))} process(es): {wall / simulated * 1e3:.1f} ms wall per "
+          f"simulated second ({simulated / wall:.0f}× real time)")
+    write_json(args.json, {"rows": [o.metrics.to_json() for o in outcomes],
+                           "targets": [v.__dict__ for v in vs]})
+    return 0 if all(v.ok is not False for v in vs) else 1

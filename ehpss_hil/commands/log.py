@@ -1,0 +1,137 @@
+"""``ehpss-hil log -i INTERFACE -c CHANNEL -o FILE``: a candump ``-L`` logger on any python-can bus.
+
+Writes ``FILE`` (rotated by size) and ``FILE.json`` (sidecar). Stops on SIGINT/SIGTERM or after
+``--duration`` seconds, flushes everything and prints the counts (exit 0). A bus that cannot be
+opened exits 3 with the reason.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+import can
+
+from ..canlog import CandumpLogger
+from ..errors import BusUnavailableError
+
+NAME = "log"
+HELP = "log every frame of a CAN bus to a candump -L file (+ JSON sidecar), rotated by size"
+
+_PROJECT_INTERFACES = ("udp_multicast", "socketcan", "virtual")
+_CLOCKS = {
+    "socketcan": "kernel receive timestamp (SO_TIMESTAMP), wall clock, s since the Unix epoch",
+    "udp_multicast": "receive socket timestamp (SO_TIMESTAMPNS), wall clock, s since the Unix epoch",
+    "virtual": "sender's msg.timestamp (time.time() unless the sender set it), s",
+}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of ``ehpss-hil log``."""
+    p.add_argument("-i", "--interface", required=True,
+                   help="python-can interface: udp_multicast, socketcan, virtual, or any other")
+    p.add_argument("-c", "--channel", required=True, help="channel (vcan0, can0, 239.74.163.2, …)")
+    p.add_argument("-o", "--output", required=True, type=Path, help="log file (candump -L)")
+    p.add_argument("--duration", type=float, default=0.0, metavar="S",
+                   help="stop after S seconds (default: until SIGINT/SIGTERM)")
+    p.add_argument("--iface", default="",
+                   help="interface name written in each line (default: the channel for "
+                        "socketcan, else can0)")
+    p.add_argument("--port", type=int, default=None, help="udp_multicast port (default: config's)")
+    p.add_argument("--max-bytes", type=int, default=256 * 2**20, help="rotate above this size")
+    p.add_argument("--backups", type=int, default=5, help="rotated files kept (0: never rotate)")
+    p.add_argument("--queue-lines", type=int, default=200_000, help="writer queue bound (frames)")
+
+
+def open_log_bus(interface: str, channel: str, port: int | None = None) -> can.BusABC:
+    """Open a bus for listening: the project's factory for its own interfaces, python-can else.
+
+    Raises :class:`BusUnavailableError` when it cannot be opened.
+    """
+    if interface in _PROJECT_INTERFACES:
+        from ..bus import open_bus
+        from ..config import BusConfig
+
+        kw: dict[str, Any] = {"port": port} if port is not None else {}
+        return open_bus(BusConfig(interface=interface, channel=channel, **kw))  # type: ignore[arg-type]
+    try:
+        return can.Bus(interface=interface, channel=channel)
+    except (OSError, can.CanError, ImportError, ValueError) as exc:
+        raise BusUnavailableError(f"{interface}:{channel}: cannot open ({exc})") from exc
+
+
+class _StopFlag:
+    """Set by SIGINT/SIGTERM; the handler only flips a flag (the loop does the shutdown)."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.signal_name = ""
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        self.signal_name = signal.Signals(signum).name
+        self.event.set()
+
+
+def record(bus: can.BusABC, logger: CandumpLogger, stop: threading.Event,
+           duration_s: float = 0.0) -> int:
+    """Receive frames into ``logger`` until ``stop`` is set or ``duration_s`` (s) elapsed (0: no
+    limit), then log what is already queued. Returns the number of frames received."""
+    deadline = time.monotonic() + duration_s if duration_s > 0 else None
+    n = 0
+    while not stop.is_set():
+        timeout = 0.1
+        if deadline is not None:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            timeout = min(timeout, left)
+        msg = bus.recv(timeout=timeout)
+        if msg is not None:
+            logger.log(msg)
+            n += 1
+    return n + drain(bus, logger)
+
+
+def drain(bus: can.BusABC, logger: CandumpLogger, limit: int = 1_000_000) -> int:
+    """Log what the bus had already received when the stop came (non-blocking, bounded)."""
+    n = 0
+    while n < limit:
+        msg = bus.recv(timeout=0.0)
+        if msg is None:
+            return n
+        logger.log(msg)
+        n += 1
+    return n
+
+
+def run(args: argparse.Namespace) -> int:
+    """Open the bus, log until stopped, print counts."""
+    bus = open_log_bus(args.interface, args.channel, args.port)
+    iface = args.iface or (args.channel if args.interface == "socketcan" else "can0")
+    meta = {"bus": {"interface": args.interface, "channel": args.channel},
+            "clock": _CLOCKS.get(args.interface, "python-can receive timestamp (s)"),
+            "process": {"command": "ehpss-hil log", "argv": sys.argv[1:]}}
+    stop = _StopFlag()
+    old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        logger = CandumpLogger(args.output, iface=iface, max_bytes=args.max_bytes,
+                               backups=args.backups, queue_lines=args.queue_lines, sidecar=meta)
+        try:
+            print(f"logging {args.interface}:{args.channel} -> {args.output} (Ctrl-C to stop)",
+                  file=sys.stderr, flush=True)
+            received = record(bus, logger, stop.event, args.duration)
+        finally:
+            summary = logger.close()
+    finally:
+        bus.shutdown()
+        for s, h in old.items():
+            signal.signal(s, h)
+    why = f" on {stop.signal_name}" if stop.signal_name else ""
+    print(f"stopped{why}: {received} frames received; {summary}", flush=True)
+    return 0

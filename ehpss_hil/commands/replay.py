@@ -1,0 +1,249 @@
+"""``ehpss-hil replay LOG [--mode M]``: the logged sensor frames through the controller, offline.
+
+The log is read in file order (the logging process's causal order: a daemon logs each received
+frame when it drains it and each VALVE_CMD when it sends it). Per logged VALVE_CMD, from the
+first one with ``Enable = 1`` (the daemon's first ACTIVE cycle, reference sample 0): the newest
+usable SENSOR_POS/SENSOR_AUX values since the previous command form the Measurement (``fresh``
+when a SENSOR_POS arrived), ``x_d`` is the reference at that sample (or a SETPOINT override), the
+controller steps once, and its current — clipped to ±1 A and quantized by the DBC
+(:meth:`FrameCodec.quantize`) — is compared with the logged setpoint. Same configuration →
+bit-identical; otherwise the first divergence is printed (exit 1). A logged ``Enable = 0`` after
+the start is the daemon's fail-safe (FAULT, ``failsafe: zero``): not stepped, the reference runs
+on, and the controller is reset when commands are enabled again (as the daemon does).
+
+Configuration: ``--config controller.yaml`` (mode, rate, reference, tuning, params), else the
+sidecar (``config``/``scenario``/``reference``, ``rate_hz``, ``mode``), else the defaults; ``--mode``
+overrides the mode. ``failsafe: hold`` cycles (the last command repeated with Enable = 1) cannot be
+told from the log and show as divergences.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..canlog import read_log, read_sidecar
+from ..canlog.reader import resolve_log
+from ..codec import FrameCodec
+from ..config import load_controller_config
+from ..control.base import Measurement
+from ..control.tuning import ControlTuning
+from ..errors import EhpssError
+from ..physics.params import Params, load_params
+from ..report.logdata import MODE_NAMES
+from ..report.logmeta import run_info
+from ..scenario import Reference, load_scenario
+
+NAME = "replay"
+HELP = "feed a log's sensor frames through the controller offline; compare with its VALVE_CMDs"
+
+
+class ReplayError(EhpssError, RuntimeError):
+    """The replay cannot run (no controller library, nothing to replay)."""
+
+
+@dataclass
+class ReplaySetup:
+    """What the controller is built from (SI: ``ts_s`` in s)."""
+
+    mode: str
+    ts_s: float
+    reference: Reference
+    tuning: ControlTuning
+    params: Params
+    source: str
+
+
+@dataclass
+class Divergence:
+    """One cycle where the replayed command differs from the logged one (A)."""
+
+    cycle: int
+    frame_number: int
+    logged_a: float
+    replayed_a: float
+    logged_enable: bool
+    replayed_enable: bool
+
+
+@dataclass
+class ReplayResult:
+    """Outcome of a replay: cycles compared, fail-safe cycles skipped (logged ``Enable = 0``),
+    divergent cycles, the first few divergences."""
+
+    setup: ReplaySetup
+    cycles: int = 0
+    failsafe_cycles: int = 0
+    divergent: int = 0
+    max_abs_diff_a: float = 0.0
+    first: list[Divergence] = field(default_factory=list)
+
+    @property
+    def identical(self) -> bool:
+        """True when every replayed command equals the logged one bit for bit."""
+        return self.cycles > 0 and self.divergent == 0
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of ``ehpss-hil replay``."""
+    p.add_argument("log", type=Path, help="candump -L log (or its directory)")
+    p.add_argument("--mode", default=None, help="controller mode (default: the logged one)")
+    p.add_argument("--config", type=Path, default=None,
+                   help="controller.yaml the run used (reference, tuning, params, rate)")
+    p.add_argument("--scenario", type=Path, default=None,
+                   help="scenario YAML for the reference and sample time")
+    p.add_argument("--show", type=int, default=5, help="divergences to print (default 5)")
+
+
+def _logged_mode(log: Path) -> str | None:
+    codec = FrameCodec()
+    mode = None
+    status_id = codec.can_id("CTRL_STATUS")
+    for msg in read_log(log):
+        if msg.arbitration_id == status_id:
+            d = codec.classify(msg)
+            if d.values is not None and d.verdict.usable:
+                mode = MODE_NAMES.get(int(d.values["Mode"]))
+    return mode
+
+
+def resolve_setup(log: Path, mode: str | None, config: Path | None,
+                  scenario: Path | None) -> ReplaySetup:
+    """The controller configuration of a logged run (see the module docstring)."""
+    if config is not None:
+        cfg = load_controller_config(config)
+        return ReplaySetup(mode or cfg.mode, 1.0 / cfg.rate_hz, cfg.reference, cfg.tuning,
+                           load_params(cfg.params or None), str(config))
+    info = run_info(read_sidecar(log), log.parent,
+                    load_scenario(scenario) if scenario is not None else None, log)
+    logged = mode or _logged_mode(log) or info.mode or "mmac"
+    return ReplaySetup(logged, info.ts_s or 1e-3, info.reference or Reference(),
+                       info.tuning or ControlTuning(), load_params(info.params_path),
+                       ", ".join(info.sources) or "defaults")
+
+
+def _make(setup: ReplaySetup) -> Any:
+    try:
+        from ..control.controllers import make_controller
+    except ImportError as exc:
+        raise ReplayError(f"controller library not available ({exc})") from exc
+    return make_controller(setup.mode, setup.params, setup.ts_s, setup.tuning, setup.reference)
+
+
+class _Replayer:
+    """The per-frame state machine of one replay."""
+
+    def __init__(self, setup: ReplaySetup, keep: int) -> None:
+        self.ctrl = _make(setup)
+        self.codec = FrameCodec()
+        self.res = ReplayResult(setup)
+        self.keep = keep
+        self.meas = Measurement()
+        self.fresh = False
+        self.started = False
+        self.in_failsafe = False
+        self.override: float | None = None
+        self.ts = setup.ts_s
+        self.ref = setup.reference
+        self._xd = np.zeros(0)
+        self._names = {self.codec.can_id(n): n for n in
+                       ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD", "SETPOINT")}
+
+    def x_d(self, k: int) -> float:
+        """Reference at sample k (m), sampled in blocks of 4096."""
+        if k >= len(self._xd):
+            n = max(2 * len(self._xd), k + 4096)
+            self._xd = self.ref.sample(np.arange(n) * self.ts)
+        return float(self._xd[k])
+
+    def frame(self, msg: Any, number: int) -> None:
+        name = self._names.get(msg.arbitration_id)
+        if name is None:
+            return
+        d = self.codec.classify(msg)
+        if d.values is None or not d.verdict.usable:
+            return
+        v, m = d.values, self.meas
+        if name == "SENSOR_POS":
+            m.position_m, m.spool_m, self.fresh = float(v["Position"]), float(v["Spool"]), True
+        elif name == "SENSOR_AUX":
+            m.coil_current_a, m.load_pressure_pa = float(v["CoilCurrent"]), float(v["LoadPressure"])
+        elif name == "SETPOINT":
+            self.override = float(v["Position"]) if v["Override"] else None
+        elif self.started or v["Enable"]:
+            self.started = True
+            self.command(float(v["CurrentSetpoint"]), bool(v["Enable"]), number)
+        else:
+            self.fresh = False
+
+    def command(self, logged_a: float, logged_en: bool, number: int) -> None:
+        k = self.res.cycles + self.res.failsafe_cycles
+        if not logged_en:  # the daemon's fail-safe (FAULT): no step, the reference runs on
+            self.res.failsafe_cycles += 1
+            self.in_failsafe = True
+            self.fresh = False
+            return
+        if self.in_failsafe:  # FAULT → ACTIVE: the daemon resets the controller
+            self.ctrl.reset()
+            self.in_failsafe = False
+        m = self.meas
+        m.reference_m = self.override if self.override is not None else self.x_d(k)
+        m.fresh = self.fresh
+        cmd = self.ctrl.step(m)
+        cur = cmd.current_a if math.isfinite(cmd.current_a) else 0.0
+        cur = max(-1.0, min(1.0, cur))
+        q = self.codec.quantize("VALVE_CMD", {"CurrentSetpoint": cur})["CurrentSetpoint"]
+        self.fresh = False
+        self.res.cycles += 1
+        if q != logged_a or bool(cmd.enable) != logged_en:
+            self.res.divergent += 1
+            self.res.max_abs_diff_a = max(self.res.max_abs_diff_a, abs(q - logged_a))
+            if len(self.res.first) < self.keep:
+                self.res.first.append(Divergence(k, number, logged_a, q, logged_en,
+                                                 bool(cmd.enable)))
+
+
+def replay_log(path: str | Path, mode: str | None = None, config: Path | None = None,
+               scenario: Path | None = None, keep: int = 5) -> ReplayResult:
+    """Replay a log through the controller; see the module docstring."""
+    log = resolve_log(path)
+    setup = resolve_setup(log, mode, config, scenario)
+    r = _Replayer(setup, keep)
+    for number, msg in enumerate(read_log(log), start=1):
+        r.frame(msg, number)
+    if r.res.cycles == 0:
+        raise ReplayError(f"{log}: no VALVE_CMD with Enable=1: nothing to compare")
+    return r.res
+
+
+def describe(d: Divergence, ts_s: float) -> str:
+    """One line for a divergence."""
+    lsb = 2e-7
+    return (f"cycle {d.cycle} (t = {d.cycle * ts_s:.4f} s, frame #{d.frame_number} of the log): "
+            f"logged {d.logged_a:+.7f} A (enable {int(d.logged_enable)}), replayed "
+            f"{d.replayed_a:+.7f} A (enable {int(d.replayed_enable)}), "
+            f"diff {(d.replayed_a - d.logged_a) / lsb:+.0f} LSB")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Replay and print the verdict: 0 identical, 1 diverged."""
+    res = replay_log(args.log, args.mode, args.config, args.scenario, args.show)
+    s = res.setup
+    print(f"replayed {res.cycles} cycles with mode {s.mode} at Ts = {s.ts_s * 1e3:g} ms "
+          f"(config from {s.source})")
+    if res.failsafe_cycles:
+        print(f"{res.failsafe_cycles} fail-safe cycles (logged Enable=0) skipped; the controller "
+              "is reset when they end, as the daemon does")
+    if res.identical:
+        print("identical: every replayed VALVE_CMD equals the logged one bit for bit")
+        return 0
+    print(f"DIVERGED in {res.divergent} of {res.cycles} cycles (max |diff| "
+          f"{res.max_abs_diff_a:.3g} A); first divergence:")
+    for d in res.first:
+        print("  " + describe(d, s.ts_s))
+    return 1

@@ -1,0 +1,87 @@
+"""``ehpss-hil sim SCENARIO… --controller MODE…``: lockstep simulation, metrics table, JSON, plot."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+from ..control.controllers import MODES
+from ..report.metrics import RunMetrics
+from ..sim.campaign import Job, default_jobs, run_campaign, scenario_paths
+from ..sim.lockstep import TRANSPORTS
+
+NAME = "sim"
+HELP = "deterministic lockstep simulation of scenarios with one or more controllers"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scenarios", nargs="+", help="scenario YAML files (or directories of them)")
+    p.add_argument("--controller", "-C", action="append", choices=MODES, metavar="MODE",
+                   help=f"controller mode, repeatable ({', '.join(MODES)}; default mmac)")
+    p.add_argument("--json", metavar="FILE", help="write the DESIGN §10 metric rows as JSON")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="figure like the paper's Fig 5 (several runs: FILE-<scenario>-<mode>.png)")
+    p.add_argument("--transport", choices=TRANSPORTS, default="quantize",
+                   help="frame layer: DBC quantization (fast) or real encoded frames with E2E")
+    p.add_argument("--jobs", "-j", type=int, default=default_jobs(),
+                   help="worker processes for several runs (default: all cores)")
+
+
+def _fmt_s(v: float) -> str:
+    return "never" if math.isinf(v) else f"{v * 1e3:.0f}"
+
+
+def format_table(rows: list[RunMetrics]) -> str:
+    """A fixed-width table of RMS, pre-fault max, switches, worst event peak and recovery, speed."""
+    head = (f"{'scenario':22s} {'controller':10s} {'RMS µm':>9s} {'pre µm':>7s} {'sw':>4s} "
+            f"{'peak µm':>9s} {'rec ms':>7s} {'speed':>7s}")
+    lines = [head, "-" * len(head)]
+    for m in rows:
+        peak = max((e.peak_error_m for e in m.events), default=0.0)
+        rec = max((e.recovery_s for e in m.events), default=0.0)
+        lines.append(f"{m.scenario[:22]:22s} {m.controller:10s} {m.rms_error_m * 1e6:9.2f} "
+                     f"{m.pre_fault_max_m * 1e6:7.1f} {m.switches:4d} {peak * 1e6:9.1f} "
+                     f"{_fmt_s(rec):>7s} {m.speed:6.0f}×")
+    return "\n".join(lines)
+
+
+def speed_line(rows: list[RunMetrics], wall_s: float, processes: int) -> str:
+    """Simulated seconds per wall second, for the campaign and per run (one core each)."""
+    simulated = sum(m.duration_s for m in rows)
+    per_run = [m.speed for m in rows if m.speed > 0]
+    text = (f"{len(rows)} run(s): {simulated:.1f} s simulated in {wall_s:.2f} s wall = "
+            f"{simulated / wall_s:.0f}× real time on {processes} process(es)")
+    if per_run:
+        text += f"; per run (loop CPU time, one core): {min(per_run):.0f}–{max(per_run):.0f}×"
+    return text
+
+
+def _plot_name(base: Path, many: bool, scenario: str, mode: str) -> Path:
+    return base.with_name(f"{base.stem}-{scenario}-{mode}{base.suffix or '.png'}") if many else base
+
+
+def run(args: argparse.Namespace) -> int:
+    modes = args.controller or ["mmac"]
+    paths = scenario_paths(args.scenarios)
+    jobs = [Job(p, m, args.transport, keep_result=bool(args.plot)) for p in paths for m in modes]
+    t0 = time.perf_counter()
+    outcomes = run_campaign(jobs, args.jobs)
+    wall = time.perf_counter() - t0
+    rows = [o.metrics for o in outcomes]
+    print(format_table(rows))
+    print(speed_line(rows, wall, min(args.jobs, len(jobs))))
+    if args.json:
+        Path(args.json).write_text(json.dumps([m.to_json() for m in rows], indent=2) + "\n")
+        print(f"wrote {args.json}")
+    if args.plot:
+        from ..report.figures import plot_run
+
+        for o in outcomes:
+            if o.result is not None:
+                out = plot_run(o.result, _plot_name(Path(args.plot), len(outcomes) > 1,
+                                                    o.result.scenario, o.result.controller))
+                print(f"wrote {out}")
+    return 0

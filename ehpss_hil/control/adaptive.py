@@ -1,0 +1,216 @@
+"""The adaptive modes: ``mmac`` (per-channel banks) and ``smac``/``mmac-paper`` (joint model).
+
+``mmac`` (DESIGN §5): the spool channel ``y_v = θ_L·v`` (v: commanded spool predicted from the
+current echo) and the position channel ``y_s = θ_D·x̂`` (x̂: model position from the spool LVDT),
+each with fixed models + FRA + RIA, a supervisor and a guard. The spool residual depends on
+k_LOE only and the position residual on k_DFT only, which is what makes them separable.
+
+``mmac-paper``/``smac``: the paper's sensing — the position alone. The regression is over a
+window of M samples, ``y = y_s[k] − y_s[k−M]`` against ``φ = K_c·∫_{k−M}^{k} v dt``, i.e.
+``y = k_LOE·k_DFT·φ``: only the product is identifiable, so a joint (θ_L, θ_D) model cannot tell a
+50 % LOE from a 0.5 drift (DESIGN §4). ``mmac-paper`` has the fixed pairs nominal, LOE 50 %,
+drift 0.5 plus FRA and RIA, whose adaptive law (the paper's actuator parametrization) adapts θ_L
+with θ_D held (FRA: 1; RIA: the θ_D of the fixed model it was reinitialized to); ``smac`` has one
+adaptive model, θ_L with θ_D = 1. Their x̂ integrates θ̂_L·v (no spool sensor in this sensing).
+"""
+
+from __future__ import annotations
+
+from ..scenario import Reference
+from .bank import JointBank, ScalarBank
+from .base import Measurement, ValveCommand
+from .controllers import JOINT_SLOT0, POSITION_SLOT0, SMAC_SLOT, SPOOL_SLOT0, LoopBase
+from .estimator import Nlms, per_sample_gain
+from .flowgain import FlowGainMonitor
+from .supervisor import Supervisor
+from .tuning import ControlTuning
+
+
+class MmacController(LoopBase):
+    """Corrected MMAC on two channels (spool, position) with bumpless compensation."""
+
+    mode = "mmac"
+
+    def _build(self) -> None:
+        t, ts = self.tuning, self.ts_s
+        g = per_sample_gain(t.nlms_gain_per_ms, ts)
+        lim_l = (t.k_loe_limits[0], t.k_loe_limits[1])
+        lim_d = (t.k_dft_limits[0], t.k_dft_limits[1])
+        self.spool_bank = ScalarBank(t.fixed_k_loe, t, ts, self.scale_spool_m, g, lim_l)
+        self.pos_bank = ScalarBank(t.fixed_k_dft, t, ts, self.scale_pos_m, g, lim_d)
+        self.spool_sup = Supervisor(self.spool_bank, t, ts, guard_epsilon=t.guard_epsilon,
+                                    sustained_guard=True)
+        self.pos_sup = Supervisor(self.pos_bank, t, ts, guard_epsilon=t.position_guard_epsilon)
+        self.flow = FlowGainMonitor(self.params.plant, ts, self.scale_spool_m,
+                                    t.flow_gain_window_s, t.flow_gain_threshold)
+        self._in_flow = False
+        self._flow_on = t.flow_gain_test
+        self._inv_s_spool = 1.0 / self.scale_spool_m
+        self._inv_s_pos = 1.0 / self.scale_pos_m
+        n_l, n_d = len(t.fixed_k_loe) + 2, len(t.fixed_k_dft) + 2
+        self.index_slots = (tuple(range(SPOOL_SLOT0, SPOOL_SLOT0 + n_l))
+                            + tuple(range(POSITION_SLOT0, POSITION_SLOT0 + n_d)))
+
+    def _reset_mode(self) -> None:
+        self.spool_bank.reset()
+        self.pos_bank.reset()
+        self.spool_sup.reset()
+        self.pos_sup.reset()
+        self.flow.reset()
+        self._in_flow = False
+
+    def step(self, meas: Measurement) -> ValveCommand:
+        """Predict, score both banks, supervise, compensate, PI."""
+        if meas.fresh:
+            self._echo = meas.coil_current_a
+            v = self.valve.step(self._echo)
+            y_v = meas.spool_m
+            sb, ss = self.spool_bank, self.spool_sup
+            sb.update(y_v, v)
+            ss.update(abs(v) * self._inv_s_spool)
+            xh = self.xhat.integrate(y_v)
+            pb, ps = self.pos_bank, self.pos_sup
+            if not self.flow.flow_fault:  # under H_Q the position channel has nothing to explain
+                pb.update(meas.position_m, xh)
+                ps.update(abs(xh) * self._inv_s_pos)
+            tl = 1.0 if ss.guarded else sb.theta[ss.active]
+            self.k_loe_hat = tl
+            self.k_dft_hat = pb.theta[ps.active]
+            self.k_q_hat = 1.0
+            if self._flow_on:
+                self._flow_split(meas, y_v, tl)
+        else:
+            v = self.valve.step(self._echo)
+            self.xhat.integrate(self.k_loe_hat / self.k_q_hat * v)
+            if self._flow_on:
+                self.flow.propagate(self._echo)
+        return self._close(meas)
+
+    def _flow_split(self, meas: Measurement, y_v: float, tl: float) -> None:
+        """Load-pressure test: is the position-channel change a flow-gain loss (flowgain.py)?
+
+        Under H_Q the sensor is taken as healthy (k̂_DFT = 1), the current is divided by
+        k̂_LOE·k̂_Q with k̂_Q the offset-free increment estimate, and x̂ (in x/k̂_Q units) is
+        kept on the sensor so that nothing jumps when the test returns to H_D.
+        """
+        fl = self.flow
+        prod = fl.product(meas.position_m, y_v)
+        fl.update(self._echo, meas.load_pressure_pa, tl, prod)
+        if fl.flow_fault:
+            self.k_q_hat = prod
+            self.k_loe_hat = tl * prod
+            self.k_dft_hat = 1.0
+            self.xhat.x = meas.position_m / prod
+            self._in_flow = True
+        elif self._in_flow:  # back to H_D: the sensor was judged healthy, restart from k_DFT = 1
+            self._in_flow = False
+            self.xhat.x = meas.position_m
+            self.pos_sup.force(0)
+            self.k_dft_hat = self.pos_bank.theta[0]
+
+    def _position_guarded(self) -> bool:
+        return self.pos_sup.guarded and not self.flow.flow_fault
+
+    def index_values(self) -> list[float]:
+        """J of the spool models then the position models."""
+        return self.spool_bank.j + self.pos_bank.j
+
+    def theta_values(self) -> list[float]:
+        """θ of the spool models then the position models."""
+        return self.spool_bank.theta + self.pos_bank.theta
+
+    def probe(self) -> tuple[int, int, float, float]:
+        """Active slots of both channels and the estimates in use."""
+        return (SPOOL_SLOT0 + self.spool_sup.active, POSITION_SLOT0 + self.pos_sup.active,
+                self.k_loe_hat, self.k_dft_hat)
+
+    def switch_count(self) -> int:
+        """Switches of both channels."""
+        return self.spool_sup.switches + self.pos_sup.switches
+
+
+class JointController(LoopBase):
+    """``mmac-paper`` (joint bank + supervisor) or ``smac`` (one joint adaptive model)."""
+
+    def __init__(self, tuning: ControlTuning, reference: Reference | None, mode: str) -> None:
+        super().__init__(tuning, reference)
+        self.mode = mode
+
+    def _build(self) -> None:
+        t, ts = self.tuning, self.ts_s
+        m = t.increment_window
+        self._m = m
+        k_c = self.params.plant.velocity_gain_1_s
+        self._h = 0.5 * ts * k_c
+        scale = self.scale_spool_m * k_c * ts * m
+        self._inv_s = 1.0 / scale
+        g = per_sample_gain(t.nlms_gain_per_ms, ts)
+        if self.mode == "smac":
+            c = (t.nlms_c_fraction * scale) ** 2
+            self.est = Nlms(1.0, g, c, t.k_loe_limits[0], t.k_loe_limits[1])
+            self.index_slots = (SMAC_SLOT,)
+        else:
+            fixed = ((1.0, 1.0), (0.5, 1.0), (1.0, 0.5))
+            self.bank = JointBank(fixed, t, ts, scale, g)
+            self.sup = Supervisor(self.bank, t, ts)
+            self.index_slots = tuple(range(JOINT_SLOT0, JOINT_SLOT0 + 5))
+
+    def _reset_mode(self) -> None:
+        self._ys = [0.0] * self._m
+        self._vs = [0.0] * self._m
+        self._i = 0
+        self._n = 0
+        self._int_v = 0.0
+        self._v_prev = 0.0
+        if self.mode == "smac":
+            self.est.reset()
+        else:
+            self.bank.reset()
+            self.sup.reset()
+
+    def step(self, meas: Measurement) -> ValveCommand:
+        """Windowed increment regression, (bank + supervisor | single model), compensation."""
+        if meas.fresh:
+            self._echo = meas.coil_current_a
+        v = self.valve.step(self._echo)
+        self._int_v += self._h * (v + self._v_prev)
+        self._v_prev = v
+        self.xhat.integrate(self.k_loe_hat * v)
+        i = self._i
+        y = meas.position_m - self._ys[i]
+        phi = self._int_v - self._vs[i]
+        self._ys[i] = meas.position_m
+        self._vs[i] = self._int_v
+        self._i = (i + 1) % self._m
+        self._n += 1
+        if meas.fresh and self._n > self._m:
+            self._adapt(y, phi)
+        return self._close(meas)
+
+    def _adapt(self, y: float, phi: float) -> None:
+        if self.mode == "smac":
+            self.est.update(y, phi)
+            self.k_loe_hat = self.est.theta
+        else:
+            self.bank.update(y, phi)
+            a = self.sup.update(abs(phi) * self._inv_s)
+            self.k_loe_hat, self.k_dft_hat = self.bank.pairs[a]
+
+    def index_values(self) -> list[float]:
+        """J per model (smac: none is computed; reported as 0)."""
+        return [0.0] if self.mode == "smac" else list(self.bank.j)
+
+    def theta_values(self) -> list[float]:
+        """θ_L·θ_D per model."""
+        if self.mode == "smac":
+            return [self.est.theta]
+        return [a * b for a, b in self.bank.pairs]
+
+    def probe(self) -> tuple[int, int, float, float]:
+        """The joint slot is reported for both channels."""
+        s = SMAC_SLOT if self.mode == "smac" else JOINT_SLOT0 + self.sup.active
+        return (s, s, self.k_loe_hat, self.k_dft_hat)
+
+    def switch_count(self) -> int:
+        """Switches of the joint supervisor."""
+        return 0 if self.mode == "smac" else self.sup.switches

@@ -1,0 +1,227 @@
+"""The five controller modes and the factory :func:`make_controller`.
+
+Modes (DESIGN §5): ``nrc`` (eq 39 PI only), ``oracle`` (compensation with the true faults, for
+benchmarks only), ``smac`` (one joint adaptive model), ``mmac-paper`` (the paper's joint bank),
+``mmac`` (per-channel banks on the spool LVDT and the position sensor).
+
+Model slots (DBC CTRL_INDEX ``ModelSlot`` 0–15, reported in :class:`ControllerStatus`):
+
+=====  ==========================================  =====  ===================================
+slot   model                                       slot   model
+=====  ==========================================  =====  ===================================
+0      spool: fixed k_LOE = 1.0                    8      position: RIA
+1      spool: fixed k_LOE = 0.5                    9      joint (mmac-paper): nominal (1, 1)
+2      spool: FRA                                  10     joint: LOE 50 % (0.5, 1)
+3      spool: RIA                                  11     joint: drift 0.5 (1, 0.5)
+4      position: fixed k_DFT = 1                   12     joint: FRA
+5      position: fixed k_DFT = 0.5                 13     joint: RIA
+6      position: fixed k_DFT = 0 (failed sensor)   14     smac: the single adaptive model
+7      position: FRA                               15     (unused)
+=====  ==========================================  =====  ===================================
+
+Slots 0–8 assume the default fixed values of :class:`ControlTuning`; other fixed tuples shift
+the FRA/RIA slots (``SPOOL_SLOT0 + len(fixed_k_loe)`` …). ``-1`` means "no bank" (nrc, oracle).
+"""
+
+from __future__ import annotations
+
+from ..errors import ModelError
+from ..physics.faults import FaultState
+from ..physics.params import Params
+from ..scenario import Reference
+from .base import ControllerStatus, Measurement, ValveCommand
+from .compensation import compensated_current, sensor_trusted
+from .pi import PiLaw
+from .predictors import ModelPosition, ValvePredictor
+from .tuning import ControlTuning
+
+SPOOL_SLOT0 = 0
+POSITION_SLOT0 = 4
+JOINT_SLOT0 = 9
+SMAC_SLOT = 14
+MODES = ("nrc", "smac", "mmac-paper", "mmac", "oracle")
+
+
+class LoopBase:
+    """Shared parts: PI, valve predictor, model position, command object, probes."""
+
+    mode = "base"
+
+    def __init__(self, tuning: ControlTuning, reference: Reference | None) -> None:
+        self.tuning = tuning
+        self.reference = reference if reference is not None else Reference()
+        self.k_loe_hat = 1.0
+        self.k_dft_hat = 1.0
+        self.k_q_hat = 1.0
+        self.sensor_trusted = True
+
+    # ---- configuration ---------------------------------------------------------------------
+    def configure(self, params: Params, ts_s: float) -> None:
+        """Build everything (ZOH maps, gains, banks) for sample time ``ts_s`` (s)."""
+        if not ts_s > 0.0:
+            raise ModelError(f"sample time must be positive, got {ts_s}")
+        self.params = params
+        self.ts_s = ts_s
+        self.k_f = params.controller.k_f
+        self.pi = PiLaw(params.controller, ts_s)
+        self.valve = ValvePredictor(params.plant, ts_s)
+        self.xhat = ModelPosition(params.plant, ts_s, self.tuning.anchor_rate_1_s)
+        ref = self.reference
+        self.scale_pos_m = ref.amplitude_m if ref.amplitude_m > 0.0 else 1e-3
+        self.scale_spool_m = ref.spool_amplitude_m if ref.spool_amplitude_m > 0.0 else 1.52e-3
+        self._cmd = ValveCommand()
+        self._failed_below = self.tuning.sensor_failed_below
+        tb = self.tuning.feedback_blend_s
+        self._blend_step = 1.0 if tb <= ts_s else ts_s / tb
+        self._blend = 1.0
+        self._echo = 0.0
+        self._y_s = 0.0
+        self._build()
+        self.reset()
+
+    def _build(self) -> None:
+        """Mode-specific construction (banks, supervisors)."""
+
+    def reset(self) -> None:
+        """Integrators, predictors, estimates and supervisors back to the start."""
+        self.pi.reset()
+        self.valve.reset()
+        self.xhat.reset()
+        self._echo = 0.0
+        self._y_s = 0.0
+        self.k_loe_hat = 1.0
+        self.k_dft_hat = 1.0
+        self.k_q_hat = 1.0
+        self.sensor_trusted = True
+        self._blend = 1.0
+        self._reset_mode()
+
+    def _reset_mode(self) -> None:
+        """Mode-specific reset."""
+
+    # ---- the cycle -------------------------------------------------------------------------
+    def _finish(self, reference_m: float, feedback: float) -> ValveCommand:
+        self._cmd.current_a = compensated_current(self.pi.step(reference_m, feedback),
+                                                  self.k_loe_hat)
+        return self._cmd
+
+    def _close(self, meas: Measurement) -> ValveCommand:
+        """Common tail: trust decision, anchoring, feedback, PI, compensation.
+
+        While the sensor is trusted the fed-back position is ``x̂ + b·(y_s/θ̂_D − x̂)`` with the
+        blend b ramping to 1 over ``feedback_blend_s`` after a period of distrust (b = 1: exactly
+        ``y_s/θ̂_D``); untrusted: x̂ alone. This makes the return to the sensor bumpless.
+        """
+        td = self.k_dft_hat
+        trusted = sensor_trusted(td, self._failed_below, self._position_guarded(), meas.fresh)
+        self.sensor_trusted = trusted
+        xh, kq = self.xhat, self.k_q_hat
+        model_x = kq * xh.x  # x̂ integrates the spool without k_Q: true x ≈ k̂_Q·x̂
+        if trusted:
+            y = meas.position_m / td
+            xh.anchor(y / kq)
+            b = self._blend
+            if b < 1.0:
+                b = self._blend = min(1.0, b + self._blend_step)
+                y = model_x + b * (y - model_x)
+            return self._finish(meas.reference_m, self.k_f * y)
+        self._blend = 0.0 if meas.fresh else self._blend
+        return self._finish(meas.reference_m, self.k_f * model_x)
+
+    def _position_guarded(self) -> bool:
+        return False
+
+    def step(self, meas: Measurement) -> ValveCommand:
+        """One cycle (each mode overrides this)."""
+        raise NotImplementedError
+
+    # ---- probes ----------------------------------------------------------------------------
+    index_slots: tuple[int, ...] = ()
+
+    def index_values(self) -> list[float]:
+        """J of every model in :attr:`index_slots` order (dimensionless)."""
+        return []
+
+    def probe(self) -> tuple[int, int, float, float]:
+        """(active spool slot, active position slot, k̂_LOE, k̂_DFT) — cheap, every sample."""
+        return (-1, -1, self.k_loe_hat, self.k_dft_hat)
+
+    def status(self) -> ControllerStatus:
+        """Current status (allocates; call at status rate)."""
+        sp, ps, kl, kd = self.probe()
+        active = {}
+        if sp >= 0:
+            active["spool"] = sp
+        if ps >= 0:
+            active["position"] = ps
+        return ControllerStatus(mode=self.mode, active_model=active, k_loe_hat=kl, k_dft_hat=kd,
+                                index=dict(zip(self.index_slots, self.index_values(), strict=True)),
+                                theta=dict(zip(self.index_slots, self.theta_values(), strict=True)),
+                                switches=self.switch_count())
+
+    def theta_values(self) -> list[float]:
+        """θ of every model in :attr:`index_slots` order."""
+        return []
+
+    def switch_count(self) -> int:
+        """Total model switches since reset."""
+        return 0
+
+
+class NrcController(LoopBase):
+    """No reconfiguration: the eq 39 PI on the raw sensor (the stale value when a frame is lost)."""
+
+    mode = "nrc"
+
+    def step(self, meas: Measurement) -> ValveCommand:
+        """PI on ``K_f·y_s``."""
+        return self._finish(meas.reference_m, self.k_f * meas.position_m)
+
+
+class OracleController(LoopBase):
+    """Compensation with the true fault values (benchmarks only): θ̂_L = k_LOE·k_Q, θ̂_D = k_DFT;
+    a failed sensor (k_DFT < 0.15) is replaced by the model position x̂ like in ``mmac``."""
+
+    mode = "oracle"
+
+    def set_truth(self, faults: FaultState) -> None:
+        """The true faults in force now (the simulator calls this every sample)."""
+        self.k_loe_hat = faults.k_loe * faults.k_q
+        self.k_q_hat = faults.k_q
+        self.k_dft_hat = faults.k_dft
+
+    def step(self, meas: Measurement) -> ValveCommand:
+        """Predict, integrate the (measured) spool into x̂, compensate with the truth."""
+        if meas.fresh:
+            self._echo = meas.coil_current_a
+            self.valve.step(self._echo)
+            self.xhat.integrate(meas.spool_m)
+        else:
+            self.xhat.integrate(faults_loe(self) * self.valve.step(self._echo))
+        return self._close(meas)
+
+
+def faults_loe(c: LoopBase) -> float:
+    """k̂_LOE alone (the current divisor is k̂_LOE·k̂_Q): what the spool LVDT sees."""
+    return c.k_loe_hat / c.k_q_hat if c.k_q_hat > 0.0 else c.k_loe_hat
+
+
+def make_controller(mode: str, params: Params, ts_s: float,
+                    tuning: ControlTuning | None = None,
+                    reference: Reference | None = None) -> LoopBase:
+    """Build and configure the controller for ``mode`` (one of :data:`MODES`).
+
+    ``reference`` sets the channels' nominal amplitudes S (default: the 1 mm, 5 rad/s sine).
+    """
+    from .adaptive import JointController, MmacController
+
+    table: dict[str, type[LoopBase]] = {
+        "nrc": NrcController, "oracle": OracleController, "mmac": MmacController,
+        "mmac-paper": JointController, "smac": JointController}
+    cls = table.get(mode)
+    if cls is None:
+        raise ModelError(f"unknown controller mode {mode!r}; choose one of {', '.join(MODES)}")
+    tun = tuning if tuning is not None else ControlTuning()
+    ctrl = cls(tun, reference, mode) if cls is JointController else cls(tun, reference)
+    ctrl.configure(params, ts_s)
+    return ctrl

@@ -1,0 +1,180 @@
+"""The controller daemon (``ehpss-hil controller``): config → bus, codec, controller, loop.
+
+Realtime on a fixed deadline grid (default) or lockstep (one cycle per received sensor pair).
+SIGTERM/SIGINT stop the loop at its next cycle; then the daemon sends zero current with
+Enable 0, reports STOPPED, flushes the log and returns 0.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import cast
+
+from .bus import open_bus
+from .codec import FrameCodec
+from .config import DAEMON_MODES, ControllerConfig, RtOptions, load_controller_config
+from .control.base import Controller
+from .errors import ConfigError
+from .physics.params import Params, load_params
+from .runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
+from .runtime.frameio import FrameIO, open_can_logger
+from .runtime.rt import apply_rt_options, freeze_gc
+from .runtime.signals import install_stop_handlers, restore_handlers
+
+log = logging.getLogger("ehpss_hil.controller")
+
+CLOCK_NOTE = ("wall clock (time.time()) at send for frames sent; the bus's receive timestamp "
+              "(kernel SO_TIMESTAMPNS on udp_multicast/socketcan) for frames received")
+ControllerFactory = Callable[[str, Params, float, ControllerConfig], Controller]
+
+
+@dataclass(frozen=True)
+class DaemonArgs:
+    """Command-line overrides of ``controller.yaml`` (None = keep the config's value)."""
+
+    config: Path
+    interface: str | None = None
+    channel: str | None = None
+    mode: str | None = None
+    rate_hz: float | None = None
+    rt_priority: int | None = None
+    cpu: int | None = None
+    log: str | None = None
+    duration_s: float | None = None
+    lockstep: bool = False
+    summary_json: Path | None = None
+    controller_factory: str | None = None
+    sensor_age_us: float | None = None
+
+
+def resolve_config(a: DaemonArgs) -> ControllerConfig:
+    """Load the config and apply the overrides, validated (raises ConfigError)."""
+    cfg = load_controller_config(a.config)
+    src = str(a.config)
+    bus = cfg.bus
+    if a.interface or a.channel:
+        try:
+            bus = replace(bus, interface=a.interface or bus.interface,  # type: ignore[arg-type]
+                          channel=a.channel or bus.channel)
+        except ConfigError as exc:
+            raise ConfigError(src, f"bus.{exc.key_path} (command line)", exc.reason) from exc
+    rate = cfg.rate_hz if a.rate_hz is None else a.rate_hz
+    if not 10.0 <= rate <= 10000.0:
+        raise ConfigError(src, "rate_hz (--rate)", f"must be in [10, 10000] Hz, got {rate:g}")
+    mode = a.mode or cfg.mode
+    if mode not in DAEMON_MODES:
+        raise ConfigError(src, "mode (--mode)", f"expected one of {', '.join(DAEMON_MODES)}")
+    rt = cfg.rt
+    if a.rt_priority is not None:
+        if not 0 <= a.rt_priority <= 99:
+            raise ConfigError(src, "rt.priority (--rt-priority)", "must be in [0, 99]")
+        rt = replace(rt, priority=a.rt_priority)
+    if a.cpu is not None:
+        rt = replace(rt, cpu=a.cpu)
+    if a.duration_s is not None and a.duration_s <= 0.0:
+        raise ConfigError(src, "--duration", "must be > 0 s")
+    return replace(cfg, bus=bus, rate_hz=rate, mode=mode, rt=rt)  # type: ignore[arg-type]
+
+
+def default_factory(mode: str, params: Params, ts_s: float, cfg: ControllerConfig) -> Controller:
+    """The project's control laws (``ehpss_hil.control.controllers.make_controller``)."""
+    from .control.controllers import make_controller
+
+    ctrl = make_controller(mode, params, ts_s, cfg.tuning, reference=cfg.reference)
+    return cast(Controller, ctrl)  # every concrete mode implements step()
+
+
+def load_factory(spec: str | None) -> ControllerFactory:
+    """``module:function`` → a controller factory (tests, custom laws); None → the default."""
+    if not spec:
+        return default_factory
+    mod_name, _, func = spec.partition(":")
+    try:
+        fn: ControllerFactory = getattr(importlib.import_module(mod_name), func)
+    except (ImportError, AttributeError) as exc:
+        raise ConfigError("", "--controller-factory", f"cannot load {spec!r}: {exc}") from exc
+    return fn
+
+
+def make_codec(cfg: ControllerConfig) -> FrameCodec:
+    """The frame codec with this config's DBC and ID layout."""
+    return FrameCodec(cfg.dbc or None, id_base=cfg.ids.id_base,
+                      node_ids={"HEARTBEAT_CTRL": cfg.ids.controller_node,
+                                "HEARTBEAT_EMU": cfg.ids.emulator_node},
+                      max_delta_counter=cfg.ids.max_delta_counter)
+
+
+def loop_options(cfg: ControllerConfig, sensor_age_us: float | None = None) -> LoopOptions:
+    """The loop's rates, fail-safe policy and phase-lock target from the config (+ override)."""
+    opts = LoopOptions(rate_hz=cfg.rate_hz, status_rate_hz=cfg.status_rate_hz,
+                       heartbeat_rate_hz=cfg.heartbeat_rate_hz, watchdog=cfg.watchdog,
+                       stats_interval_s=cfg.stats_interval_s)
+    if sensor_age_us is not None:
+        if not 0.0 <= sensor_age_us * 1e-6 < 0.5 / cfg.rate_hz:
+            raise ConfigError("", "--sensor-age-us", "must be in [0, half a period)")
+        opts = replace(opts, sensor_age_target_s=sensor_age_us * 1e-6)
+    return opts
+
+
+def format_summary(s: dict[str, object]) -> str:
+    """The counters printed at exit."""
+    st = s["stats"]
+    assert isinstance(st, dict)
+    lat, cmp_, lcy = st["lateness_s"], st["compute_s"], st["latency_s"]
+    return "\n".join([
+        f"controller: cycles {s['cycles']}, final state {s['state']} "
+        f"(reason {s['failsafe_reason']}), watchdog trips {s['watchdog_trips']}, "
+        f"fail-safe cycles {s['failsafe_cycles']}, saturations {s['saturations']}",
+        f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
+        f"  frames received: {s['frames_received']}; by verdict {s['received_by_verdict']}",
+        f"  overruns {st['overruns']}, lateness p50 {lat['p50'] * 1e6:.1f} µs p99 "
+        f"{lat['p99'] * 1e6:.1f} µs, compute p99 {cmp_['p99'] * 1e6:.1f} µs, sensor->command "
+        f"latency p50 {lcy['p50'] * 1e6:.1f} µs p99 {lcy['p99'] * 1e6:.1f} µs"])
+
+
+def run_daemon(a: DaemonArgs) -> int:
+    """Configure, run until stopped, shut down fail-safe; returns the exit code (0)."""
+    cfg = resolve_config(a)
+    params = load_params(cfg.params or None)
+    codec = make_codec(cfg)
+    controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
+    bus = open_bus(cfg.bus)
+    logger = open_can_logger(a.log or cfg.log.path, cfg.log, cfg.bus, sidecar={
+        "tool": "ehpss-hil controller", "config": str(a.config), "dbc": cfg.dbc or None,
+        "mode": cfg.mode, "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
+        "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "lockstep": a.lockstep})
+    io = FrameIO(bus, codec, OWN_FRAMES, logger)
+    loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us))
+    stop, previous = install_stop_handlers()
+    n = None if a.duration_s is None else round(a.duration_s * cfg.rate_hz)
+    try:
+        _prepare_rt(cfg.rt)
+        loop.start()
+        log.info("mode %s on %s:%s at %g Hz%s", cfg.mode, cfg.bus.interface, cfg.bus.channel,
+                 cfg.rate_hz, " (lockstep)" if a.lockstep else "")
+        if a.lockstep:
+            loop.run_lockstep(stop, n)
+        else:
+            loop.run_realtime(stop, n)
+    finally:
+        try:
+            loop.shutdown()
+        finally:
+            restore_handlers(previous)
+            io.close()
+            bus.shutdown()
+    summary = loop.summary()
+    print(format_summary(summary), flush=True)
+    if a.summary_json is not None:
+        a.summary_json.write_text(json.dumps(summary, indent=1))
+    return 0
+
+
+def _prepare_rt(rt: RtOptions) -> None:
+    apply_rt_options(rt)
+    freeze_gc(rt.gc_freeze)

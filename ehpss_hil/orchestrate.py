@@ -1,0 +1,212 @@
+"""``ehpss-hil run``: the emulator, the controller and a bus logger as three OS processes.
+
+The run directory gets: the exact configs used (``controller.yaml``, ``emulator.yaml``), the
+bus log ``bus.log`` (candump ``-L``, everything on the bus) with its JSON sidecar, each process's
+own log, their stdout/stderr, ``run.json`` (commands, exit codes, timings) and ``metrics.json``.
+
+On the embedded ``udp_multicast`` bus the processes run inside a private network namespace when
+this process may make one (root + ``unshare``): nothing can leave the host or reach other
+processes. Without it they run in the host namespace (TTL 0 keeps frames on the host), which
+needs a multicast route; :func:`multicast_route_reason` says what to do when there is none.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import yaml
+
+from . import PROJECT_ROOT, __version__
+from .config import DEFAULT_MULTICAST_GROUP
+from .errors import BusUnavailableError, EhpssError
+from .netns import PrivateNetns, netns_unavailable_reason
+from .scenario import Scenario, load_scenario
+from .schema import load_yaml
+
+CONTROLLER_YAML = PROJECT_ROOT / "configs" / "controller.yaml"
+EMULATOR_YAML = PROJECT_ROOT / "configs" / "emulator.yaml"
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """What to run. ``interface``/``channel`` None: the configs' bus."""
+
+    scenario_path: Path
+    mode: str = "mmac"
+    out_dir: Path = Path("out/run")
+    interface: str | None = None
+    channel: str | None = None
+    lockstep: bool = False
+    controller_yaml: Path = CONTROLLER_YAML
+    emulator_yaml: Path = EMULATOR_YAML
+    extra_controller_args: tuple[str, ...] = ()
+    quiet: bool = False
+
+
+@dataclass
+class RunResult:
+    """Outcome of one run: exit codes, paths, metrics row (None if no ground truth)."""
+
+    out_dir: Path
+    exit_codes: dict[str, int | None] = field(default_factory=dict)
+    metrics: dict[str, Any] | None = None
+    wall_s: float = 0.0
+
+
+def multicast_route_reason(group: str = DEFAULT_MULTICAST_GROUP) -> str | None:
+    """None when this namespace can route the multicast group, else what to do about it."""
+    r = subprocess.run(["ip", "route", "get", group], capture_output=True, text=True, check=False)
+    if r.returncode == 0:
+        return None
+    return ("no route for multicast on this host: run as root (a private network namespace is "
+            "made automatically), or add one with 'ip route add 224.0.0.0/4 dev lo', or use "
+            "--interface socketcan --channel vcan0")
+
+
+def _derived_config(src: Path, dst: Path, overrides: dict[str, Any]) -> Path:
+    """Write ``src`` with ``overrides`` applied and its relative paths made absolute."""
+    data = load_yaml(src) or {}
+    base = src.resolve().parent
+    for key in ("params", "dbc", "scenario"):
+        v = data.get(key)
+        if isinstance(v, str) and v and not Path(v).is_absolute():
+            data[key] = str((base / v).resolve())
+    for dotted, value in overrides.items():
+        node = data
+        *parents, leaf = dotted.split(".")
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[leaf] = value
+    dst.write_text(yaml.safe_dump(data, sort_keys=False))
+    return dst
+
+
+def _reference_dict(sc: Scenario) -> dict[str, Any]:
+    r = sc.reference
+    return {"kind": r.kind, "amplitude_m": r.amplitude_m, "omega_rad_s": r.omega_rad_s,
+            "start_s": r.start_s, "rate_m_s": r.rate_m_s, "path": r.path}
+
+
+def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
+    py = sys.executable
+    bus: dict[str, Any] = {}
+    if plan.interface:
+        bus["bus.interface"] = plan.interface
+    if plan.channel:
+        bus["bus.channel"] = plan.channel
+    emu_mode = "lockstep" if plan.lockstep else "realtime"
+    ctrl_cfg = _derived_config(plan.controller_yaml, out / "controller.yaml", {
+        **bus, "mode": plan.mode, "reference": _reference_dict(sc),
+        "rate_hz": 1.0 / sc.sample_time_s})
+    emu_cfg = _derived_config(plan.emulator_yaml, out / "emulator.yaml", {
+        **bus, "mode": emu_mode, "scenario": str(Path(plan.scenario_path).resolve()),
+        "truth": True, "rate_hz": 1.0 / sc.sample_time_s})
+    bus_cfg = load_yaml(ctrl_cfg)["bus"]
+    return {
+        "logger": [py, "-m", "ehpss_hil.cli", "log", "-i", bus_cfg["interface"], "-c",
+                   str(bus_cfg["channel"]), "-o", str(out / "bus.log")],
+        "controller": [py, "-m", "ehpss_hil.cli", "controller", "-c", str(ctrl_cfg),
+                       "--log", str(out / "controller.log"), "--summary-json",
+                       str(out / "controller-summary.json"),
+                       *(["--lockstep"] if plan.lockstep else []), *plan.extra_controller_args],
+        "emulator": [py, "-m", "firmware_sim.cli", "-c", str(emu_cfg), "--log",
+                     str(out / "emulator.log"), "--summary-json", str(out / "emulator-summary.json"),
+                     "--duration", repr(sc.duration_s)],
+    }
+
+
+def _spawn(argv: list[str], prefix: list[str], out: Path, name: str) -> subprocess.Popen[bytes]:
+    stdout: IO[bytes] = open(out / f"{name}.out", "wb")  # noqa: SIM115 - closed by the child's exit
+    return subprocess.Popen([*prefix, *argv], stdout=stdout, stderr=subprocess.STDOUT,
+                            stdin=subprocess.DEVNULL, cwd=PROJECT_ROOT)
+
+
+def _stop(proc: subprocess.Popen[bytes], timeout_s: float = 10.0) -> int | None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return proc.returncode
+
+
+def _wait_for_file(path: Path, timeout_s: float) -> None:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end and not path.exists():
+        time.sleep(0.02)
+
+
+def execute(plan: RunPlan) -> RunResult:
+    """Run the three processes for the scenario's duration and collect the results."""
+    sc = load_scenario(plan.scenario_path)
+    out = plan.out_dir
+    out.mkdir(parents=True, exist_ok=True)
+    cmds = _commands(plan, sc, out)
+    interface = load_yaml(out / "controller.yaml")["bus"]["interface"]
+    netns: PrivateNetns | None = None
+    prefix: list[str] = []
+    if interface == "udp_multicast":
+        if netns_unavailable_reason() is None:
+            netns = PrivateNetns().start()
+            prefix = netns.prefix()
+        elif (why := multicast_route_reason()) is not None:
+            raise BusUnavailableError(why)
+    res = RunResult(out)
+    t0 = time.monotonic()
+    procs: dict[str, subprocess.Popen[bytes]] = {}
+    try:
+        procs["logger"] = _spawn(cmds["logger"], prefix, out, "logger")
+        procs["controller"] = _spawn(cmds["controller"], prefix, out, "controller")
+        _wait_for_file(out / "controller.log", 10.0)
+        _wait_for_file(out / "bus.log", 10.0)
+        time.sleep(0.3)  # let both subscribe to the bus before the first sensor frame
+        procs["emulator"] = _spawn(cmds["emulator"], prefix, out, "emulator")
+        limit = sc.duration_s * (60.0 if plan.lockstep else 1.0) + 30.0
+        try:
+            res.exit_codes["emulator"] = procs["emulator"].wait(timeout=limit)
+        except subprocess.TimeoutExpired:
+            res.exit_codes["emulator"] = _stop(procs["emulator"])
+        time.sleep(0.1)
+        res.exit_codes["controller"] = _stop(procs["controller"])
+        res.exit_codes["logger"] = _stop(procs["logger"])
+    finally:
+        for p in procs.values():
+            _stop(p, 2.0)
+        if netns is not None:
+            netns.close()
+    res.wall_s = time.monotonic() - t0
+    _write_run_json(plan, sc, cmds, res, netns is not None)
+    return res
+
+
+def _write_run_json(plan: RunPlan, sc: Scenario, cmds: dict[str, list[str]], res: RunResult,
+                    private_netns: bool) -> None:
+    meta = {"tool": "ehpss-hil run", "version": __version__, "scenario": sc.name,
+            "scenario_path": str(Path(plan.scenario_path).resolve()), "mode": plan.mode,
+            "lockstep": plan.lockstep, "private_netns": private_netns, "commands": cmds,
+            "exit_codes": res.exit_codes, "wall_s": round(res.wall_s, 3),
+            "started_unix_s": time.time() - res.wall_s, "pid": os.getpid()}
+    (plan.out_dir / "run.json").write_text(json.dumps(meta, indent=2) + "\n")
+
+
+def check_exit_codes(res: RunResult) -> None:
+    """Raise when a process did not end cleanly (exit 0)."""
+    bad = {k: v for k, v in res.exit_codes.items() if v != 0}
+    if bad:
+        tails = []
+        for name in bad:
+            f = res.out_dir / f"{name}.out"
+            if f.exists():
+                tails.append(f"--- {name}.out ---\n" + "\n".join(
+                    f.read_text(errors="replace").splitlines()[-8:]))
+        raise EhpssError(f"processes ended badly: {bad}\n" + "\n".join(tails))

@@ -1,0 +1,5 @@
+"""Reports: the DESIGN §10 metrics (one implementation) and figures."""
+
+from .metrics import RECOVERY_BAND_M, EventMetrics, RunMetrics, compute_metrics
+
+__all__ = ["RECOVERY_BAND_M", "EventMetrics", "RunMetrics", "compute_metrics"]

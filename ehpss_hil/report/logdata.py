@@ -1,0 +1,317 @@
+"""A candump log turned into the per-sample record a report needs (a :class:`SimResult`).
+
+Alignment (the controller's view, one row per logged VALVE_CMD):
+
+- the controller's sample index is ``k = CycleCount − CycleCount₀`` (16-bit counter unwrapped;
+  ``CycleCount₀`` = the first command with ``Enable = 1``: the controller daemon starts its
+  reference at its first ACTIVE cycle), ``t = k·Ts``;
+- every other signal is the newest frame logged **before** that command (zero-order hold on the
+  log's timestamps): x_true from PLANT_TRUTH, y_s/spool from SENSOR_POS (``fresh`` when one
+  arrived since the previous command), applied current over [k, k+1) from the SENSOR_AUX echo
+  of sample k+1 (the commanded one is :attr:`LogRun.commanded_current_a`), active models and k̂
+  from CTRL_STATUS, J per slot from CTRL_INDEX, true gains from PLANT_FAULTS;
+- x_d and y_m (ReferenceModel, exact ZOH, from rest at k = 0) come from the run's reference: the
+  sidecar's ``scenario`` (a mapping, a YAML path, or a scenario name found in ``scenarios/``),
+  or ``config.reference``/``reference`` with ``config.rate_hz``/``rate_hz``, or the caller's.
+
+A log without VALVE_CMD falls back to one row per PLANT_TRUTH frame (k counted from the first);
+without PLANT_TRUTH the tracking-error metrics are unavailable and :attr:`LogRun.notes` says so.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..canlog import decode_log, read_sidecar
+from ..canlog.reader import resolve_log
+from ..codec import FrameCodec, Verdict
+from ..physics.params import Params, load_params
+from ..physics.reference import ReferenceModel
+from ..scenario import Scenario
+from ..sim.result import N_SLOTS, SimResult
+from .logmeta import RunInfo, reference_of, run_info
+from .metrics import RunMetrics, compute_metrics
+
+__all__ = ["LogMetrics", "LogRun", "load_log_run", "log_metrics", "reference_of"]
+
+MODE_NAMES = {0: "nrc", 1: "smac", 2: "mmac-paper", 3: "mmac", 4: "oracle"}
+_NO_MODEL = 15  # CTRL_STATUS nibble of "no bank" (−1 & 0xF)
+
+
+@dataclass
+class LogRun:
+    """A decoded log: ``result`` (per-sample arrays, SI) plus what the log could not give."""
+
+    log_path: Path
+    result: SimResult
+    sidecar: dict[str, Any] | None
+    has_truth: bool
+    has_reference: bool
+    scenario: Scenario | None
+    commanded_current_a: np.ndarray
+    frames: dict[str, dict[str, np.ndarray]]
+    verdicts: dict[str, dict[str, int]]
+    notes: list[str] = field(default_factory=list)
+
+
+# ---- helpers on decoded arrays ----------------------------------------------------------------
+def hold(t_src: np.ndarray, v_src: np.ndarray, t_query: np.ndarray,
+         default: float | None = np.nan) -> np.ndarray:
+    """Zero-order hold: the newest ``v_src`` at or before each ``t_query``; before the first
+    source sample ``default`` (None: the first source value, i.e. backfill)."""
+    if len(t_src) == 0:
+        return np.full(len(t_query), np.nan if default is None else default)
+    i = np.searchsorted(t_src, t_query, side="right") - 1
+    fill = v_src[0] if default is None else default
+    out = np.where(i >= 0, v_src[np.clip(i, 0, None)], fill)
+    return out.astype(float)
+
+
+def unwrap_counter(c: np.ndarray, modulo: int = 65536) -> np.ndarray:
+    """A wrapping counter made monotonic (assumes < ``modulo`` steps between two rows)."""
+    if len(c) == 0:
+        return c.astype(np.int64)
+    d = np.mod(np.diff(c.astype(np.int64)), modulo)
+    return np.concatenate(([int(c[0])], int(c[0]) + np.cumsum(d)))
+
+
+def _sorted(frames: dict[str, dict[str, np.ndarray]], name: str) -> dict[str, np.ndarray]:
+    f = frames.get(name)
+    if not f:
+        return {"t_s": np.zeros(0)}
+    order = np.argsort(f["t_s"], kind="stable")
+    return {k: v[order] for k, v in f.items()}
+
+
+def _rows(frames: dict[str, dict[str, np.ndarray]], notes: list[str]) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray]:
+    """``(k, wall time (s), commanded current (A))`` of every sample 0…K (module docstring).
+
+    Samples whose VALVE_CMD is missing from the log get an interpolated wall time and a NaN
+    commanded current, so the arrays stay on the uniform grid the metrics expect.
+    """
+    cmd = frames.get("VALVE_CMD")
+    if cmd is not None and len(cmd["t_s"]):
+        cyc = unwrap_counter(cmd["CycleCount"])
+        enabled = np.flatnonzero(cmd["Enable"] > 0.5)
+        if len(enabled) == 0:
+            notes.append("no VALVE_CMD with Enable=1: the controller never went ACTIVE")
+        start = int(enabled[0]) if len(enabled) else 0
+        k = cyc[start:] - cyc[start]
+        k_all = np.arange(int(k[-1]) + 1)
+        missing = len(k_all) - len(np.unique(k))
+        if missing:
+            notes.append(f"{missing} VALVE_CMD frames missing from the log (lost or not logged): "
+                         "their samples use the neighbours' timing")
+        t_all = np.interp(k_all, k, cmd["t_s"][start:])
+        i_all = np.full(len(k_all), np.nan)
+        i_all[k] = cmd["CurrentSetpoint"][start:]
+        return k_all, t_all, i_all
+    truth = frames.get("PLANT_TRUTH")
+    if truth is not None and len(truth["t_s"]):
+        notes.append("no VALVE_CMD in the log: one row per PLANT_TRUTH frame, the reference "
+                     "assumed to start at the first one")
+        n = len(truth["t_s"])
+        return np.arange(n), truth["t_s"] + 1e-9, np.full(n, np.nan)
+    return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+
+
+def _fresh(t_pos: np.ndarray, t_rows: np.ndarray) -> np.ndarray:
+    """True where a SENSOR_POS frame arrived after the previous row and up to this one."""
+    n_upto = np.searchsorted(t_pos, t_rows, side="right")
+    prev = np.concatenate(([0], n_upto[:-1]))
+    return n_upto > prev
+
+
+def _index_matrix(idx: dict[str, np.ndarray], t_rows: np.ndarray) -> np.ndarray:
+    out = np.full((len(t_rows), N_SLOTS), np.nan)
+    if len(idx["t_s"]) == 0:
+        return out
+    for slot in range(N_SLOTS):
+        col = idx.get(f"J_{slot}")
+        if col is None:
+            continue
+        m = np.isfinite(col)
+        out[:, slot] = hold(idx["t_s"][m], col[m], t_rows)
+    return out
+
+
+def _event_times(faults: dict[str, np.ndarray], t_rows: np.ndarray, k: np.ndarray,
+                 ts: float) -> tuple[float, ...]:
+    """Reference times (s) at which PLANT_FAULTS reports a change of any gain."""
+    if len(faults["t_s"]) < 2 or len(t_rows) == 0:
+        return ()
+    g = np.column_stack([faults[s] for s in ("KLoe", "KQ", "KDft")])
+    changed = np.flatnonzero(np.any(np.abs(np.diff(g, axis=0)) > 5e-5, axis=1)) + 1
+    out = []
+    for i in changed:
+        j = min(int(np.searchsorted(t_rows, faults["t_s"][i])), len(k) - 1)
+        out.append(float(k[j] * ts))
+    return tuple(out)
+
+
+# ---- the whole log ----------------------------------------------------------------------------
+def load_log_run(path: str | os.PathLike[str], scenario: Scenario | None = None,
+                 params: Params | None = None, codec: FrameCodec | None = None) -> LogRun:
+    """Decode a log (file or directory, whole rotation set) into a :class:`LogRun`."""
+    log = resolve_log(path)
+    side = read_sidecar(log)
+    codec = codec if codec is not None else FrameCodec(_dbc_of(side))
+    frames = decode_log(log, codec)
+    verdicts = {n: {v.name: c for v, c in per.items() if c} for n, per in
+                codec.counts_by_name.items()}
+    notes: list[str] = []
+    info = run_info(side, log.parent, scenario, log)
+    sc, ref, ts = info.scenario, info.reference, info.ts_s
+    if ref is not None and info.sources and info.sources[0] not in ("--scenario", "sidecar"):
+        notes.append(f"reference taken from {', '.join(info.sources)} beside the log")
+    k, t_rows, i_cmd = _rows(frames, notes)
+    if ts is None:
+        ts = _median_period(t_rows) or 1e-3
+        notes.append(f"sample time not in the metadata: {ts * 1e3:.4g} ms from the log's timing")
+    prm = params if params is not None else load_params(info.params_path)
+    x_d = np.full(len(k), np.nan)
+    y_m = np.full(len(k), np.nan)
+    if ref is not None and len(k):
+        base = Path(sc.base_dir) if sc is not None and sc.base_dir else None
+        xd_all = ref.sample(np.arange(int(k[-1]) + 1) * ts, base)
+        x_d = xd_all[k]
+        y_m = ReferenceModel(prm, ts).simulate(xd_all)[k]
+    else:
+        notes.append("no reference in the metadata (sidecar scenario/config): x_d and y_m "
+                     "unavailable; pass --scenario to recompute them")
+    result, has_truth = _assemble(frames, sc, info, k, t_rows, ts, x_d, y_m, notes)
+    return LogRun(log, result, side, has_truth, ref is not None, sc, i_cmd, frames, verdicts,
+                  notes)
+
+
+def _assemble(frames: dict[str, dict[str, np.ndarray]], sc: Scenario | None,
+              info: RunInfo, k: np.ndarray, t_rows: np.ndarray, ts: float,
+              x_d: np.ndarray, y_m: np.ndarray, notes: list[str]) -> tuple[SimResult, bool]:
+    pos, aux = _sorted(frames, "SENSOR_POS"), _sorted(frames, "SENSOR_AUX")
+    truth, flt = _sorted(frames, "PLANT_TRUTH"), _sorted(frames, "PLANT_FAULTS")
+    st, idx = _sorted(frames, "CTRL_STATUS"), _sorted(frames, "CTRL_INDEX")
+    has_truth = len(truth["t_s"]) > 0
+    if has_truth and len(t_rows) > 100:
+        n_emu = int(np.count_nonzero((truth["t_s"] >= t_rows[0]) & (truth["t_s"] <= t_rows[-1])))
+        if abs(n_emu - len(t_rows)) > 0.01 * len(t_rows):
+            notes.append(f"the controller ran {len(t_rows)} cycles while the emulator sent "
+                         f"{n_emu} PLANT_TRUTH frames in the same time: real time was not kept "
+                         "(overruns?); metrics are on the controller's time base")
+    if not has_truth:
+        notes.append("no PLANT_TRUTH frames (emulator truth off): no ground truth, so no "
+                     "tracking-error metrics (RMS, peaks, recovery); sensor-based plots, "
+                     "model switches, k̂ and J are still shown")
+
+    def col(f: dict[str, np.ndarray], sig: str, default: float | None = np.nan) -> np.ndarray:
+        if sig not in f:
+            return np.full(len(k), np.nan if default is None else default)
+        return hold(f["t_s"], f[sig], t_rows, default)
+
+    # models before the first CTRL_STATUS: backfilled (a start-up value is not a switch)
+    spool_m, pos_m = col(st, "ActiveSpoolModel", None), col(st, "ActivePosModel", None)
+    spool_m[np.isnan(spool_m)] = _NO_MODEL
+    pos_m[np.isnan(pos_m)] = _NO_MODEL
+    applied = np.append(col(aux, "CoilCurrent")[1:], np.nan)  # echo at k+1 = over [k, k+1)
+    events = _event_times(flt, t_rows, k, ts) if len(flt["t_s"]) else ()
+    if not events and sc is not None:
+        events = tuple(ev.t_s for ev in sc.events)
+    mode = _mode(st, info)
+    res = SimResult(
+        scenario=sc.name if sc is not None else "log",
+        controller=mode, ts_s=ts, event_times_s=events, t_s=k * ts, x_d_m=x_d, y_m_m=y_m,
+        x_true_m=col(truth, "Position"), y_s_m=col(pos, "Position"), spool_m=col(pos, "Spool"),
+        current_a=applied,
+        active_spool=np.where(spool_m == _NO_MODEL, -1, spool_m).astype(np.int64),
+        active_position=np.where(pos_m == _NO_MODEL, -1, pos_m).astype(np.int64),
+        k_loe_hat=col(st, "KLoeHat"), k_dft_hat=col(st, "KDftHat"),
+        index=_index_matrix(idx, t_rows), true_k_loe=col(flt, "KLoe"),
+        true_k_q=col(flt, "KQ"), true_k_dft=col(flt, "KDft"),
+        fresh=_fresh(pos["t_s"], t_rows) if len(pos["t_s"]) else np.zeros(len(k), bool))
+    return res, has_truth
+
+
+def _mode(st: dict[str, np.ndarray], info: RunInfo) -> str:
+    if "Mode" in st and len(st["Mode"]):
+        return MODE_NAMES.get(int(st["Mode"][-1]), "unknown")
+    return info.mode or "unknown"
+
+
+def _median_period(t: np.ndarray) -> float | None:
+    if len(t) < 3:
+        return None
+    return float(np.round(np.median(np.diff(t)), 6)) or None
+
+
+def _dbc_of(side: dict[str, Any] | None) -> str | None:
+    dbc = (side or {}).get("dbc")
+    p = dbc.get("path") if isinstance(dbc, dict) else dbc
+    return str(p) if p and Path(str(p)).is_file() else None
+
+
+def verdict_summary(run: LogRun) -> dict[str, int]:
+    """Frames rejected while decoding the log, by verdict name (all frame names summed)."""
+    out: dict[str, int] = {}
+    for per in run.verdicts.values():
+        for v, n in per.items():
+            if not Verdict[v].usable:
+                out[v] = out.get(v, 0) + n
+    return out
+
+
+# ---- metrics (adapter to report.metrics) ------------------------------------------------------
+@dataclass
+class LogMetrics:
+    """DESIGN §10 metrics of a log where it has ground truth, and what a log gives regardless.
+
+    ``run``: :class:`RunMetrics` (None without PLANT_TRUTH or without a reference, see
+    ``unavailable``); ``extra``: switch counter, overruns, max cycle time (s), rejected frames,
+    sensor-based RMS (y_s − y_m, m: an indication only, the sensor may be faulty).
+    """
+
+    run: RunMetrics | None
+    extra: dict[str, Any]
+    unavailable: list[str]
+
+
+def _counter_span(v: np.ndarray, modulo: int) -> int:
+    return int(unwrap_counter(v.astype(np.int64), modulo)[-1] - int(v[0])) if len(v) else 0
+
+
+def log_metrics(run: LogRun) -> LogMetrics:
+    """Metrics of a :class:`LogRun` (NaN gaps in x_true are held from the previous sample)."""
+    r, st, stats = run.result, run.frames.get("CTRL_STATUS"), run.frames.get("CTRL_STATS")
+    extra: dict[str, Any] = {"samples": len(r.t_s), "rejected_frames": verdict_summary(run)}
+    if st is not None and len(st["t_s"]):
+        extra["switches_counter"] = _counter_span(st["Switches"][np.argsort(st["t_s"])], 256)
+    if stats is not None and len(stats["t_s"]):
+        order = np.argsort(stats["t_s"])
+        extra["overruns"] = _counter_span(stats["Overruns"][order], 65536)
+        extra["cycle_time_max_s"] = float(np.nanmax(stats["CycleTimeMax"]))
+    unavailable: list[str] = []
+    if run.has_reference and np.any(np.isfinite(r.y_s_m)):
+        e_s = r.y_s_m - r.y_m_m
+        extra["sensor_rms_error_m"] = float(np.sqrt(np.nanmean(e_s ** 2)))
+    if not run.has_truth:
+        unavailable.append("rms_error_m, pre_fault_max_m, per-event peak_error_m and recovery_s "
+                           "need x_true: the log has no PLANT_TRUTH (run the emulator with truth on)")
+    if not run.has_reference:
+        unavailable.append("every tracking metric needs y_m: no reference in the sidecar "
+                           "(pass --scenario)")
+    if unavailable or len(r.t_s) == 0:
+        return LogMetrics(None, extra, unavailable)
+    x = r.x_true_m.copy()
+    gaps = ~np.isfinite(x)
+    if gaps.any():
+        idx = np.where(gaps, 0, np.arange(len(x)))
+        np.maximum.accumulate(idx, out=idx)
+        x = x[idx]
+        x[~np.isfinite(x)] = 0.0
+        extra["x_true_filled_samples"] = int(gaps.sum())
+    filled = SimResult(**{**r.__dict__, "x_true_m": x})
+    return LogMetrics(compute_metrics(filled), extra, unavailable)

@@ -1,0 +1,30 @@
+"""Metrics (DESIGN §10) of an ``ehpss-hil run`` directory, from its bus log alone."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from .commands.report import metrics_row, write_markdown
+from .report.logdata import load_log_run, log_metrics
+from .scenario import load_scenario
+
+
+def metrics_from_run(out_dir: Path, plot: bool = False) -> dict[str, Any]:
+    """Decode ``out_dir/bus.log`` with the run's scenario; write ``metrics.json`` (a one-row
+    list, DESIGN §10 format) and, with ``plot``, the report figures and ``report/report.md``."""
+    meta = json.loads((out_dir / "run.json").read_text())
+    sc = load_scenario(meta["scenario_path"])
+    lr = load_log_run(out_dir / "bus.log", scenario=sc)
+    m = log_metrics(lr)
+    row = metrics_row(lr, m)
+    row["controller"] = meta["mode"]
+    row["scenario"] = sc.name
+    (out_dir / "metrics.json").write_text(json.dumps([row], indent=1, default=str) + "\n")
+    if plot:
+        from .report.logfigures import draw_all
+        rep = out_dir / "report"
+        figs = draw_all(lr, rep / "figures")
+        write_markdown(lr, m, figs, rep)
+    return row

@@ -1,0 +1,346 @@
+"""The controller daemon's cycle (DESIGN.md §8): read → E2E → watchdog → step → one VALVE_CMD.
+
+Per cycle: drain every pending frame without blocking (own echoes dropped by :class:`FrameIO`);
+the newest usable SENSOR_POS/SENSOR_AUX values are used; the watchdog counts the cycle; in
+ACTIVE the controller steps once, in FAULT the fail-safe command is sent (0 A with Enable 0, or
+the last command with ``failsafe: hold``); exactly one VALVE_CMD goes out, echoing the counter of
+the SENSOR_POS frame used and the cycle count. CTRL_STATUS + CTRL_INDEX at ``status_rate_hz``,
+CTRL_STATS at 10 Hz, heartbeat at ``heartbeat_rate_hz``.
+
+Lifecycle: CONFIGURED (0 A, Enable 0, watchdog idle) until the first usable sensor frame, then
+ACTIVE; the reference starts at that cycle. Realtime: a fixed deadline grid. Lockstep: one cycle
+per received sensor pair (triggered by SENSOR_AUX, which the emulator sends after SENSOR_POS).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import can
+import numpy as np
+
+from ..codec import Verdict
+from ..config import Watchdog
+from ..control.base import Controller, Measurement
+from ..scenario import Reference
+from .deadline import DeadlineTimer
+from .frameio import FrameIO
+from .lifecycle import Lifecycle, State
+from .phaselock import PhaseLock
+from .signals import StopFlag
+from .stats import LoopStats
+from .watchdog import SensorWatchdog
+
+log = logging.getLogger("ehpss_hil.controller")
+
+OWN_FRAMES = ("VALVE_CMD", "CTRL_STATUS", "CTRL_INDEX", "CTRL_STATS", "HEARTBEAT_CTRL")
+MODE_CODE = {"nrc": 0, "smac": 1, "mmac-paper": 2, "mmac": 3, "oracle": 4}
+_E2E_VERDICTS = (Verdict.CRC_ERROR, Verdict.REPEATED, Verdict.WRONG_SEQUENCE, Verdict.BAD_DLC)
+_F32_MAX = 3.0e38
+
+
+@dataclass(frozen=True)
+class LoopOptions:
+    """Rates (Hz) and fail-safe policy of the loop."""
+
+    rate_hz: float = 1000.0
+    status_rate_hz: float = 50.0
+    heartbeat_rate_hz: float = 10.0
+    stats_rate_hz: float = 10.0
+    watchdog: Watchdog = field(default_factory=Watchdog)
+    current_limit_a: float = 1.0
+    lockstep_idle_s: float = 2.0
+    #: a one-line counter summary in the log every this many seconds of cycles (0 = never)
+    stats_interval_s: float = 10.0
+    #: phase lock: age of the sensor frame at the controller's deadline (s); 0 = free grid
+    #: (off by default: a small age also shrinks the stall tolerance of the watchdog, see
+    #: docs/runtime.md)
+    sensor_age_target_s: float = 0.0
+    stats_capacity: int = 600_000
+
+
+class ReferenceBlocks:
+    """x_d sampled in blocks of ``block`` samples (m): cheap per cycle, no per-cycle arrays."""
+
+    def __init__(self, reference: Reference, ts_s: float, block: int = 1000) -> None:
+        self.reference = reference
+        self.ts_s = ts_s
+        self._block = block
+        self._k0 = 0
+        self._buf = reference.sample(np.arange(block) * ts_s)
+
+    def at(self, k: int) -> float:
+        """x_d at sample k ≥ the previous k (m)."""
+        if not self._k0 <= k < self._k0 + self._block:
+            self._k0 = k
+            self._buf = self.reference.sample((k + np.arange(self._block)) * self.ts_s)
+        return float(self._buf[k - self._k0])
+
+
+class ControllerLoop:
+    """One controller instance on one bus."""
+
+    def __init__(self, controller: Controller, io: FrameIO, reference: Reference,
+                 opts: LoopOptions) -> None:
+        self.controller = controller
+        self.io = io
+        self.codec = io.codec
+        self.opts = opts
+        self.ts_s = 1.0 / opts.rate_hz
+        self.ref = ReferenceBlocks(reference, self.ts_s)
+        self.wd = SensorWatchdog(opts.watchdog)
+        self.life = Lifecycle()
+        self.life.to(State.CONFIGURED)
+        self.stats = LoopStats(opts.stats_capacity)
+        self.meas = Measurement()
+        self._id_pos = self.codec.can_id("SENSOR_POS")
+        self._id_aux = self.codec.can_id("SENSOR_AUX")
+        self._id_setpoint = self.codec.can_id("SETPOINT")
+        self._status_every = max(1, round(opts.rate_hz / opts.status_rate_hz))
+        self._hb_every = max(1, round(opts.rate_hz / opts.heartbeat_rate_hz))
+        self._stats_every = max(1, round(opts.rate_hz / opts.stats_rate_hz))
+        self._log_every = round(opts.stats_interval_s * opts.rate_hz)
+        self._interval_compute_max_s = 0.0
+        self.cycles = 0
+        self.k_active = 0
+        self.failsafe_cycles = 0
+        self.saturations = 0
+        self.overruns = 0
+        self.last_current_a = 0.0
+        self.last_enable = False
+        self._override_m: float | None = None
+        self._compute_max_s = 0.0
+        self._index_queue: list[tuple[int, float, float]] = []
+        self._reset_cycle_rx()
+
+    # ---- receive ----------------------------------------------------------------------------
+    def _reset_cycle_rx(self) -> None:
+        self._fresh = False
+        self._e2e_bad = 0
+        self._implausible = 0
+        self._pos_counter = 0
+        self._pos_ts = 0.0
+
+    def on_frame(self, msg: can.Message) -> None:
+        """Consume one received frame (IDs other than sensors/SETPOINT are only logged)."""
+        fid = msg.arbitration_id
+        if fid not in (self._id_pos, self._id_aux, self._id_setpoint):
+            return
+        d = self.codec.classify(msg)
+        if not d.verdict.usable or d.values is None:
+            if fid != self._id_setpoint:
+                if d.verdict is Verdict.OUT_OF_RANGE:
+                    self._implausible += 1
+                elif d.verdict in _E2E_VERDICTS:
+                    self._e2e_bad += 1
+            return
+        v = d.values
+        if fid == self._id_pos:
+            self.meas.position_m = float(v["Position"])
+            self.meas.spool_m = float(v["Spool"])
+            self._fresh = True
+            self._pos_counter = msg.data[1] & 0x0F
+            self._pos_ts = msg.timestamp
+        elif fid == self._id_aux:
+            self.meas.coil_current_a = float(v["CoilCurrent"])
+            self.meas.load_pressure_pa = float(v["LoadPressure"])
+        else:
+            self._override_m = float(v["Position"]) if v["Override"] else None
+
+    # ---- one cycle --------------------------------------------------------------------------
+    def _update_state(self) -> None:
+        st = self.life.state
+        if st is State.CONFIGURED:
+            if self._fresh:
+                self.wd.reset()
+                self.life.to(State.ACTIVE)
+                log.info("first sensor data: ACTIVE (mode %s)", self.controller.mode)
+            return
+        tripped = self.wd.update(self._fresh, self._e2e_bad, self._implausible)
+        if st is State.ACTIVE and tripped:
+            self.life.to(State.FAULT, self.wd.reason)
+            log.error("cycle %d: watchdog: %s -> FAULT, fail-safe %s", self.cycles,
+                      self.wd.reason.name, self.opts.watchdog.failsafe)
+        elif st is State.FAULT and not tripped:
+            self.controller.reset()
+            self.life.to(State.ACTIVE)
+            log.warning("cycle %d: sensor data fresh for %d cycles: ACTIVE again", self.cycles,
+                        self.wd.fresh_cycles)
+
+    def _command(self) -> tuple[float, bool]:
+        st = self.life.state
+        if st is State.ACTIVE:
+            x_d = self._override_m if self._override_m is not None else self.ref.at(self.k_active)
+            self.meas.reference_m = x_d
+            self.meas.fresh = self._fresh
+            cmd = self.controller.step(self.meas)
+            self.k_active += 1
+            return cmd.current_a, cmd.enable
+        if st is State.FAULT:
+            self.failsafe_cycles += 1
+            self.k_active += 1
+            if self.opts.watchdog.failsafe == "hold":
+                return self.last_current_a, self.last_enable
+        return 0.0, False
+
+    def poll_cycle(self) -> float | None:
+        """One realtime cycle without waiting: drain every pending frame, then :meth:`cycle`.
+
+        Returns the receive timestamp (wall-clock s) of the SENSOR_POS frame used, or None."""
+        for msg in self.io.drain():
+            self.on_frame(msg)
+        used = self._pos_ts if self._fresh else None
+        self.cycle()
+        return used
+
+    def cycle(self) -> None:
+        """Everything after the drain: state, control step, VALVE_CMD, periodic frames."""
+        self._update_state()
+        current, enable = self._command()
+        lim = self.opts.current_limit_a
+        if not math.isfinite(current) or abs(current) > lim:
+            self.saturations += 1
+            current = 0.0 if not math.isfinite(current) else max(-lim, min(lim, current))
+        self.send_command(current, enable)
+        if self._fresh:
+            self.stats.latency.add(time.time() - self._pos_ts)
+        self._reset_cycle_rx()
+        self.cycles += 1
+        self._periodic()
+
+    def send_command(self, current_a: float, enable: bool) -> None:
+        """One VALVE_CMD (A) with the sensor counter echo and the cycle count."""
+        self.io.send("VALVE_CMD", {"CurrentSetpoint": current_a, "Enable": int(enable),
+                                   "SensorCounterEcho": self._pos_counter,
+                                   "CycleCount": self.cycles & 0xFFFF})
+        self.last_current_a = current_a
+        self.last_enable = enable
+
+    # ---- status frames ----------------------------------------------------------------------
+    def _periodic(self) -> None:
+        c = self.cycles
+        if c % self._status_every == 0:
+            self.send_status()
+        elif self._index_queue:  # one CTRL_INDEX per cycle keeps the cycle time flat
+            self._send_index(*self._index_queue.pop())
+        if c % self._stats_every == 0:
+            self.io.send("CTRL_STATS", {
+                "Overruns": self.overruns & 0xFFFF, "RejectedFrames": self.codec.rejected & 0xFFFF,
+                "CycleTimeMax": min(self._compute_max_s, 0.065535)})
+            self._compute_max_s = 0.0
+        if c % self._hb_every == 0:
+            self.io.send("HEARTBEAT_CTRL", {"NmtState": self.life.nmt_state})
+        if self._log_every and c % self._log_every == 0:
+            self._log_counters()
+
+    def _log_counters(self) -> None:
+        """Cheap counters only (no percentiles in the cycle: they would cost an overrun)."""
+        log.info("cycles %d, state %s, overruns %d, rejected frames %d, fail-safe cycles %d, "
+                 "max compute %.0f µs in the last interval", self.cycles, self.life.state.name,
+                 self.overruns, self.codec.rejected, self.failsafe_cycles,
+                 self._interval_compute_max_s * 1e6)
+        self._interval_compute_max_s = 0.0
+
+    def send_status(self, all_index: bool = False) -> None:
+        """CTRL_STATUS now; the CTRL_INDEX frames (one per model slot) one per following cycle,
+        or all at once with ``all_index``."""
+        s = self.controller.status()
+        self.io.send("CTRL_STATUS", {
+            "State": int(self.life.state), "FailsafeReason": int(self.life.reason),
+            "Mode": MODE_CODE.get(self.controller.mode, 15),
+            "ActiveSpoolModel": _nibble(s.active_model.get("spool", 0)),
+            "ActivePosModel": _nibble(s.active_model.get("position", 0)),
+            "KLoeHat": _clip(s.k_loe_hat, 0.0, 4.095), "KDftHat": _clip(s.k_dft_hat, 0.0, 4.095),
+            "Switches": min(s.switches, 255)})
+        self._index_queue = [(slot, j, s.theta.get(slot, 0.0))
+                             for slot, j in reversed(s.index.items()) if 0 <= slot <= 15]
+        while all_index and self._index_queue:
+            self._send_index(*self._index_queue.pop())
+
+    def _send_index(self, slot: int, j: float, theta: float) -> None:
+        self.io.send("CTRL_INDEX", {"ModelSlot": slot, f"J_{slot}": _clip(j, -_F32_MAX, _F32_MAX),
+                                    f"Theta_{slot}": _clip(theta, 0.0, 6.5535)})
+
+    # ---- drivers ----------------------------------------------------------------------------
+    def start(self) -> None:
+        """Announce boot-up (CiA 301 heartbeat state 0)."""
+        self.io.send("HEARTBEAT_CTRL", {"NmtState": 0})
+
+    def run_realtime(self, stop: StopFlag, n_cycles: int | None = None) -> None:
+        """Cycles on the deadline grid until ``stop`` or ``n_cycles``."""
+        timer = DeadlineTimer(self.ts_s, name="controller")
+        target = min(self.opts.sensor_age_target_s, 0.5 * self.ts_s)
+        lock = PhaseLock(self.ts_s, target) if target > 0.0 else None
+        timer.start()
+        perf = time.perf_counter
+        while not stop and (n_cycles is None or self.cycles < n_cycles):
+            lateness = timer.wait()
+            t0 = perf()
+            rx_wall = self.poll_cycle()
+            if lock is not None and rx_wall is not None:
+                arrival = rx_wall - (time.time() - time.monotonic())
+                timer.shift(lock.correction(timer.next_deadline_s - self.ts_s, arrival))
+            dt = perf() - t0
+            self.stats.compute.add(dt)
+            self.stats.lateness.add(lateness)
+            self._compute_max_s = max(self._compute_max_s, dt)
+            self._interval_compute_max_s = max(self._interval_compute_max_s, dt)
+            self.overruns = timer.overruns
+        self.stats.overruns = timer.overruns
+        self.stats.skipped = timer.skipped
+
+    def run_lockstep(self, stop: StopFlag, n_cycles: int | None = None) -> None:
+        """One cycle per received sensor pair, until ``stop``, ``n_cycles`` or the bus is idle
+        for ``lockstep_idle_s`` after the first frame (before it, the loop waits for the peer
+        however long it takes to start)."""
+        perf = time.perf_counter
+        pending = False
+        started = False
+        while not stop and (n_cycles is None or self.cycles < n_cycles):
+            msg = self.io.recv(self.opts.lockstep_idle_s if started else 0.5)
+            if msg is None:
+                if not started:
+                    continue
+                log.info("lockstep: bus idle for %.1f s; ending", self.opts.lockstep_idle_s)
+                return
+            started = True
+            t0 = perf()
+            if msg.arbitration_id == self._id_pos:
+                pending = True
+            self.on_frame(msg)
+            if msg.arbitration_id == self._id_aux and pending:
+                pending = False
+                self.cycle()
+                self.stats.compute.add(perf() - t0)
+
+    def shutdown(self) -> None:
+        """Zero current with Enable 0, state STOPPED, final status and heartbeat."""
+        for _ in self.io.drain():  # log what arrived since the last cycle
+            pass
+        self.send_command(0.0, False)
+        self.life.to(State.STOPPED)
+        self.send_status(all_index=True)
+        self.io.send("HEARTBEAT_CTRL", {"NmtState": self.life.nmt_state})
+
+    def summary(self) -> dict[str, object]:
+        """Counters and loop statistics (JSON-able)."""
+        return {"cycles": self.cycles, "state": self.life.state.name,
+                "failsafe_reason": self.life.reason.name, "watchdog_trips": self.wd.trips,
+                "failsafe_cycles": self.failsafe_cycles, "saturations": self.saturations,
+                "frames_sent": dict(self.io.sent), "tx_errors": self.io.tx_errors,
+                "frames_received": self.io.received,
+                "received_by_verdict": {v.name: n for v, n in self.codec.counts.items()},
+                "stats": self.stats.summary()}
+
+
+def _clip(v: float, lo: float, hi: float) -> float:
+    if not math.isfinite(v):
+        return hi if v > 0 else lo
+    return max(lo, min(hi, v))
+
+
+def _nibble(v: int) -> int:
+    return int(v) & 0x0F

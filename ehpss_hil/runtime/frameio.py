@@ -1,0 +1,112 @@
+"""Frame I/O at the edge of a loop: encode + send + log, non-blocking drain, own-echo filter.
+
+On ``udp_multicast`` a process receives its own frames; :class:`FrameIO` drops every received
+frame whose ID is one this process transmits (``own_ids``) before anything else sees it, so
+each frame is logged exactly once (when sent). Every other frame is logged when received, then
+handed to the loop, which classifies only the IDs it consumes.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterator
+from typing import Any, Protocol
+
+import can
+
+from ..codec import FrameCodec
+from ..config import BusConfig, LogConfig
+from ..errors import FrameError
+
+log = logging.getLogger(__name__)
+
+
+class FrameLogger(Protocol):
+    """What a loop needs of ``ehpss_hil.canlog.CandumpLogger``."""
+
+    def log(self, msg: can.Message) -> None: ...
+
+    def close(self) -> object: ...
+
+
+def open_can_logger(path: str, cfg: LogConfig, bus: BusConfig,
+                    sidecar: dict[str, Any] | None = None) -> FrameLogger | None:
+    """A candump logger for ``path`` (None when ``path`` is empty or canlog is unavailable)."""
+    if not path:
+        return None
+    try:
+        from ..canlog import CandumpLogger  # type: ignore[attr-defined]
+    except ImportError as exc:
+        log.warning("CAN log %s not written: ehpss_hil.canlog unavailable (%s)", path, exc)
+        return None
+    iface = bus.channel if bus.interface == "socketcan" else "can0"
+    logger: FrameLogger = CandumpLogger(path, iface=iface, max_bytes=cfg.max_bytes,
+                                        backups=cfg.backups, queue_lines=cfg.queue_lines,
+                                        sidecar=sidecar)
+    return logger
+
+
+class FrameIO:
+    """One process's view of the bus: counts sent frames by name and transmit errors."""
+
+    def __init__(self, bus: can.BusABC, codec: FrameCodec, own_names: tuple[str, ...],
+                 logger: FrameLogger | None = None) -> None:
+        self.bus = bus
+        self.codec = codec
+        self.logger = logger
+        self.own_ids = frozenset(codec.can_id(n) for n in own_names)
+        self.sent: dict[str, int] = {n: 0 for n in own_names}
+        self.tx_errors = 0
+        self.received = 0
+
+    def send(self, name: str, values: dict[str, Any]) -> can.Message | None:
+        """Encode, send and log one frame; returns it, or None when encode/send failed."""
+        try:
+            msg = self.codec.encode(name, values, timestamp_s=time.time())
+            self.bus.send(msg)
+        except (FrameError, can.CanError, OSError) as exc:
+            self.tx_errors += 1
+            if self.tx_errors == 1 or self.tx_errors % 1000 == 0:
+                log.warning("%s not sent (%d transmit errors): %s", name, self.tx_errors, exc)
+            return None
+        self.sent[name] = self.sent.get(name, 0) + 1
+        if self.logger is not None:
+            self.logger.log(msg)
+        return msg
+
+    def _accept(self, msg: can.Message | None) -> bool:
+        if msg is None or msg.arbitration_id in self.own_ids:
+            return False
+        self.received += 1
+        if self.logger is not None:
+            self.logger.log(msg)
+        return True
+
+    def drain(self, limit: int = 1000) -> Iterator[can.Message]:
+        """Every frame pending now (non-blocking), own echoes dropped; at most ``limit``."""
+        for _ in range(limit):
+            msg = self.bus.recv(0.0)
+            if msg is None:
+                return
+            if self._accept(msg):
+                yield msg
+
+    def recv(self, timeout_s: float) -> can.Message | None:
+        """Wait up to ``timeout_s`` (s) for one foreign frame (own echoes skipped)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            left = deadline - time.monotonic()
+            msg = self.bus.recv(max(left, 0.0))
+            if msg is None:
+                return None
+            if self._accept(msg):
+                return msg
+            if left <= 0.0:
+                return None
+
+    def close(self) -> None:
+        """Flush/close the log (the bus is closed by its owner)."""
+        if self.logger is not None:
+            self.logger.close()
+            self.logger = None

@@ -1,0 +1,92 @@
+"""Campaigns: many (scenario, controller) runs on all cores, results in submission order."""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..control.tuning import ControlTuning
+from ..physics.params import Params, load_params
+from ..report.metrics import RunMetrics, compute_metrics
+from ..scenario import Scenario, load_scenario
+from .blas import limit_blas_threads
+from .lockstep import run_scenario
+from .result import SimResult
+
+
+@dataclass(frozen=True)
+class Job:
+    """One run: a scenario file (or loaded scenario) and a controller mode."""
+
+    scenario: str | Scenario
+    mode: str
+    transport: str = "quantize"
+    keep_result: bool = False
+
+
+@dataclass
+class JobOutcome:
+    """The metrics of a run, and its arrays when the job asked to keep them."""
+
+    job: Job
+    metrics: RunMetrics
+    result: SimResult | None
+
+
+_PARAMS: Params | None = None
+_TUNING: ControlTuning | None = None
+
+
+def _init(params: Params | None, tuning: ControlTuning | None) -> None:
+    global _PARAMS, _TUNING
+    _PARAMS = params if params is not None else load_params()
+    _TUNING = tuning
+
+
+def _run(job: Job) -> JobOutcome:
+    sc = job.scenario if isinstance(job.scenario, Scenario) else load_scenario(job.scenario)
+    res = run_scenario(sc, job.mode, _PARAMS, _TUNING, job.transport)
+    return JobOutcome(job, compute_metrics(res), res if job.keep_result else None)
+
+
+def default_jobs() -> int:
+    """Worker processes by default: every core."""
+    return os.cpu_count() or 1
+
+
+def run_campaign(jobs: Sequence[Job], n_jobs: int | None = None, params: Params | None = None,
+                 tuning: ControlTuning | None = None,
+                 progress: Callable[[int, int], None] | None = None) -> list[JobOutcome]:
+    """Run every job (on ``n_jobs`` processes; 1 = in this process); outcomes in job order.
+
+    ``progress(done, total)`` is called after each finished run.
+    """
+    n = max(1, min(n_jobs or default_jobs(), len(jobs)))
+    limit_blas_threads(1)  # before forking: no spinning BLAS pool to inherit
+    out: list[JobOutcome] = []
+    if n == 1:
+        _init(params, tuning)
+        for i, job in enumerate(jobs):
+            out.append(_run(job))
+            if progress:
+                progress(i + 1, len(jobs))
+        return out
+    ctx = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
+    with ctx.Pool(n, initializer=_init, initargs=(params, tuning)) as pool:
+        for i, o in enumerate(pool.imap(_run, jobs, chunksize=1)):
+            out.append(o)
+            if progress:
+                progress(i + 1, len(jobs))
+    return out
+
+
+def scenario_paths(items: Sequence[str | Path]) -> list[str]:
+    """Scenario files as strings (directories expand to their ``*.yaml``, sorted)."""
+    paths: list[str] = []
+    for it in items:
+        p = Path(it)
+        paths.extend(sorted(str(q) for q in p.glob("*.yaml")) if p.is_dir() else [str(p)])
+    return paths

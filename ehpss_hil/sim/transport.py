@@ -1,0 +1,133 @@
+"""The frame layer between the emulated plant and the controller in a lockstep run.
+
+``quantize``: each value goes through :meth:`FrameCodec.quantize` (the DBC scaling a receiver
+decodes) — fast. ``frames``: every frame is built with :meth:`FrameCodec.encode` (bytes, E2E CRC and
+counter) and checked with :meth:`FrameCodec.classify` on the receiving side — slow, but the real
+thing. Both give bit-identical values (a test checks it). Frame loss is decided by the caller; a
+lost frame is simply never delivered (the receiver's E2E counter then reports OK_SOME_LOST).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from cantools.database.conversion import LinearConversion
+
+from ..codec.frames import FrameCodec
+
+SensorValues = tuple[float, float, float, float]
+
+
+def _clip(v: float, lim: float) -> float:
+    return -lim if v < -lim else lim if v > lim else v
+
+
+def _quantizer(codec: FrameCodec, frame: str, signal: str) -> Callable[[float], float]:
+    """``v → `` what :meth:`FrameCodec.quantize` returns for this signal, bit for bit.
+
+    For cantools' ``LinearConversion`` (integer raw) this is its own arithmetic,
+    ``round((v − offset)/scale)·scale + offset``, written out; any other conversion is called.
+    """
+    conv = codec.message(frame).get_signal_by_name(signal).conversion
+    if isinstance(conv, LinearConversion) and not conv.is_float:
+        sc, off = conv.scale, conv.offset
+        return lambda v: round((v - off) / sc) * sc + off
+    to_raw, to_scaled = conv.numeric_scaled_to_raw, conv.raw_to_scaled
+    return lambda v: to_scaled(to_raw(v), False)  # type: ignore[return-value]
+
+
+def _linear_scale(codec: FrameCodec, frame: str, signal: str) -> tuple[float, float] | None:
+    """(scale, offset) when the signal uses cantools' integer-raw ``LinearConversion``."""
+    conv = codec.message(frame).get_signal_by_name(signal).conversion
+    if isinstance(conv, LinearConversion) and not conv.is_float:
+        return conv.scale, conv.offset
+    return None
+
+
+class QuantizeTransport:
+    """DBC quantization only (the conversions of :meth:`FrameCodec.quantize`).
+
+    Position, spool, coil current and the command current use cantools' ``LinearConversion``
+    arithmetic written out inline, ``round((v − offset)/scale)·scale + offset`` (this is the
+    simulator's hot path); any other conversion is called through cantools.
+    """
+
+    def __init__(self, codec: FrameCodec) -> None:
+        lin = [_linear_scale(codec, "SENSOR_POS", "Position"),
+               _linear_scale(codec, "SENSOR_POS", "Spool"),
+               _linear_scale(codec, "SENSOR_AUX", "CoilCurrent"),
+               _linear_scale(codec, "VALVE_CMD", "CurrentSetpoint")]
+        if any(x is None for x in lin):
+            raise TypeError("position/spool/current signals must use a linear integer scaling")
+        (self._ps, self._po), (self._ss, self._so), (self._cs, self._co), (self._ks, self._ko) = \
+            lin  # type: ignore[misc]
+        self._press = _quantizer(codec, "SENSOR_AUX", "LoadPressure")
+
+    def sensor(self, pos: float, spool: float, pressure: float, coil: float,
+               saturated: bool, lost: bool) -> SensorValues | None:
+        """SENSOR_POS + SENSOR_AUX as the controller decodes them (m, m, Pa, A); None if lost."""
+        if lost:
+            return None
+        pos = -0.5 if pos < -0.5 else 0.5 if pos > 0.5 else pos
+        spool = -0.01 if spool < -0.01 else 0.01 if spool > 0.01 else spool
+        coil = -1.0 if coil < -1.0 else 1.0 if coil > 1.0 else coil
+        ps, po, ss, so, cs, co = self._ps, self._po, self._ss, self._so, self._cs, self._co
+        return (round((pos - po) / ps) * ps + po, round((spool - so) / ss) * ss + so,
+                self._press(_clip(pressure, 4e7)), round((coil - co) / cs) * cs + co)
+
+    def command(self, current_a: float, k: int, lost: bool) -> float | None:
+        """VALVE_CMD current as the emulator decodes it (A); None if lost."""
+        if lost:
+            return None
+        c = -1.0 if current_a < -1.0 else 1.0 if current_a > 1.0 else current_a
+        return round((c - self._ko) / self._ks) * self._ks + self._ko
+
+    def counts(self) -> dict[str, int]:
+        """No frames are classified in this transport."""
+        return {}
+
+
+class FramesTransport:
+    """Real encode → bytes → classify with E2E, one codec per side."""
+
+    def __init__(self, emu_codec: FrameCodec, ctrl_codec: FrameCodec) -> None:
+        self._emu = emu_codec
+        self._ctrl = ctrl_codec
+
+    def sensor(self, pos: float, spool: float, pressure: float, coil: float,
+               saturated: bool, lost: bool) -> SensorValues | None:
+        """Encode both sensor frames on the emulator side, classify them on the controller side
+        unless ``lost`` (the TX counters advance either way)."""
+        f1 = self._emu.encode("SENSOR_POS", {"Position": _clip(pos, 0.5),
+                                             "Spool": _clip(spool, 0.01)})
+        f2 = self._emu.encode("SENSOR_AUX", {
+            "LoadPressure": _clip(pressure, 4e7), "CoilCurrent": _clip(coil, 1.0),
+            "ValveEnabled": 1, "CmdTimeout": 0, "CurrentSaturated": int(saturated)})
+        if lost:
+            return None
+        d1, d2 = self._ctrl.classify(f1), self._ctrl.classify(f2)
+        if not (d1.verdict.usable and d2.verdict.usable) or d1.values is None or d2.values is None:
+            return None
+        return (float(d1.values["Position"]), float(d1.values["Spool"]),
+                float(d2.values["LoadPressure"]), float(d2.values["CoilCurrent"]))
+
+    def command(self, current_a: float, k: int, lost: bool) -> float | None:
+        """Encode VALVE_CMD on the controller side, classify it on the emulator side unless
+        ``lost``."""
+        f = self._ctrl.encode("VALVE_CMD", {"CurrentSetpoint": _clip(current_a, 1.0), "Enable": 1,
+                                            "SensorCounterEcho": k & 0xF,
+                                            "CycleCount": k & 0xFFFF})
+        if lost:
+            return None
+        d = self._emu.classify(f)
+        if not d.verdict.usable or d.values is None:
+            return None
+        return float(d.values["CurrentSetpoint"])
+
+    def counts(self) -> dict[str, int]:
+        """Verdict counts of both receivers (name → count)."""
+        out: dict[str, int] = {}
+        for c in (self._emu, self._ctrl):
+            for v, n in c.counts.items():
+                out[v.name] = out.get(v.name, 0) + n
+        return out

@@ -1,0 +1,174 @@
+"""``firmware-sim``: the plant emulator process.
+
+``firmware-sim -c configs/emulator.yaml [--interface I --channel C] [--scenario S] [--rate HZ]
+[--mode realtime|lockstep] [--truth] [--log FILE] [--duration S]``
+
+Exit codes: 0 (normal end, SIGTERM/SIGINT), 1 (lockstep peer stopped answering, other errors),
+2 (bad config: the message names file and key path), 3 (bus unavailable).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+from ehpss_hil.bus import open_bus
+from ehpss_hil.codec import FrameCodec
+from ehpss_hil.config import EmulatorConfig, load_emulator_config
+from ehpss_hil.errors import ConfigError, EhpssError
+from ehpss_hil.physics.params import load_params
+from ehpss_hil.runtime.frameio import FrameIO, open_can_logger
+from ehpss_hil.runtime.rt import apply_rt_options, freeze_gc
+from ehpss_hil.runtime.signals import install_stop_handlers, restore_handlers
+from ehpss_hil.scenario import Scenario, load_scenario
+
+from .emulation import PlantEmulation
+from .process import OWN_FRAMES, EmulatorOptions, EmulatorProcess
+
+log = logging.getLogger("firmware_sim")
+CLOCK_NOTE = ("wall clock (time.time()) at send for frames sent; the bus's receive timestamp "
+              "(kernel SO_TIMESTAMPNS on udp_multicast/socketcan) for frames received")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``firmware-sim`` argument parser."""
+    p = argparse.ArgumentParser(prog="firmware-sim", description="EHPSS plant emulator on CAN.")
+    p.add_argument("-c", "--config", required=True, type=Path, help="emulator.yaml")
+    p.add_argument("--interface", choices=("udp_multicast", "socketcan", "virtual"),
+                   help="override bus.interface")
+    p.add_argument("--channel", help="override bus.channel (vcan0, a 239.x.y.z group, ...)")
+    p.add_argument("--scenario", type=Path, help="override the scenario file")
+    p.add_argument("--rate", type=float, help="period rate (Hz), overrides rate_hz")
+    p.add_argument("--mode", choices=("realtime", "lockstep"), help="override mode")
+    p.add_argument("--truth", action="store_true", help="send PLANT_TRUTH/PLANT_FAULTS (bench)")
+    p.add_argument("--fault-inject", action="store_true", help="accept FAULT_INJECT frames")
+    p.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority 1..99 (0 = none)")
+    p.add_argument("--cpu", type=int, help="pin to this CPU")
+    p.add_argument("--log", help="candump -L log of every frame sent and received")
+    p.add_argument("--duration", type=float, help="stop after this many seconds of plant time")
+    p.add_argument("--lockstep-timeout", type=float, default=5.0,
+                   help="lockstep: give up when no VALVE_CMD arrives for this long (s)")
+    p.add_argument("--summary-json", type=Path, help="write the final counters as JSON here")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    return p
+
+
+def _resolve(args: argparse.Namespace) -> tuple[EmulatorConfig, Scenario]:
+    """Config + command-line overrides + scenario, validated (raises ConfigError)."""
+    cfg = load_emulator_config(args.config)
+    src = str(args.config)
+    bus = cfg.bus
+    if args.interface or args.channel:
+        try:
+            bus = replace(bus, interface=args.interface or bus.interface,
+                          channel=args.channel or bus.channel)
+        except ConfigError as exc:
+            raise ConfigError(src, f"bus.{exc.key_path} (command line)", exc.reason) from exc
+    rate = cfg.rate_hz if args.rate is None else args.rate
+    if not 10.0 <= rate <= 10000.0:
+        raise ConfigError(src, "rate_hz (--rate)", f"must be in [10, 10000] Hz, got {rate:g}")
+    rt = cfg.rt
+    if args.rt_priority is not None:
+        if not 0 <= args.rt_priority <= 99:
+            raise ConfigError(src, "rt.priority (--rt-priority)", "must be in [0, 99]")
+        rt = replace(rt, priority=args.rt_priority)
+    if args.cpu is not None:
+        rt = replace(rt, cpu=args.cpu)
+    cfg = replace(cfg, bus=bus, rate_hz=rate, mode=args.mode or cfg.mode, rt=rt,
+                  truth=cfg.truth or args.truth, fault_inject=cfg.fault_inject or args.fault_inject)
+    path = args.scenario or (Path(cfg.scenario) if cfg.scenario else None)
+    scenario = (load_scenario(path) if path is not None
+                else Scenario(name="default", duration_s=3600.0))
+    if abs(scenario.sample_time_s * rate - 1.0) > 1e-9:
+        scenario = replace(scenario, sample_time_s=1.0 / rate)
+    if args.duration is not None and args.duration <= 0.0:
+        raise ConfigError(src, "--duration", "must be > 0 s")
+    return cfg, scenario
+
+
+def make_codec(cfg: EmulatorConfig) -> FrameCodec:
+    """The frame codec with this config's DBC and ID layout."""
+    return FrameCodec(cfg.dbc or None, id_base=cfg.ids.id_base,
+                      node_ids={"HEARTBEAT_CTRL": cfg.ids.controller_node,
+                                "HEARTBEAT_EMU": cfg.ids.emulator_node},
+                      max_delta_counter=cfg.ids.max_delta_counter)
+
+
+def format_summary(s: dict[str, object]) -> str:
+    """The counters printed at exit."""
+    st = s["stats"]
+    assert isinstance(st, dict)
+    lat = st["lateness_s"]
+    lines = [f"firmware-sim: periods {s['periods']}",
+             f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
+             f"  frames received: {s['frames_received']}; by verdict {s['received_by_verdict']}",
+             f"  commands accepted {s['commands_accepted']}, command timeouts "
+             f"{s['command_timeouts']}, lost sensor/command frames {s['lost_sensor_frames']}/"
+             f"{s['lost_command_frames']}, clipped values {s['clipped_values']}",
+             f"  overruns {st['overruns']} (skipped periods {st['skipped']}), wake-up lateness "
+             f"p50 {lat['p50'] * 1e6:.1f} µs p99 {lat['p99'] * 1e6:.1f} µs "
+             f"max {lat['max'] * 1e6:.1f} µs, compute p99 "
+             f"{st['compute_s']['p99'] * 1e6:.1f} µs"]
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Configure, run until the end/stop signal, print the counters; returns the exit code."""
+    cfg, scenario = _resolve(args)
+    params = load_params(cfg.params or None)
+    codec = make_codec(cfg)
+    emu = PlantEmulation(params, scenario)
+    bus = open_bus(cfg.bus)
+    logger = open_can_logger(args.log or cfg.log.path, cfg.log, cfg.bus, sidecar={
+        "tool": "firmware-sim", "config": str(args.config), "dbc": cfg.dbc or None,
+        "scenario": scenario.name, "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
+        "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "mode": cfg.mode})
+    io = FrameIO(bus, codec, OWN_FRAMES, logger)
+    proc = EmulatorProcess(emu, io, EmulatorOptions(
+        command_timeout_s=cfg.command_timeout_s, truth=cfg.truth, fault_inject=cfg.fault_inject,
+        heartbeat_rate_hz=cfg.heartbeat_rate_hz, lockstep_timeout_s=args.lockstep_timeout))
+    stop, previous = install_stop_handlers()
+    ok = True
+    try:
+        apply_rt_options(cfg.rt)
+        freeze_gc(cfg.rt.gc_freeze)
+        log.info("%s on %s:%s at %g Hz, scenario %s", cfg.mode, cfg.bus.interface,
+                 cfg.bus.channel, cfg.rate_hz, scenario.name)
+        if cfg.mode == "lockstep":
+            n = scenario.n_samples if args.duration is None else round(args.duration * cfg.rate_hz)
+            ok = proc.run_lockstep(stop, n)
+        else:
+            n_rt = None if args.duration is None else round(args.duration * cfg.rate_hz)
+            proc.run_realtime(stop, n_rt)
+    finally:
+        restore_handlers(previous)
+        io.close()
+        bus.shutdown()
+    summary = proc.summary()
+    print(format_summary(summary), flush=True)
+    if args.summary_json is not None:
+        args.summary_json.write_text(json.dumps(summary, indent=1))
+    return 0 if ok else 1
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``firmware-sim`` console script."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
+                        format="firmware-sim: %(levelname)s: %(message)s")
+    try:
+        return run(args)
+    except EhpssError as exc:
+        print(f"firmware-sim: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

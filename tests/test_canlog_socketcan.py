@@ -1,0 +1,85 @@
+"""On vcan0, with the real can-utils: ``canplayer`` plays our log, and ``candump -L`` and our
+logger (``ehpss-hil log``'s ``record`` on the project's socketcan bus) record it — line for
+line the same text (timestamps aside).
+
+Marked ``socketcan``: run inside ``../shared/tools/vcan-vm/run`` (this kernel has no SocketCAN).
+"""
+
+from __future__ import annotations
+
+import shutil
+import signal
+import socket
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import can
+import pytest
+
+from ehpss_hil.bus import open_bus
+from ehpss_hil.canlog import CandumpLogger
+from ehpss_hil.codec import FrameCodec
+from ehpss_hil.commands import log as log_cmd
+from ehpss_hil.config import BusConfig
+
+
+def _af_can() -> bool:
+    try:
+        socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW).close()
+    except (OSError, AttributeError):
+        return False
+    return True
+
+
+pytestmark = [
+    pytest.mark.socketcan,
+    pytest.mark.skipif(not _af_can(), reason="no SocketCAN: run via ../shared/tools/vcan-vm/run"),
+    pytest.mark.skipif(shutil.which("canplayer") is None or shutil.which("candump") is None,
+                       reason="can-utils (candump, canplayer) not installed"),
+]
+
+
+def _frames() -> list[can.Message]:
+    codec = FrameCodec()
+    out = []
+    for k in range(30):
+        t = 1_700_000_000.0 + k * 1e-3
+        out.append(codec.encode("SENSOR_POS", {"Position": 1e-5 * k}, timestamp_s=t))
+        out.append(codec.encode("VALVE_CMD", {"CurrentSetpoint": 1e-3 * k, "CycleCount": k},
+                                timestamp_s=t + 2e-4))
+    out.append(can.Message(timestamp=t + 5e-4, arbitration_id=0x1ABCDE0, is_extended_id=True,
+                           data=b"\x01\x02\x03"))
+    out.append(can.Message(timestamp=t + 6e-4, arbitration_id=0x7FF, is_extended_id=False,
+                           data=b""))
+    return out
+
+
+def _body(line: str) -> str:
+    """``iface ID#DATA`` of a candump -L line (the timestamp dropped)."""
+    return line.split(" ", 1)[1].strip()
+
+
+def test_canplayer_candump_and_our_logger_agree(tmp_path: Path) -> None:
+    ours = tmp_path / "ours.log"
+    with CandumpLogger(ours, iface="vcan0") as lg:
+        for m in _frames():
+            lg.log(m)
+    dump = subprocess.Popen(["candump", "-L", "vcan0"], stdout=subprocess.PIPE, text=True)
+    stop = threading.Event()
+    with open_bus(BusConfig(interface="socketcan", channel="vcan0")) as bus:
+        rec = CandumpLogger(tmp_path / "rec.log", iface="vcan0")
+        th = threading.Thread(target=log_cmd.record, args=(bus, rec, stop))
+        th.start()
+        time.sleep(0.5)  # let candump open its socket (a wait, not a measurement)
+        subprocess.run(["canplayer", "-I", str(ours)], check=True, timeout=120)
+        time.sleep(0.5)
+        stop.set()  # record() then drains what the socket already holds
+        th.join()
+        rec.close()
+    dump.send_signal(signal.SIGINT)
+    dumped, _ = dump.communicate(timeout=60)
+    expected = [_body(x) for x in ours.read_text().splitlines()]
+    assert [_body(x) for x in dumped.splitlines()] == expected
+    assert [_body(x) for x in (tmp_path / "rec.log").read_text().splitlines()] == expected

@@ -1,0 +1,66 @@
+"""Compensation: the division by the estimates, and bumpless switching in closed loop."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+import pytest
+
+from ehpss_hil import PROJECT_ROOT
+from ehpss_hil.control.base import Measurement
+from ehpss_hil.control.compensation import compensated_current, feedback_signal, sensor_trusted
+from ehpss_hil.control.controllers import make_controller
+from ehpss_hil.physics.params import load_params
+from ehpss_hil.scenario import load_scenario
+from firmware_sim.emulation import PlantEmulation
+
+PARAMS = load_params()
+
+
+def test_compensation_functions() -> None:
+    assert compensated_current(0.01, 0.5) == pytest.approx(0.02)
+    assert compensated_current(0.01, 0.0) == pytest.approx(0.2)  # floor 0.05
+    assert feedback_signal(12.71, 4e-4, 0.8, 1.0, True) == pytest.approx(12.71 * 5e-4)
+    assert feedback_signal(12.71, 4e-4, 0.8, 1e-3, False) == pytest.approx(12.71e-3)
+    assert sensor_trusted(0.5, 0.15, False, True)
+    assert not sensor_trusted(0.1, 0.15, False, True)
+    assert not sensor_trusted(0.5, 0.15, True, True)
+    assert not sensor_trusted(0.5, 0.15, False, False)
+
+
+def _closed_loop(name: str) -> dict[str, np.ndarray]:
+    """Plant + mmac with a one-sample delay; per sample: z, PI output u, current, active slots."""
+    sc = load_scenario(PROJECT_ROOT / "scenarios" / f"{name}.yaml")
+    emu = PlantEmulation(PARAMS, sc)
+    ctrl = make_controller("mmac", PARAMS, sc.sample_time_s, reference=sc.reference)
+    meas, q = Measurement(), deque([0.0])
+    rows = []
+    for xd in sc.reference_samples().tolist():
+        s = emu.measure()
+        meas.position_m, meas.spool_m, meas.coil_current_a = s.position_m, s.spool_m, s.coil_current_a
+        meas.reference_m = xd
+        cmd = ctrl.step(meas)
+        q.append(cmd.current_a)
+        emu.advance(q.popleft())
+        sp, ps, kl, _ = ctrl.probe()
+        rows.append((ctrl.pi.z, ctrl.pi.u, cmd.current_a, sp, ps, kl))
+    a = np.array(rows)
+    return {"z": a[:, 0], "u": a[:, 1], "i": a[:, 2], "sp": a[:, 3], "ps": a[:, 4], "kl": a[:, 5]}
+
+
+@pytest.mark.parametrize("name", ["case1-loe", "case3-combined"])
+def test_switches_are_bumpless(name: str) -> None:
+    d = _closed_loop(name)
+    sw = np.flatnonzero((np.diff(d["sp"]) != 0) | (np.diff(d["ps"]) != 0)) + 1
+    assert len(sw) >= 2
+    dz, du = np.abs(np.diff(d["z"])), np.abs(np.diff(d["u"]))
+    normal = np.ones(len(dz), dtype=bool)
+    for k in sw:
+        normal[max(k - 3, 0):k + 3] = False
+    for k in sw:
+        # no jump in z, nor in the PI output, beyond the largest ordinary one-sample change
+        assert dz[k - 1] <= dz[normal].max()
+        assert du[k - 1] <= du[normal].max()
+    # the current is exactly the PI output divided by the estimate in use (the compensation)
+    np.testing.assert_allclose(d["i"] * np.maximum(d["kl"], 0.05), d["u"], rtol=1e-12, atol=1e-15)

@@ -1,0 +1,101 @@
+"""PI law, predictors and the fault-free closed loop against the reference model."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ehpss_hil import PROJECT_ROOT
+from ehpss_hil.control.base import Measurement
+from ehpss_hil.control.controllers import MODES, make_controller
+from ehpss_hil.control.pi import PiLaw
+from ehpss_hil.control.predictors import ModelPosition, ValvePredictor
+from ehpss_hil.errors import ModelError
+from ehpss_hil.physics.faults import FaultState
+from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.plant import PlantStepper
+from ehpss_hil.scenario import Noise, load_scenario
+from ehpss_hil.sim import run_scenario
+
+PARAMS = load_params()
+TS = 1e-3
+FAULT_FREE = load_scenario(PROJECT_ROOT / "scenarios" / "fault-free.yaml")
+
+
+def test_pi_is_eq39() -> None:
+    g = PARAMS.controller
+    pi = PiLaw(g, TS)
+    u0 = pi.step(1e-3, 0.0)  # reference enters as the mean of this and the last sample
+    e0 = g.k_f * 0.5e-3
+    assert u0 == pytest.approx(g.k_a * g.k_p * e0)
+    assert pi.z == pytest.approx(TS * g.k_i * e0)
+    u1 = pi.step(1e-3, 0.0)
+    e1 = g.k_f * 1e-3
+    assert u1 == pytest.approx(g.k_a * (g.k_p * e1 + g.k_i * TS * g.k_i * e0))
+
+
+def test_valve_predictor_matches_plant_spool() -> None:
+    plant = PlantStepper(PARAMS, TS)
+    plant.set_faults(FaultState(k_loe=0.4))
+    pred = ValvePredictor(PARAMS.plant, TS)
+    rng = np.random.default_rng(1)
+    for i in rng.uniform(-0.01, 0.01, 300).tolist():
+        plant.step(i)
+        v = pred.step(i)
+        assert v == pytest.approx(plant.spool_commanded_m, rel=1e-9, abs=1e-15)
+        assert 0.4 * v == pytest.approx(plant.spool_actual_m, rel=1e-9, abs=1e-15)
+
+
+def test_model_position_integrates_spool() -> None:
+    xh = ModelPosition(PARAMS.plant, TS, anchor_rate_1_s=0.0)
+    for _ in range(1000):
+        xh.integrate(1e-3)
+    kc = PARAMS.plant.velocity_gain_1_s
+    assert xh.x == pytest.approx(kc * 1e-3 * (1.0 - 0.5e-3), rel=1e-9)  # trapezoid from rest
+    xh.reset()
+    xa = ModelPosition(PARAMS.plant, TS, anchor_rate_1_s=100.0)
+    for _ in range(200):
+        xa.integrate(0.0)
+        xa.anchor(2e-3)
+    assert xa.x == pytest.approx(2e-3, rel=1e-6)
+
+
+def test_fault_free_loop_tracks_reference_model() -> None:
+    """PI + plant (one-sample delay, quantized frames, noise) follows y_m to ≤ 3 µm RMS."""
+    r = run_scenario(replace(FAULT_FREE, duration_s=2.0), "nrc", PARAMS)
+    assert np.sqrt(np.mean(r.error_m ** 2)) <= 3e-6
+    quiet = run_scenario(replace(FAULT_FREE, duration_s=2.0, noise=Noise()), "nrc", PARAMS)
+    e = quiet.error_m[200:]  # after the start-up transient of the sine
+    assert np.max(np.abs(e)) <= 0.5e-6
+
+
+def test_factory_builds_every_mode_and_rejects_unknown() -> None:
+    for mode in MODES:
+        c = make_controller(mode, PARAMS, TS)
+        assert c.mode == mode
+        assert c.step(Measurement(reference_m=1e-4)).current_a != 0.0
+        st = c.status()
+        assert st.mode == mode
+    with pytest.raises(ModelError):
+        make_controller("pid", PARAMS, TS)
+    with pytest.raises(ModelError):
+        make_controller("nrc", PARAMS, 0.0)
+
+
+def test_status_reports_documented_slots() -> None:
+    st = make_controller("mmac", PARAMS, TS).status()
+    assert st.active_model == {"spool": 0, "position": 4}
+    assert sorted(st.index) == [0, 1, 2, 3, 4, 5, 6, 7, 8]
+    assert st.theta[6] == 0.0 and st.theta[1] == 0.5
+    assert sorted(make_controller("mmac-paper", PARAMS, TS).status().index) == [9, 10, 11, 12, 13]
+    assert list(make_controller("smac", PARAMS, TS).status().index) == [14]
+
+
+def test_oracle_uses_the_truth() -> None:
+    c = make_controller("oracle", PARAMS, TS)
+    c.set_truth(FaultState(k_loe=0.5, k_q=0.8, k_dft=0.1))  # type: ignore[attr-defined]
+    assert c.k_loe_hat == pytest.approx(0.4)
+    c.step(Measurement(position_m=5e-4, reference_m=1e-3))
+    assert not c.sensor_trusted  # k_DFT below 0.15: model position instead of the sensor

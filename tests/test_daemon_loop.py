@@ -1,0 +1,259 @@
+"""The controller daemon's loop in-process over python-can ``virtual``: cycles are counted,
+nothing is timed. A minimal PI (this file only) keeps the loop tests independent of the control
+law; one test runs the real ``mmac`` law against the emulator in lockstep."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+import can
+import pytest
+
+from ehpss_hil.codec import FrameCodec
+from ehpss_hil.codec.e2e import protect
+from ehpss_hil.config import Watchdog
+from ehpss_hil.control.base import ControllerStatus, Measurement, ValveCommand
+from ehpss_hil.physics.params import Params, load_params
+from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
+from ehpss_hil.runtime.frameio import FrameIO
+from ehpss_hil.runtime.lifecycle import FailsafeReason, State
+from ehpss_hil.runtime.signals import StopFlag
+from ehpss_hil.scenario import Reference, Scenario
+
+
+class MiniPI:
+    """A tiny PI on the position error (A per m), enough to exercise the loop."""
+
+    mode = "nrc"
+
+    def __init__(self, kp: float = 0.05, ki: float = 0.5, ts_s: float = 1e-3) -> None:
+        self.kp, self.ki, self.ts_s = kp, ki, ts_s
+        self.z = 0.0
+        self.steps = 0
+
+    def configure(self, params: Params, ts_s: float) -> None:
+        self.ts_s = ts_s
+
+    def reset(self) -> None:
+        self.z = 0.0
+
+    def step(self, meas: Measurement) -> ValveCommand:
+        e = meas.reference_m - meas.position_m
+        self.z += self.ts_s * e
+        self.steps += 1
+        return ValveCommand(current_a=self.kp * e + self.ki * self.z, enable=True)
+
+    def status(self) -> ControllerStatus:
+        return ControllerStatus(mode=self.mode, index={0: 0.5}, theta={0: 1.0})
+
+
+class Rig:
+    """Controller loop + a test peer playing the emulator on one virtual channel."""
+
+    def __init__(self, name: str, wd: Watchdog | None = None) -> None:
+        self.bus = can.Bus(interface="virtual", channel=name)
+        self.peer = can.Bus(interface="virtual", channel=name)
+        self.tx = FrameCodec()
+        self.rx = FrameCodec()
+        self.ctrl = MiniPI()
+        self.loop = ControllerLoop(self.ctrl, FrameIO(self.bus, FrameCodec(), OWN_FRAMES),
+                                   Reference(kind="step", amplitude_m=1e-3),
+                                   LoopOptions(watchdog=wd or Watchdog()))
+
+    def sensors(self, position_m: float = 0.0) -> can.Message:
+        pos = self.tx.encode("SENSOR_POS", {"Position": position_m, "Spool": 0.0})
+        self.peer.send(pos)
+        self.peer.send(self.tx.encode("SENSOR_AUX", {"CoilCurrent": 1e-5}))
+        return pos
+
+    def cycle(self) -> dict[str, dict[str, Any]]:
+        """One loop cycle; returns the newest decoded frame of each name the loop sent."""
+        self.loop.poll_cycle()
+        out: dict[str, dict[str, Any]] = {}
+        while (m := self.peer.recv(0.0)) is not None:
+            d = self.rx.classify(m)
+            if d.name is not None and d.values is not None:
+                out[d.name] = d.values
+        return out
+
+    def close(self) -> None:
+        self.bus.shutdown()
+        self.peer.shutdown()
+
+
+@pytest.fixture
+def rig(request: pytest.FixtureRequest) -> Iterator[Rig]:
+    r = Rig(request.node.name)
+    yield r
+    r.close()
+
+
+def _activate(rig: Rig, n: int = 5) -> None:
+    for _ in range(n):
+        rig.sensors()
+        rig.cycle()
+    assert rig.loop.life.state is State.ACTIVE
+
+
+def test_configured_sends_zero_until_sensor_data(rig: Rig) -> None:
+    for _ in range(10):  # no sensor data yet: no watchdog trip, zero current, disabled
+        cmd = rig.cycle()["VALVE_CMD"]
+        assert cmd["CurrentSetpoint"] == 0.0 and cmd["Enable"] == 0
+    assert rig.loop.life.state is State.CONFIGURED
+    rig.sensors()
+    cmd = rig.cycle()["VALVE_CMD"]
+    assert rig.loop.life.state is State.ACTIVE and cmd["Enable"] == 1
+
+
+def test_one_command_per_cycle_echoes_the_sensor_counter(rig: Rig) -> None:
+    _activate(rig)
+    sent = rig.loop.io.sent["VALVE_CMD"]
+    for i in range(20):
+        pos = rig.sensors(1e-4 * i)
+        cmd = rig.cycle()["VALVE_CMD"]
+        assert cmd["SensorCounterEcho"] == pos.data[1] & 0x0F
+        assert cmd["CycleCount"] == rig.loop.cycles - 1
+    assert rig.loop.io.sent["VALVE_CMD"] == sent + 20
+
+
+def test_newest_of_several_frames_is_used(rig: Rig) -> None:
+    _activate(rig)
+    rig.sensors(1e-3)
+    newest = rig.sensors(2e-3)
+    cmd = rig.cycle()["VALVE_CMD"]
+    assert cmd["SensorCounterEcho"] == newest.data[1] & 0x0F
+    assert rig.loop.meas.position_m == pytest.approx(2e-3)
+
+
+def _cycles_to_failsafe(rig: Rig, feed: Any = None) -> int:
+    for n in range(1, 20):
+        if feed is not None:
+            feed()
+        cmd = rig.cycle()["VALVE_CMD"]
+        if cmd["Enable"] == 0 and cmd["CurrentSetpoint"] == 0.0:
+            return n
+    return -1
+
+
+def _status(rig: Rig) -> dict[str, Any]:
+    rig.loop.send_status()
+    m = rig.peer.recv(1.0)
+    assert m is not None
+    d = rig.rx.classify(m)
+    assert d.name == "CTRL_STATUS" and d.values is not None
+    return d.values
+
+
+def test_sensor_timeout_failsafe_within_3_cycles(rig: Rig) -> None:
+    _activate(rig, 50)
+    n = _cycles_to_failsafe(rig)
+    assert 1 <= n <= 3, n
+    assert rig.loop.life.state is State.FAULT
+    st = _status(rig)
+    assert st["State"] == int(State.FAULT) and st["FailsafeReason"] == int(
+        FailsafeReason.SENSOR_TIMEOUT)
+
+
+def test_e2e_errors_failsafe_with_reason(rig: Rig) -> None:
+    _activate(rig)
+    pid = rig.tx.can_id("SENSOR_POS")
+
+    def corrupt() -> None:
+        data = bytearray(rig.tx.encode("SENSOR_POS", {"Position": 0.0, "Spool": 0.0}).data)
+        data[0] ^= 0x5A
+        rig.peer.send(can.Message(arbitration_id=pid, data=bytes(data), is_extended_id=False))
+
+    assert _cycles_to_failsafe(rig, corrupt) <= 3
+    assert rig.loop.life.reason is FailsafeReason.E2E_ERRORS
+
+
+def test_implausible_data_failsafe_with_reason(rig: Rig) -> None:
+    _activate(rig)
+    pid = rig.tx.can_id("SENSOR_POS")
+    msg = rig.tx.message("SENSOR_POS")
+    counter = [rig.tx._tx_counter["SENSOR_POS"]]  # continue the sequence: only the range is bad
+
+    def implausible() -> None:
+        raw = bytearray(msg.encode({"CRC": 0, "Counter": 0, "Position": 0.8, "Spool": 0.0},
+                                   strict=False))
+        data = protect(raw, counter[0], rig.tx.data_ids("SENSOR_POS"))  # type: ignore[arg-type]
+        counter[0] = (counter[0] + 1) & 0x0F
+        rig.peer.send(can.Message(arbitration_id=pid, data=data, is_extended_id=False))
+
+    assert _cycles_to_failsafe(rig, implausible) <= 3
+    assert rig.loop.life.reason is FailsafeReason.PLAUSIBILITY
+
+
+def test_failsafe_hold_keeps_last_command() -> None:
+    r = Rig("hold", Watchdog(timeout_cycles=3, failsafe="hold"))
+    try:
+        for _ in range(20):
+            r.sensors(-1e-3)
+            r.cycle()
+        cmds = [r.cycle()["VALVE_CMD"] for _ in range(6)]
+        assert r.loop.life.state is State.FAULT
+        held = [(c["CurrentSetpoint"], c["Enable"]) for c in cmds[-3:]]
+        assert held[0] == held[1] == held[2] and held[0][1] == 1 and held[0][0] != 0.0
+    finally:
+        r.close()
+
+
+def test_auto_recovery_after_m_fresh_cycles() -> None:
+    r = Rig("recover", Watchdog(timeout_cycles=3, recovery_cycles=10, auto_recover=True))
+    try:
+        _activate(r)
+        for _ in range(3):
+            r.cycle()
+        assert r.loop.life.state is State.FAULT
+        states = []
+        for _ in range(12):
+            r.sensors()
+            r.cycle()
+            states.append(r.loop.life.state)
+        assert states.index(State.ACTIVE) == 9  # the 10th fresh cycle
+    finally:
+        r.close()
+
+
+def test_shutdown_sends_zero_disabled_and_stopped(rig: Rig) -> None:
+    _activate(rig)
+    rig.loop.shutdown()
+    got: dict[str, dict[str, Any]] = {}
+    while (m := rig.peer.recv(0.0)) is not None:
+        d = rig.rx.classify(m)
+        if d.name and d.values is not None:
+            got[d.name] = d.values
+    assert got["VALVE_CMD"]["CurrentSetpoint"] == 0.0 and got["VALVE_CMD"]["Enable"] == 0
+    assert got["CTRL_STATUS"]["State"] == int(State.STOPPED)
+    assert got["HEARTBEAT_CTRL"]["NmtState"] == 4
+
+
+def test_lockstep_with_emulator_and_mmac() -> None:
+    """The real control law against the emulator, both in lockstep: one answer per sample."""
+    from ehpss_hil.control.controllers import make_controller
+    from firmware_sim.emulation import PlantEmulation
+    from firmware_sim.process import OWN_FRAMES as EMU_FRAMES
+    from firmware_sim.process import EmulatorOptions, EmulatorProcess
+
+    sc = Scenario(name="ls", duration_s=0.5)
+    params = load_params()
+    eb = can.Bus(interface="virtual", channel="daemon-lockstep")
+    cb = can.Bus(interface="virtual", channel="daemon-lockstep")
+    try:
+        emu = EmulatorProcess(PlantEmulation(params, sc), FrameIO(eb, FrameCodec(), EMU_FRAMES),
+                              EmulatorOptions())
+        loop = ControllerLoop(make_controller("mmac", params, 1e-3, None, sc.reference),
+                              FrameIO(cb, FrameCodec(), OWN_FRAMES), sc.reference,
+                              LoopOptions(lockstep_idle_s=0.5))
+        th = threading.Thread(target=loop.run_lockstep, args=(StopFlag(), sc.n_samples))
+        th.start()
+        assert emu.run_lockstep(StopFlag(), sc.n_samples)
+        th.join()
+        assert loop.cycles == sc.n_samples == emu.hold.accepted
+        assert loop.life.state is State.ACTIVE and emu.hold.timeouts == 0
+        assert abs(emu.emu.plant.position_m) < 2e-3
+    finally:
+        eb.shutdown()
+        cb.shutdown()

@@ -1,0 +1,154 @@
+"""Emulator command handling, one realtime period at a time over python-can ``virtual``
+(periods are counted; nothing is timed): command timeout, rejected VALVE_CMDs, FAULT_INJECT."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import can
+import pytest
+
+from ehpss_hil.codec import FrameCodec, Verdict
+from ehpss_hil.codec.e2e import protect
+from ehpss_hil.physics.params import load_params
+from ehpss_hil.runtime.frameio import FrameIO
+from ehpss_hil.scenario import Scenario
+from firmware_sim.emulation import PlantEmulation
+from firmware_sim.process import OWN_FRAMES, EmulatorOptions, EmulatorProcess
+
+TIMEOUT_PERIODS = 10  # command_timeout_s 10 ms at 1 kHz
+
+
+class Rig:
+    """An emulator process and a test peer on one virtual channel."""
+
+    def __init__(self, name: str, **opts: object) -> None:
+        self.emu_bus = can.Bus(interface="virtual", channel=name)
+        self.peer = can.Bus(interface="virtual", channel=name)
+        self.codec = FrameCodec()  # the peer's TX counters
+        self.proc = EmulatorProcess(
+            PlantEmulation(load_params(), Scenario(name="t", duration_s=10.0)),
+            FrameIO(self.emu_bus, FrameCodec(), OWN_FRAMES),
+            EmulatorOptions(command_timeout_s=0.010, **opts))  # type: ignore[arg-type]
+        self.rx = FrameCodec()
+
+    def cmd(self, current_a: float, enable: int = 1) -> can.Message:
+        msg = self.codec.encode("VALVE_CMD", {"CurrentSetpoint": current_a, "Enable": enable})
+        self.peer.send(msg)
+        return msg
+
+    def step(self) -> tuple[float, dict[str, float]]:
+        """One period; returns (applied current (A), the SENSOR_AUX values sent)."""
+        applied = self.proc.step_period()
+        aux: dict[str, float] = {}
+        while (m := self.peer.recv(0.0)) is not None:
+            d = self.rx.classify(m)
+            if d.name == "SENSOR_AUX" and d.values is not None:
+                aux = d.values
+        return applied, aux
+
+    @property
+    def verdicts(self) -> dict[Verdict, int]:
+        return self.proc.codec.counts_by_name.get("VALVE_CMD", {v: 0 for v in Verdict})
+
+    def close(self) -> None:
+        self.emu_bus.shutdown()
+        self.peer.shutdown()
+
+
+@pytest.fixture
+def rig(request: pytest.FixtureRequest) -> Iterator[Rig]:
+    r = Rig(request.node.name)
+    yield r
+    r.close()
+
+
+def test_starts_timed_out_then_applies_fresh_commands(rig: Rig) -> None:
+    applied, aux = rig.step()
+    assert applied == 0.0 and aux["CmdTimeout"] == 1
+    rig.cmd(2e-4)
+    applied, _ = rig.step()
+    assert applied == pytest.approx(2e-4, abs=2e-7)
+    _, aux = rig.step()
+    assert aux["CmdTimeout"] == 0 and aux["ValveEnabled"] == 1
+
+
+def _periods_until_zero(rig: Rig, limit: int = 50) -> int:
+    for n in range(1, limit + 1):
+        applied, _ = rig.step()
+        if applied == 0.0:
+            return n
+    return -1
+
+
+def test_command_timeout_counts_periods(rig: Rig) -> None:
+    for _ in range(20):
+        rig.cmd(3e-4)
+        assert rig.step()[0] == pytest.approx(3e-4, abs=2e-7)
+    n = _periods_until_zero(rig)
+    assert abs(n - TIMEOUT_PERIODS) <= 1, n
+    _, aux = rig.step()
+    assert aux["CmdTimeout"] == 1 and aux["ValveEnabled"] == 0
+    assert rig.proc.hold.timeouts == 1  # (it starts timed out: no command yet)
+    rig.cmd(-1e-4)  # resumes on a fresh command
+    assert rig.step()[0] == pytest.approx(-1e-4, abs=2e-7)
+
+
+def _raw_cmd(rig: Rig, current_a: float, counter: int) -> bytes:
+    """A correctly protected VALVE_CMD with any current (bypasses the encoder's range check)."""
+    msg = rig.codec.message("VALVE_CMD")
+    data = bytearray(msg.encode({"CRC": 0, "Counter": 0, "Enable": 1, "CurrentSetpoint": current_a,
+                                 "SensorCounterEcho": 0, "CycleCount": 0}, strict=False))
+    return protect(data, counter, rig.codec.data_ids("VALVE_CMD"))  # type: ignore[arg-type]
+
+
+def test_bad_commands_rejected_last_valid_holds_until_timeout(rig: Rig) -> None:
+    good = rig.cmd(5e-4)
+    assert rig.step()[0] == pytest.approx(5e-4, abs=2e-7)
+    cid = rig.codec.can_id("VALVE_CMD")
+    crc = bytearray(rig.codec.encode("VALVE_CMD", {"CurrentSetpoint": -5e-4, "Enable": 1}).data)
+    crc[0] ^= 0xFF
+    bad = [
+        can.Message(arbitration_id=cid, data=bytes(crc), is_extended_id=False),  # wrong CRC
+        good,  # repeated counter
+        can.Message(arbitration_id=cid, data=_raw_cmd(rig, 1.5, 2), is_extended_id=False),
+        can.Message(arbitration_id=cid, data=bytes(good.data[:7]), is_extended_id=False),  # DLC 7
+    ]
+    held = 0
+    for i in range(TIMEOUT_PERIODS + 5):
+        rig.peer.send(bad[i % len(bad)])
+        applied, _ = rig.step()
+        if applied != 0.0:
+            assert applied == pytest.approx(5e-4, abs=2e-7)
+            held += 1
+    assert abs(held - (TIMEOUT_PERIODS - 1)) <= 1, held
+    v = rig.verdicts
+    # every bad frame rejected and counted (a resent frame is REPEATED or, once the implausible
+    # frame moved the counter reference, WRONG_SEQUENCE)
+    assert sum(n for verdict, n in v.items() if not verdict.usable) == TIMEOUT_PERIODS + 5
+    assert v[Verdict.CRC_ERROR] >= 3 and v[Verdict.BAD_DLC] >= 3
+    assert v[Verdict.REPEATED] >= 1 and v[Verdict.OUT_OF_RANGE] >= 1
+    assert rig.proc.hold.accepted == 1
+
+
+def test_enable_zero_applies_no_current(rig: Rig) -> None:
+    rig.cmd(5e-4, enable=0)
+    assert rig.step()[0] == 0.0
+
+
+def test_fault_inject_only_when_enabled() -> None:
+    for enabled in (False, True):
+        r = Rig(f"inject-{enabled}", fault_inject=enabled)
+        try:
+            r.peer.send(r.codec.encode("FAULT_INJECT", {"FaultKind": 0, "Value": 0.5}))
+            r.step()
+            assert r.proc.emu.faults.k_loe == (0.5 if enabled else 1.0)
+            r.peer.send(r.codec.encode("FAULT_INJECT", {"FaultKind": 2, "Value": 9.0}))
+            r.step()  # k_dft 9 is out of range: rejected
+            assert r.proc.emu.faults.k_dft == 1.0
+            r.peer.send(r.codec.encode("FAULT_INJECT", {"FaultKind": 7, "Value": 0.0}))
+            r.step()
+            assert r.proc.emu.faults.k_loe == 1.0
+            assert (r.proc.inject_applied, r.proc.inject_rejected) == ((2, 1) if enabled else (0, 0))
+        finally:
+            r.close()

@@ -1,0 +1,140 @@
+"""Deadline grid (fake clock: no wall-clock timing), loop statistics, RT options."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from ehpss_hil.config import RtOptions
+from ehpss_hil.runtime import rt
+from ehpss_hil.runtime.deadline import DeadlineTimer
+from ehpss_hil.runtime.stats import LoopStats, Ring
+
+
+class FakeClock:
+    """Monotonic seconds that only move when the loop sleeps or 'computes'."""
+
+    def __init__(self) -> None:
+        self.t = 100.0
+        self.sleeps: list[float] = []
+
+    def __call__(self) -> float:
+        return self.t
+
+    def sleep(self, dt: float) -> None:
+        assert dt > 0.0  # never a zero/negative sleep, never a spin
+        self.sleeps.append(dt)
+        self.t += dt
+
+
+def _timer(clock: FakeClock, period: float = 1e-3) -> DeadlineTimer:
+    t = DeadlineTimer(period, clock=clock, sleep=clock.sleep)
+    t.start()
+    return t
+
+
+def test_fixed_grid_sleeps_to_absolute_deadlines() -> None:
+    clock = FakeClock()
+    t = _timer(clock)
+    t0 = clock.t
+    for n in range(1, 6):
+        clock.t += 0.0002  # compute 0.2 ms
+        assert t.wait() == 0.0
+        assert clock.t == pytest.approx(t0 + n * 1e-3)  # on the grid, no drift
+    assert t.overruns == 0
+    assert clock.sleeps == pytest.approx([0.8e-3] * 5)
+
+
+def test_overrun_counted_skips_ahead_never_bursts() -> None:
+    clock = FakeClock()
+    t = _timer(clock)
+    t0 = clock.t
+    t.wait()                     # cycle 1 at t0 + 1 ms
+    clock.t += 3.5e-3            # this cycle overruns by 2.5 periods
+    lateness = t.wait()          # runs at once, on the latest grid point (t0 + 4 ms)
+    assert t.overruns == 1 and t.skipped == 2
+    assert lateness == pytest.approx(0.5e-3)
+    n_sleeps = len(clock.sleeps)
+    t.wait()                     # the next one sleeps to t0 + 5 ms: no catch-up burst
+    assert len(clock.sleeps) == n_sleeps + 1
+    assert clock.t == pytest.approx(t0 + 5e-3)
+
+
+def test_overrun_warning_at_most_once_a_second(caplog: pytest.LogCaptureFixture) -> None:
+    clock = FakeClock()
+    t = _timer(clock)
+    with caplog.at_level(logging.WARNING, logger="ehpss_hil.runtime.deadline"):
+        for _ in range(3000):    # 3000 overrunning cycles of 1.5 ms = 4.5 s
+            t.wait()
+            clock.t += 1.5e-3
+    assert t.overruns >= 2999
+    assert 4 <= len(caplog.records) <= 6
+
+
+def test_ring_percentiles_and_wraparound() -> None:
+    r = Ring(1000)
+    for v in np.arange(2000, dtype=float):
+        r.add(v)
+    s = r.summary()
+    assert s["n"] == 2000 and s["max"] == 1999.0
+    assert s["p50"] == pytest.approx(np.percentile(np.arange(1000, 2000), 50))
+    assert s["p99"] == pytest.approx(np.percentile(np.arange(1000, 2000), 99))
+
+
+def test_loop_stats_summary_text() -> None:
+    st = LoopStats(100)
+    for i in range(10):
+        st.compute.add(i * 1e-6)
+        st.lateness.add(2e-6)
+    st.overruns = 3
+    s = st.summary()
+    assert s["overruns"] == 3 and s["latency_s"]["n"] == 0
+    assert "p99" in st.text() and "overruns=3" in st.text()
+
+
+def test_rt_options_warn_instead_of_failing(monkeypatch: pytest.MonkeyPatch) -> None:
+    def refuse(*a: object) -> None:
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(rt.os, "sched_setscheduler", refuse)
+    monkeypatch.setattr(rt.os, "sched_setaffinity", refuse)
+    w = rt.apply_rt_options(RtOptions(priority=50, cpu=0))
+    assert any("SCHED_FIFO" in x for x in w) and any("affinity" in x for x in w)
+
+
+def test_rt_cpu_and_timer_slack_apply() -> None:
+    import os
+    before = os.sched_getaffinity(0)
+    cpu = min(before)
+    try:
+        assert rt.set_cpu(cpu) is None
+        assert os.sched_getaffinity(0) == {cpu}
+    finally:
+        os.sched_setaffinity(0, before)
+    assert rt.set_timer_slack(50_000) is None
+
+
+def test_phase_lock_converges_to_target_age() -> None:
+    """Sensor frames arrive every T at phase 0.37 T; the slewed grid settles with the frame's age
+    at the deadline equal to the target (pure arithmetic: no clock)."""
+    from ehpss_hil.runtime.phaselock import PhaseLock
+
+    period, phase, target = 1e-3, 0.37e-3, 150e-6
+    lock = PhaseLock(period, target)
+    deadline = 0.9e-3  # arbitrary start phase
+    for _ in range(2000):
+        arrival = np.floor((deadline - phase) / period) * period + phase  # newest frame so far
+        shift = lock.correction(deadline, arrival)
+        assert abs(shift) <= lock.max_slew_s  # bounded slew: the grid never jumps
+        deadline += period + shift
+    assert lock.last_age_s == pytest.approx(target, abs=1e-6)
+
+
+def test_phase_lock_wraps_a_just_missed_frame() -> None:
+    from ehpss_hil.runtime.phaselock import PhaseLock
+
+    lock = PhaseLock(1e-3, 150e-6)
+    assert lock.error(0.99e-3) == pytest.approx(-0.16e-3)  # just missed: pull back, not +T
+    assert lock.correction(1.0, 1.0 - 0.99e-3) == pytest.approx(16e-6)  # later, bounded
