@@ -49,6 +49,15 @@ class RunPlan:
     emulator_yaml: Path = EMULATOR_YAML
     extra_controller_args: tuple[str, ...] = ()
     quiet: bool = False
+    #: bench runs let the controller leave fail-safe after ``watchdog.recovery_cycles`` fresh
+    #: cycles (a non-RT host stalls a few ms now and then); False keeps the config's choice
+    auto_recover: bool = True
+    #: watchdog.timeout_cycles for this run (None: the config's, 3 by default). A non-RT host
+    #: stalls a process 3–5 ms now and then; bench runs default to 10 (the emulator's own
+    #: command timeout), deployments keep 3 on an RT host.
+    watchdog_cycles: int | None = 10
+    #: how long the controller may take to appear on the bus (slow VMs need more)
+    startup_timeout_s: float = 60.0
 
 
 @dataclass
@@ -105,6 +114,8 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
     emu_mode = "lockstep" if plan.lockstep else "realtime"
     ctrl_cfg = _derived_config(plan.controller_yaml, out / "controller.yaml", {
         **bus, "mode": plan.mode, "reference": _reference_dict(sc),
+        **({"watchdog.auto_recover": True} if plan.auto_recover else {}),
+        **({"watchdog.timeout_cycles": plan.watchdog_cycles} if plan.watchdog_cycles else {}),
         "rate_hz": 1.0 / sc.sample_time_s})
     emu_cfg = _derived_config(plan.emulator_yaml, out / "emulator.yaml", {
         **bus, "mode": emu_mode, "scenario": str(Path(plan.scenario_path).resolve()),
@@ -119,7 +130,8 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
                        *(["--lockstep"] if plan.lockstep else []), *plan.extra_controller_args],
         "emulator": [py, "-m", "firmware_sim.cli", "-c", str(emu_cfg), "--log",
                      str(out / "emulator.log"), "--summary-json", str(out / "emulator-summary.json"),
-                     "--duration", repr(sc.duration_s)],
+                     "--duration", repr(sc.duration_s),
+                     *(["--lockstep-timeout", "60"] if plan.lockstep else [])],
     }
 
 
@@ -140,10 +152,19 @@ def _stop(proc: subprocess.Popen[bytes], timeout_s: float = 10.0) -> int | None:
     return proc.returncode
 
 
-def _wait_for_file(path: Path, timeout_s: float) -> None:
+def _wait_for_line(path: Path, needle: str, timeout_s: float,
+                   procs: dict[str, subprocess.Popen[bytes]]) -> None:
+    """Wait until ``needle`` appears in the growing file ``path`` (e.g. the controller's
+    heartbeat in the bus log: the controller is on the bus and the logger hears it)."""
     end = time.monotonic() + timeout_s
-    while time.monotonic() < end and not path.exists():
-        time.sleep(0.02)
+    while time.monotonic() < end:
+        if path.exists() and needle in path.read_text(errors="replace"):
+            return
+        dead = {n: p.returncode for n, p in procs.items() if p.poll() is not None}
+        if dead:
+            raise EhpssError(f"process ended during start-up: {dead} (see {path.parent}/*.out)")
+        time.sleep(0.05)
+    raise EhpssError(f"start-up timed out: {needle!r} not seen in {path} after {timeout_s:g} s")
 
 
 def execute(plan: RunPlan) -> RunResult:
@@ -167,9 +188,8 @@ def execute(plan: RunPlan) -> RunResult:
     try:
         procs["logger"] = _spawn(cmds["logger"], prefix, out, "logger")
         procs["controller"] = _spawn(cmds["controller"], prefix, out, "controller")
-        _wait_for_file(out / "controller.log", 10.0)
-        _wait_for_file(out / "bus.log", 10.0)
-        time.sleep(0.3)  # let both subscribe to the bus before the first sensor frame
+        hb = f"{0x700 + int(load_yaml(out / 'controller.yaml').get('ids', {}).get('controller_node', 1)):03X}#"
+        _wait_for_line(out / "bus.log", hb, plan.startup_timeout_s, procs)
         procs["emulator"] = _spawn(cmds["emulator"], prefix, out, "emulator")
         limit = sc.duration_s * (60.0 if plan.lockstep else 1.0) + 30.0
         try:

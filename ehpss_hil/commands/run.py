@@ -23,12 +23,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lockstep", action="store_true",
                    help="emulator advances one period per VALVE_CMD (deterministic)")
     p.add_argument("--plot", action="store_true", help="also draw the report figures")
+    p.add_argument("--watchdog-cycles", type=int, default=10,
+                   help="watchdog.timeout_cycles for this run (default 10 on a non-RT bench host; "
+                        "0 = the config's)")
+    p.add_argument("--strict-watchdog", action="store_true",
+                   help="keep the config's watchdog.auto_recover (default for runs: recover "
+                        "after watchdog.recovery_cycles fresh cycles)")
 
 
 def run(args: argparse.Namespace) -> int:
     out = args.out or Path("out/runs") / f"{args.scenario.stem}-{args.mode}"
     plan = RunPlan(scenario_path=args.scenario, mode=args.mode, out_dir=out,
-                   interface=args.interface, channel=args.channel, lockstep=args.lockstep)
+                   interface=args.interface, channel=args.channel, lockstep=args.lockstep,
+                   auto_recover=not args.strict_watchdog,
+                   watchdog_cycles=args.watchdog_cycles or None)
     res = execute(plan)
     check_exit_codes(res)
     row = metrics_from_run(out, plot=args.plot)
