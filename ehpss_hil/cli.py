@@ -17,12 +17,13 @@ from . import __version__, commands
 from .errors import EhpssError
 
 
-def _command_modules() -> list[ModuleType]:
+def discover(package: ModuleType) -> list[ModuleType]:
+    """The modules of ``package`` that define ``NAME`` and ``run`` (one per subcommand)."""
     mods = []
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
+    for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
         if info.name.startswith("_"):
             continue
-        mod = importlib.import_module(f"{commands.__name__}.{info.name}")
+        mod = importlib.import_module(f"{package.__name__}.{info.name}")
         if hasattr(mod, "NAME") and hasattr(mod, "run"):
             mods.append(mod)
     return mods
@@ -35,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Fault-tolerant (MMAC) controller for an electro-hydraulic position servo on CAN.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for mod in _command_modules():
+    for mod in discover(commands):
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP)
         mod.add_arguments(p)
         p.set_defaults(_run=mod.run)

@@ -145,6 +145,32 @@ class EmulatorConfig:
     dbc: str = ""
 
 
+def apply_overrides(src: str, bus: BusConfig, rate_hz: float, rt: RtOptions, *,
+                    interface: str | None = None, channel: str | None = None,
+                    rate: float | None = None, rt_priority: int | None = None,
+                    cpu: int | None = None) -> tuple[BusConfig, float, RtOptions]:
+    """Command-line overrides of a process config's bus, rate and RT options, validated like
+    the YAML (errors name the key and the option)."""
+    from dataclasses import replace
+
+    if interface or channel:
+        try:
+            bus = replace(bus, interface=interface or bus.interface,  # type: ignore[arg-type]
+                          channel=channel or bus.channel)
+        except ConfigError as exc:
+            raise ConfigError(src, f"bus.{exc.key_path} (command line)", exc.reason) from exc
+    rate_hz = rate_hz if rate is None else rate
+    if not 10.0 <= rate_hz <= 10000.0:
+        raise ConfigError(src, "rate_hz (--rate)", f"must be in [10, 10000] Hz, got {rate_hz:g}")
+    if rt_priority is not None:
+        if not 0 <= rt_priority <= 99:
+            raise ConfigError(src, "rt.priority (--rt-priority)", "must be in [0, 99]")
+        rt = replace(rt, priority=rt_priority)
+    if cpu is not None:
+        rt = replace(rt, cpu=cpu)
+    return bus, rate_hz, rt
+
+
 def _resolve(base: Path, value: str) -> str:
     if not value:
         return value

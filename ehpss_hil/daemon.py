@@ -17,7 +17,13 @@ from typing import cast
 
 from .bus import open_bus
 from .codec import FrameCodec
-from .config import DAEMON_MODES, ControllerConfig, RtOptions, load_controller_config
+from .config import (
+    DAEMON_MODES,
+    ControllerConfig,
+    RtOptions,
+    apply_overrides,
+    load_controller_config,
+)
 from .control.base import Controller
 from .errors import ConfigError
 from .physics.params import Params, load_params
@@ -57,25 +63,12 @@ def resolve_config(a: DaemonArgs) -> ControllerConfig:
     cfg = load_controller_config(a.config)
     src = str(a.config)
     bus = cfg.bus
-    if a.interface or a.channel:
-        try:
-            bus = replace(bus, interface=a.interface or bus.interface,  # type: ignore[arg-type]
-                          channel=a.channel or bus.channel)
-        except ConfigError as exc:
-            raise ConfigError(src, f"bus.{exc.key_path} (command line)", exc.reason) from exc
-    rate = cfg.rate_hz if a.rate_hz is None else a.rate_hz
-    if not 10.0 <= rate <= 10000.0:
-        raise ConfigError(src, "rate_hz (--rate)", f"must be in [10, 10000] Hz, got {rate:g}")
+    bus, rate, rt = apply_overrides(src, bus, cfg.rate_hz, cfg.rt, interface=a.interface,
+                                    channel=a.channel, rate=a.rate_hz,
+                                    rt_priority=a.rt_priority, cpu=a.cpu)
     mode = a.mode or cfg.mode
     if mode not in DAEMON_MODES:
         raise ConfigError(src, "mode (--mode)", f"expected one of {', '.join(DAEMON_MODES)}")
-    rt = cfg.rt
-    if a.rt_priority is not None:
-        if not 0 <= a.rt_priority <= 99:
-            raise ConfigError(src, "rt.priority (--rt-priority)", "must be in [0, 99]")
-        rt = replace(rt, priority=a.rt_priority)
-    if a.cpu is not None:
-        rt = replace(rt, cpu=a.cpu)
     if a.duration_s is not None and a.duration_s <= 0.0:
         raise ConfigError(src, "--duration", "must be > 0 s")
     return replace(cfg, bus=bus, rate_hz=rate, mode=mode, rt=rt)  # type: ignore[arg-type]

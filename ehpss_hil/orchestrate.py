@@ -20,7 +20,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import yaml
 
@@ -136,9 +136,9 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
 
 
 def _spawn(argv: list[str], prefix: list[str], out: Path, name: str) -> subprocess.Popen[bytes]:
-    stdout: IO[bytes] = open(out / f"{name}.out", "wb")  # noqa: SIM115 - closed by the child's exit
-    return subprocess.Popen([*prefix, *argv], stdout=stdout, stderr=subprocess.STDOUT,
-                            stdin=subprocess.DEVNULL, cwd=PROJECT_ROOT)
+    with open(out / f"{name}.out", "wb") as stdout:  # the child keeps its own descriptor
+        return subprocess.Popen([*prefix, *argv], stdout=stdout, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, cwd=PROJECT_ROOT)
 
 
 def _stop(proc: subprocess.Popen[bytes], timeout_s: float = 10.0) -> int | None:
@@ -188,7 +188,8 @@ def execute(plan: RunPlan) -> RunResult:
     try:
         procs["logger"] = _spawn(cmds["logger"], prefix, out, "logger")
         procs["controller"] = _spawn(cmds["controller"], prefix, out, "controller")
-        hb = f"{0x700 + int(load_yaml(out / 'controller.yaml').get('ids', {}).get('controller_node', 1)):03X}#"
+        node = int((load_yaml(out / "controller.yaml").get("ids") or {}).get("controller_node", 1))
+        hb = f"{0x700 + node:03X}#"  # the controller's heartbeat: it is on the bus
         _wait_for_line(out / "bus.log", hb, plan.startup_timeout_s, procs)
         procs["emulator"] = _spawn(cmds["emulator"], prefix, out, "emulator")
         limit = sc.duration_s * (60.0 if plan.lockstep else 1.0) + 30.0

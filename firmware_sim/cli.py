@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ehpss_hil.bus import open_bus
 from ehpss_hil.codec import FrameCodec
-from ehpss_hil.config import EmulatorConfig, load_emulator_config
+from ehpss_hil.config import EmulatorConfig, apply_overrides, load_emulator_config
 from ehpss_hil.errors import ConfigError, EhpssError
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.runtime.frameio import FrameIO, open_can_logger
@@ -63,22 +63,9 @@ def _resolve(args: argparse.Namespace) -> tuple[EmulatorConfig, Scenario]:
     cfg = load_emulator_config(args.config)
     src = str(args.config)
     bus = cfg.bus
-    if args.interface or args.channel:
-        try:
-            bus = replace(bus, interface=args.interface or bus.interface,
-                          channel=args.channel or bus.channel)
-        except ConfigError as exc:
-            raise ConfigError(src, f"bus.{exc.key_path} (command line)", exc.reason) from exc
-    rate = cfg.rate_hz if args.rate is None else args.rate
-    if not 10.0 <= rate <= 10000.0:
-        raise ConfigError(src, "rate_hz (--rate)", f"must be in [10, 10000] Hz, got {rate:g}")
-    rt = cfg.rt
-    if args.rt_priority is not None:
-        if not 0 <= args.rt_priority <= 99:
-            raise ConfigError(src, "rt.priority (--rt-priority)", "must be in [0, 99]")
-        rt = replace(rt, priority=args.rt_priority)
-    if args.cpu is not None:
-        rt = replace(rt, cpu=args.cpu)
+    bus, rate, rt = apply_overrides(src, bus, cfg.rate_hz, cfg.rt, interface=args.interface,
+                                    channel=args.channel, rate=args.rate,
+                                    rt_priority=args.rt_priority, cpu=args.cpu)
     cfg = replace(cfg, bus=bus, rate_hz=rate, mode=args.mode or cfg.mode, rt=rt,
                   truth=cfg.truth or args.truth, fault_inject=cfg.fault_inject or args.fault_inject)
     path = args.scenario or (Path(cfg.scenario) if cfg.scenario else None)

@@ -7,30 +7,17 @@ Each benchmark is a module in ``ehpss_hil/bench/`` defining ``NAME``, ``HELP``,
 from __future__ import annotations
 
 import argparse
-import importlib
-import pkgutil
-from types import ModuleType
 
 from .. import bench as bench_pkg
+from ..cli import discover
 
 NAME = "bench"
-HELP = "benchmarks: codec, control, loop, faults (print figures beside their targets)"
-
-
-def _modules() -> list[ModuleType]:
-    mods = []
-    for info in sorted(pkgutil.iter_modules(bench_pkg.__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
-            continue
-        mod = importlib.import_module(f"{bench_pkg.__name__}.{info.name}")
-        if hasattr(mod, "NAME") and hasattr(mod, "run"):
-            mods.append(mod)
-    return mods
+HELP = "benchmarks: codec, control (print figures beside their targets)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="bench", metavar="KIND", required=True)
-    for mod in _modules():
+    for mod in discover(bench_pkg):
         sp = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP)
         mod.add_arguments(sp)
         sp.set_defaults(_bench_run=mod.run)

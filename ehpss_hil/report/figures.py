@@ -59,6 +59,7 @@ def plot_run(r: SimResult, path: str | Path, title: str | None = None) -> Path:
     fig.suptitle(title or f"{r.scenario} — {r.controller}")
     fig.tight_layout()
     out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
