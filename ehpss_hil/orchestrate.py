@@ -187,6 +187,7 @@ def execute(plan: RunPlan) -> RunResult:
     procs: dict[str, subprocess.Popen[bytes]] = {}
     try:
         procs["logger"] = _spawn(cmds["logger"], prefix, out, "logger")
+        _wait_for_line(out / "logger.out", "logging ", plan.startup_timeout_s, procs)
         procs["controller"] = _spawn(cmds["controller"], prefix, out, "controller")
         node = int((load_yaml(out / "controller.yaml").get("ids") or {}).get("controller_node", 1))
         hb = f"{0x700 + node:03X}#"  # the controller's heartbeat: it is on the bus
