@@ -31,6 +31,7 @@ from .runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from .runtime.frameio import FrameIO, open_can_logger
 from .runtime.rt import apply_rt_options, freeze_gc
 from .runtime.signals import install_stop_handlers, restore_handlers
+from .sim.blas import limit_blas_threads
 
 log = logging.getLogger("ehpss_hil.controller")
 
@@ -146,6 +147,7 @@ def run_daemon(a: DaemonArgs) -> int:
     stop, previous = install_stop_handlers()
     n = None if a.duration_s is None else round(a.duration_s * cfg.rate_hz)
     try:
+        limit_blas_threads(1)  # idle OpenBLAS workers spin and steal the loop's CPU
         _prepare_rt(cfg.rt)
         loop.start()
         log.info("mode %s on %s:%s at %g Hz%s", cfg.mode, cfg.bus.interface, cfg.bus.channel,

@@ -48,6 +48,9 @@ class RunPlan:
     controller_yaml: Path = CONTROLLER_YAML
     emulator_yaml: Path = EMULATOR_YAML
     extra_controller_args: tuple[str, ...] = ()
+    extra_emulator_args: tuple[str, ...] = ()
+    #: a third process logging the whole bus to ``bus.log`` (needed for ``metrics.json``)
+    bus_logger: bool = True
     quiet: bool = False
     #: bench runs let the controller leave fail-safe after ``watchdog.recovery_cycles`` fresh
     #: cycles (a non-RT host stalls a few ms now and then); False keeps the config's choice
@@ -131,7 +134,8 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
         "emulator": [py, "-m", "firmware_sim.cli", "-c", str(emu_cfg), "--log",
                      str(out / "emulator.log"), "--summary-json", str(out / "emulator-summary.json"),
                      "--duration", repr(sc.duration_s),
-                     *(["--lockstep-timeout", "60"] if plan.lockstep else [])],
+                     *(["--lockstep-timeout", "60"] if plan.lockstep else []),
+                     *plan.extra_emulator_args],
     }
 
 
@@ -172,6 +176,10 @@ def execute(plan: RunPlan) -> RunResult:
     sc = load_scenario(plan.scenario_path)
     out = plan.out_dir
     out.mkdir(parents=True, exist_ok=True)
+    for stale in out.glob("*.log*"):  # a reused run directory: start-up waits read these files
+        stale.unlink()
+    for stale in out.glob("*.out"):
+        stale.unlink()
     cmds = _commands(plan, sc, out)
     interface = load_yaml(out / "controller.yaml")["bus"]["interface"]
     netns: PrivateNetns | None = None
@@ -186,12 +194,13 @@ def execute(plan: RunPlan) -> RunResult:
     t0 = time.monotonic()
     procs: dict[str, subprocess.Popen[bytes]] = {}
     try:
-        procs["logger"] = _spawn(cmds["logger"], prefix, out, "logger")
-        _wait_for_line(out / "logger.out", "logging ", plan.startup_timeout_s, procs)
+        if plan.bus_logger:
+            procs["logger"] = _spawn(cmds["logger"], prefix, out, "logger")
+            _wait_for_line(out / "logger.out", "logging ", plan.startup_timeout_s, procs)
         procs["controller"] = _spawn(cmds["controller"], prefix, out, "controller")
         node = int((load_yaml(out / "controller.yaml").get("ids") or {}).get("controller_node", 1))
-        hb = f"{0x700 + node:03X}#"  # the controller's heartbeat: it is on the bus
-        _wait_for_line(out / "bus.log", hb, plan.startup_timeout_s, procs)
+        hb = f"{0x700 + node:03X}#"  # the controller's own boot-up heartbeat: it is on the bus
+        _wait_for_line(out / "controller.log", hb, plan.startup_timeout_s, procs)
         procs["emulator"] = _spawn(cmds["emulator"], prefix, out, "emulator")
         limit = sc.duration_s * (60.0 if plan.lockstep else 1.0) + 30.0
         try:
@@ -200,7 +209,8 @@ def execute(plan: RunPlan) -> RunResult:
             res.exit_codes["emulator"] = _stop(procs["emulator"])
         time.sleep(0.1)
         res.exit_codes["controller"] = _stop(procs["controller"])
-        res.exit_codes["logger"] = _stop(procs["logger"])
+        if "logger" in procs:
+            res.exit_codes["logger"] = _stop(procs["logger"])
     finally:
         for p in procs.values():
             _stop(p, 2.0)

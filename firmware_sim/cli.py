@@ -26,6 +26,7 @@ from ehpss_hil.runtime.frameio import FrameIO, open_can_logger
 from ehpss_hil.runtime.rt import apply_rt_options, freeze_gc
 from ehpss_hil.runtime.signals import install_stop_handlers, restore_handlers
 from ehpss_hil.scenario import Scenario, load_scenario
+from ehpss_hil.sim.blas import limit_blas_threads
 
 from .emulation import PlantEmulation
 from .process import OWN_FRAMES, EmulatorOptions, EmulatorProcess
@@ -122,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
     stop, previous = install_stop_handlers()
     ok = True
     try:
+        limit_blas_threads(1)  # idle OpenBLAS workers spin and steal the loop's CPU
         apply_rt_options(cfg.rt)
         freeze_gc(cfg.rt.gc_freeze)
         log.info("%s on %s:%s at %g Hz, scenario %s", cfg.mode, cfg.bus.interface,

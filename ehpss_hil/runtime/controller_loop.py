@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
+import resource
 import time
 from dataclasses import dataclass, field
 
@@ -333,7 +334,8 @@ class ControllerLoop:
                 "frames_sent": dict(self.io.sent), "tx_errors": self.io.tx_errors,
                 "frames_received": self.io.received,
                 "received_by_verdict": {v.name: n for v, n in self.codec.counts.items()},
-                "stats": self.stats.summary()}
+                "stats": self.stats.summary(),
+                "max_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}
 
 
 def _clip(v: float, lo: float, hi: float) -> float:
