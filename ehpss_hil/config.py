@@ -85,6 +85,9 @@ class RtOptions:
     cpu: int = field(default=-1, metadata=rng(-1, 1023))
     lock_memory: bool = False
     gc_freeze: bool = True
+    #: phase lock: the controller's deadline falls this long after the SENSOR_POS frame
+    #: arrives (µs; 0 = a free grid; must be below half a period). See docs/runtime.md.
+    sensor_age_us: float = field(default=0.0, metadata=rng(0.0, 1e6))
 
 
 @dataclass(frozen=True)

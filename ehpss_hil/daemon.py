@@ -108,11 +108,11 @@ def loop_options(cfg: ControllerConfig, sensor_age_us: float | None = None) -> L
     opts = LoopOptions(rate_hz=cfg.rate_hz, status_rate_hz=cfg.status_rate_hz,
                        heartbeat_rate_hz=cfg.heartbeat_rate_hz, watchdog=cfg.watchdog,
                        stats_interval_s=cfg.stats_interval_s)
-    if sensor_age_us is not None:
-        if not 0.0 <= sensor_age_us * 1e-6 < 0.5 / cfg.rate_hz:
-            raise ConfigError("", "--sensor-age-us", "must be in [0, half a period)")
-        opts = replace(opts, sensor_age_target_s=sensor_age_us * 1e-6)
-    return opts
+    key = "--sensor-age-us" if sensor_age_us is not None else "rt.sensor_age_us"
+    age_us = sensor_age_us if sensor_age_us is not None else cfg.rt.sensor_age_us
+    if not 0.0 <= age_us * 1e-6 < 0.5 / cfg.rate_hz:
+        raise ConfigError("", key, f"must be in [0, half a period = {0.5e6 / cfg.rate_hz:g} µs)")
+    return replace(opts, sensor_age_target_s=age_us * 1e-6)
 
 
 def format_summary(s: dict[str, object]) -> str:

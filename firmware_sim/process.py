@@ -74,6 +74,8 @@ class EmulatorProcess:
                         for n in ("SENSOR_POS", "SENSOR_AUX", "PLANT_TRUTH")}
         self.stats = LoopStats(opts.stats_capacity)
         self.periods = 0
+        #: periods slept through by overruns, the plant advanced without frames (step_period)
+        self.skipped_periods = 0
         self.lost_sensor = 0
         self.lost_cmd = 0
         self.clipped = 0
@@ -193,9 +195,20 @@ class EmulatorProcess:
                 self.hold.accept(*cmd)
         return self.hold.tick(self.t_s)
 
-    def step_period(self) -> float:
-        """One realtime period (no waiting); returns the current applied over it (A)."""
+    def step_period(self, skipped: int = 0) -> float:
+        """One realtime period (no waiting); returns the current applied over it (A).
+
+        ``skipped``: grid periods this process slept through (an overrun). The plant does not
+        stop when its emulator is late: it advances over them with the held command (the one
+        just drained) before this period's sample, sending nothing for them, so the plant stays
+        on the wall clock (and so do the scenario's events)."""
         setpoint = self._take_command(self._drain())
+        for _ in range(skipped):
+            self.emu.measure()  # draws the sample's noise: the streams stay on the sample grid
+            self.emu.advance(setpoint)
+            self._check_faults()
+            self.periods += 1
+            self.skipped_periods += 1
         self._send_sample(self.emu.measure())
         self.applied_a = self.emu.advance(setpoint)
         self._housekeeping()
@@ -211,7 +224,10 @@ class EmulatorProcess:
         while not stop and (n_periods is None or self.periods < n_periods):
             lateness = timer.wait()
             t0 = perf()
-            self.step_period()
+            skipped = timer.last_skipped
+            if n_periods is not None:
+                skipped = min(skipped, max(0, n_periods - self.periods - 1))
+            self.step_period(skipped)
             self.stats.compute.add(perf() - t0)
             self.stats.lateness.add(lateness)
         self.stats.overruns = timer.overruns
@@ -258,7 +274,8 @@ class EmulatorProcess:
     def summary(self) -> dict[str, Any]:
         """Counters and period statistics (JSON-able)."""
         return {
-            "periods": self.periods, "frames_sent": dict(self.io.sent),
+            "periods": self.periods, "skipped_periods": self.skipped_periods,
+            "frames_sent": dict(self.io.sent),
             "tx_errors": self.io.tx_errors, "frames_received": self.io.received,
             "received_by_verdict": {v.name: n for v, n in self.codec.counts.items()},
             "commands_accepted": self.hold.accepted, "command_timeouts": self.hold.timeouts,

@@ -152,3 +152,28 @@ def test_fault_inject_only_when_enabled() -> None:
             assert (r.proc.inject_applied, r.proc.inject_rejected) == ((2, 1) if enabled else (0, 0))
         finally:
             r.close()
+
+
+def test_skipped_periods_advance_the_plant_without_frames(rig: Rig) -> None:
+    """An emulator overrun that skipped 2 periods: the plant still advances 3 periods with the
+    held command (the plant does not stop), one sensor pair goes out, and the state equals an
+    offline emulation stepped 3 times with that command."""
+    rig.cmd(4e-4)
+    rig.step()
+    k0 = rig.proc.emu.k
+    ref = PlantEmulation(load_params(), Scenario(name="t", duration_s=10.0))
+    assert k0 == 1  # the command was applied at once: one period at 0.4 mA (as decoded)
+    i_a = rig.proc.hold.current_a
+    assert i_a == pytest.approx(4e-4, abs=2e-7)
+    ref.measure()
+    ref.advance(i_a)
+    assert ref.plant.position_m == rig.proc.emu.plant.position_m
+    sent = rig.proc.io.sent["SENSOR_POS"]
+    rig.cmd(4e-4)
+    rig.proc.step_period(skipped=2)
+    assert rig.proc.emu.k == k0 + 3 and rig.proc.skipped_periods == 2
+    assert rig.proc.io.sent["SENSOR_POS"] == sent + 1
+    for _ in range(3):
+        ref.measure()
+        ref.advance(i_a)
+    assert rig.proc.emu.plant.position_m == ref.plant.position_m != 0.0

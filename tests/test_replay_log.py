@@ -75,3 +75,46 @@ def test_controller_library_missing_is_a_clear_error(logs: dict[str, Path],
     monkeypatch.setitem(sys.modules, "ehpss_hil.control.controllers", None)
     with pytest.raises(replay.ReplayError, match="controller library not available"):
         replay.replay_log(logs["nrc"])
+
+
+def test_skipped_periods_replay_bit_identical(tmp_path: Path) -> None:
+    """A realtime-style log with controller overruns (CycleCount gaps): the daemon stepped the
+    skipped periods without data; the replay does the same and matches bit for bit."""
+    import can
+
+    from ehpss_hil.control.controllers import make_controller
+    from ehpss_hil.physics.params import load_params
+    from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
+    from ehpss_hil.runtime.frameio import FrameIO
+    from firmware_sim.emulation import PlantEmulation
+    from firmware_sim.process import OWN_FRAMES as EMU_FRAMES
+    from firmware_sim.process import EmulatorOptions, EmulatorProcess
+
+    sc = short_case3()
+    params = load_params()
+    out = tmp_path / "controller.log"
+    eb = can.Bus(interface="virtual", channel="replay-skips")
+    cb = can.Bus(interface="virtual", channel="replay-skips")
+    try:
+        emu = EmulatorProcess(PlantEmulation(params, sc), FrameIO(eb, FrameCodec(), EMU_FRAMES),
+                              EmulatorOptions())
+        logger = CandumpLogger(out, iface="vcan0", sidecar={"scenario": str(
+            PROJECT_ROOT / "scenarios" / "case3-combined.yaml"), "rate_hz": 1000.0})
+        loop = ControllerLoop(make_controller("mmac", params, 1e-3, None, sc.reference),
+                              FrameIO(cb, FrameCodec(), OWN_FRAMES, logger), sc.reference,
+                              LoopOptions())
+        k = 0
+        while emu.periods < sc.n_samples - 3:
+            skipped = 2 if k % 97 == 50 else 0  # an overrun now and then: 2 periods slept through
+            for _ in range(skipped + 1):
+                emu.step_period()
+            loop.poll_cycle(skipped)
+            k += 1
+        loop.io.close()
+    finally:
+        eb.shutdown()
+        cb.shutdown()
+    assert loop.skipped_periods >= 18
+    res = replay.replay_log(out)
+    assert res.skipped_periods == loop.skipped_periods
+    assert res.cycles > 900 and res.identical, res.first

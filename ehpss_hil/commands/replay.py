@@ -79,6 +79,8 @@ class ReplayResult:
     setup: ReplaySetup
     cycles: int = 0
     failsafe_cycles: int = 0
+    #: periods the daemon skipped (CycleCount gaps), stepped without a frame
+    skipped_periods: int = 0
     divergent: int = 0
     max_abs_diff_a: float = 0.0
     first: list[Divergence] = field(default_factory=list)
@@ -151,8 +153,16 @@ class _Replayer:
         self.ts = setup.ts_s
         self.ref = setup.reference
         self._xd = np.zeros(0)
+        self.k = 0
+        self.cycle_count = 0
+        self.prev = Measurement()
         self._names = {self.codec.can_id(n): n for n in
                        ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD", "SETPOINT")}
+
+    def _snapshot(self) -> None:
+        p, m = self.prev, self.meas
+        p.position_m, p.spool_m = m.position_m, m.spool_m
+        p.coil_current_a, p.load_pressure_pa = m.coil_current_a, m.load_pressure_pa
 
     def x_d(self, k: int) -> float:
         """Reference at sample k (m), sampled in blocks of 4096."""
@@ -176,17 +186,37 @@ class _Replayer:
         elif name == "SETPOINT":
             self.override = float(v["Position"]) if v["Override"] else None
         elif self.started or v["Enable"]:
+            cc = int(v["CycleCount"])
+            gap = 0 if not self.started else (cc - self.cycle_count - 1) % 65536
             self.started = True
-            self.command(float(v["CurrentSetpoint"]), bool(v["Enable"]), number)
+            self.cycle_count = cc
+            self.command(float(v["CurrentSetpoint"]), bool(v["Enable"]), number, gap)
         else:
             self.fresh = False
 
-    def command(self, logged_a: float, logged_en: bool, number: int) -> None:
-        k = self.res.cycles + self.res.failsafe_cycles
+    def _catch_up(self, periods: int) -> None:
+        """Periods the daemon skipped (a CycleCount gap): stepped without a frame on the values
+        of the previous command, as ``ControllerLoop.catch_up`` does."""
+        self.res.skipped_periods += periods
+        if self.in_failsafe:
+            self.k += periods
+            return
+        m = self.prev
+        m.fresh = False
+        for _ in range(periods):
+            m.reference_m = self.override if self.override is not None else self.x_d(self.k)
+            self.ctrl.step(m)
+            self.k += 1
+
+    def command(self, logged_a: float, logged_en: bool, number: int, gap: int = 0) -> None:
+        self._catch_up(gap)
+        k = self.k
+        self.k += 1
         if not logged_en:  # the daemon's fail-safe (FAULT): no step, the reference runs on
             self.res.failsafe_cycles += 1
             self.in_failsafe = True
             self.fresh = False
+            self._snapshot()
             return
         if self.in_failsafe:  # FAULT → ACTIVE: the daemon resets the controller
             self.ctrl.reset()
@@ -195,6 +225,7 @@ class _Replayer:
         m.reference_m = self.override if self.override is not None else self.x_d(k)
         m.fresh = self.fresh
         cmd = self.ctrl.step(m)
+        self._snapshot()
         cur = cmd.current_a if math.isfinite(cmd.current_a) else 0.0
         cur = max(-1.0, min(1.0, cur))
         q = self.codec.quantize("VALVE_CMD", {"CurrentSetpoint": cur})["CurrentSetpoint"]
@@ -236,6 +267,9 @@ def run(args: argparse.Namespace) -> int:
     s = res.setup
     print(f"replayed {res.cycles} cycles with mode {s.mode} at Ts = {s.ts_s * 1e3:g} ms "
           f"(config from {s.source})")
+    if res.skipped_periods:
+        print(f"{res.skipped_periods} periods skipped by the daemon's overruns (CycleCount gaps) "
+              "stepped without a frame, as the daemon does")
     if res.failsafe_cycles:
         print(f"{res.failsafe_cycles} fail-safe cycles (logged Enable=0) skipped; the controller "
               "is reset when they end, as the daemon does")

@@ -26,6 +26,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--watchdog-cycles", type=int, default=10,
                    help="watchdog.timeout_cycles for this run (default 10 on a non-RT bench host; "
                         "0 = the config's)")
+    p.add_argument("--sensor-age-us", type=float, default=300.0,
+                   help="controller phase lock for this run (µs after the sensor frame; default "
+                        "300; -1 = the config's rt.sensor_age_us)")
     p.add_argument("--strict-watchdog", action="store_true",
                    help="keep the config's watchdog.auto_recover (default for runs: recover "
                         "after watchdog.recovery_cycles fresh cycles)")
@@ -36,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
     plan = RunPlan(scenario_path=args.scenario, mode=args.mode, out_dir=out,
                    interface=args.interface, channel=args.channel, lockstep=args.lockstep,
                    auto_recover=not args.strict_watchdog,
-                   watchdog_cycles=args.watchdog_cycles or None)
+                   watchdog_cycles=args.watchdog_cycles or None,
+                   sensor_age_us=None if args.sensor_age_us < 0 else args.sensor_age_us)
     res = execute(plan)
     check_exit_codes(res)
     row = metrics_from_run(out, plot=args.plot)

@@ -106,8 +106,9 @@ def _rows(frames: dict[str, dict[str, np.ndarray]], notes: list[str]) -> tuple[
         k_all = np.arange(int(k[-1]) + 1)
         missing = len(k_all) - len(np.unique(k))
         if missing:
-            notes.append(f"{missing} VALVE_CMD frames missing from the log (lost or not logged): "
-                         "their samples use the neighbours' timing")
+            notes.append(f"{missing} VALVE_CMD frames missing from the log (periods skipped by "
+                         "controller overruns, frames lost or not logged): their samples use "
+                         "the neighbours' timing")
         t_all = np.interp(k_all, k, cmd["t_s"][start:])
         i_all = np.full(len(k_all), np.nan)
         i_all[k] = cmd["CurrentSetpoint"][start:]
@@ -119,6 +120,23 @@ def _rows(frames: dict[str, dict[str, np.ndarray]], notes: list[str]) -> tuple[
         n = len(truth["t_s"])
         return np.arange(n), truth["t_s"] + 1e-9, np.full(n, np.nan)
     return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+
+
+def _within_truth(frames: dict[str, dict[str, np.ndarray]], k: np.ndarray, t_rows: np.ndarray,
+                  i_cmd: np.ndarray, ts_s: float, notes: list[str]) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray]:
+    """Drop the rows after the emulator's last PLANT_TRUTH frame (+ 1.5 periods): the plant was
+    no longer emulated there (the run stops the emulator first, the controller then sees no data
+    and goes to its fail-safe), so there is no ground truth to score them against."""
+    truth = frames.get("PLANT_TRUTH")
+    if truth is None or not len(truth["t_s"]) or not len(t_rows):
+        return k, t_rows, i_cmd
+    keep = t_rows <= float(np.max(truth["t_s"])) + 1.5 * ts_s
+    n_drop = len(t_rows) - int(np.count_nonzero(keep))
+    if n_drop:
+        notes.append(f"{n_drop} controller cycles after the emulator's last PLANT_TRUTH frame "
+                     "(the emulator had stopped) are left out")
+    return k[keep], t_rows[keep], i_cmd[keep]
 
 
 def _fresh(t_pos: np.ndarray, t_rows: np.ndarray) -> np.ndarray:
@@ -174,6 +192,7 @@ def load_log_run(path: str | os.PathLike[str], scenario: Scenario | None = None,
     if ts is None:
         ts = _median_period(t_rows) or 1e-3
         notes.append(f"sample time not in the metadata: {ts * 1e3:.4g} ms from the log's timing")
+    k, t_rows, i_cmd = _within_truth(frames, k, t_rows, i_cmd, ts, notes)
     prm = params if params is not None else load_params(info.params_path)
     x_d = np.full(len(k), np.nan)
     y_m = np.full(len(k), np.nan)

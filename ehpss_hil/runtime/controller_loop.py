@@ -8,7 +8,9 @@ the SENSOR_POS frame used and the cycle count. CTRL_STATUS + CTRL_INDEX at ``sta
 CTRL_STATS at 10 Hz, heartbeat at ``heartbeat_rate_hz``.
 
 Lifecycle: CONFIGURED (0 A, Enable 0, watchdog idle) until the first usable sensor frame, then
-ACTIVE; the reference starts at that cycle. Realtime: a fixed deadline grid. Lockstep: one cycle
+ACTIVE; the reference starts at that cycle. Realtime: a fixed deadline grid; periods skipped by
+an overrun are stepped without data before the next cycle (:meth:`ControllerLoop.catch_up`), so
+the controller's clock stays on the grid. Lockstep: one cycle
 per received sensor pair (triggered by SENSOR_AUX, which the emulator sends after SENSOR_POS).
 """
 
@@ -108,6 +110,8 @@ class ControllerLoop:
         self.cycles = 0
         self.k_active = 0
         self.failsafe_cycles = 0
+        #: grid periods skipped by overruns, stepped without a frame (:meth:`catch_up`)
+        self.skipped_periods = 0
         self.saturations = 0
         self.overruns = 0
         self.last_current_a = 0.0
@@ -187,10 +191,38 @@ class ControllerLoop:
                 return self.last_current_a, self.last_enable
         return 0.0, False
 
-    def poll_cycle(self) -> float | None:
-        """One realtime cycle without waiting: drain every pending frame, then :meth:`cycle`.
+    def catch_up(self, periods: int) -> None:
+        """Grid periods the loop slept through (an overrun skipped them): the controller's clock
+        stays on the grid. Each one is a cycle without a sensor frame (``fresh`` False: the
+        predictors advance on the held current echo, the PI integrates, the reference moves on),
+        with no frame sent; :attr:`cycles` and so VALVE_CMD's CycleCount count them, so the
+        reference index and CycleCount keep matching the emulator's sample clock. The watchdog
+        does not count them (only executed cycles judge freshness)."""
+        if periods <= 0:
+            return
+        self.skipped_periods += periods
+        self.cycles += periods
+        if self.life.state is State.FAULT:
+            self.k_active += periods
+            self.failsafe_cycles += periods
+            return
+        if self.life.state is not State.ACTIVE:
+            return
+        fresh = self.meas.fresh
+        self.meas.fresh = False
+        for _ in range(periods):
+            self.meas.reference_m = (self._override_m if self._override_m is not None
+                                     else self.ref.at(self.k_active))
+            self.controller.step(self.meas)
+            self.k_active += 1
+        self.meas.fresh = fresh
+
+    def poll_cycle(self, skipped: int = 0) -> float | None:
+        """One realtime cycle without waiting: the ``skipped`` grid periods before it
+        (:meth:`catch_up`), drain every pending frame, then :meth:`cycle`.
 
         Returns the receive timestamp (wall-clock s) of the SENSOR_POS frame used, or None."""
+        self.catch_up(skipped)
         for msg in self.io.drain():
             self.on_frame(msg)
         used = self._pos_ts if self._fresh else None
@@ -280,7 +312,7 @@ class ControllerLoop:
         while not stop and (n_cycles is None or self.cycles < n_cycles):
             lateness = timer.wait()
             t0 = perf()
-            rx_wall = self.poll_cycle()
+            rx_wall = self.poll_cycle(timer.last_skipped)
             if lock is not None and rx_wall is not None:
                 arrival = rx_wall - (time.time() - time.monotonic())
                 timer.shift(lock.correction(timer.next_deadline_s - self.ts_s, arrival))
@@ -328,7 +360,8 @@ class ControllerLoop:
 
     def summary(self) -> dict[str, object]:
         """Counters and loop statistics (JSON-able)."""
-        return {"cycles": self.cycles, "state": self.life.state.name,
+        return {"cycles": self.cycles, "skipped_periods": self.skipped_periods,
+                "state": self.life.state.name,
                 "failsafe_reason": self.life.reason.name, "watchdog_trips": self.wd.trips,
                 "failsafe_cycles": self.failsafe_cycles, "saturations": self.saturations,
                 "frames_sent": dict(self.io.sent), "tx_errors": self.io.tx_errors,

@@ -35,6 +35,8 @@ class DeadlineTimer:
         self._unwarned = 0
         self.overruns = 0
         self.skipped = 0
+        #: grid periods skipped by the last :meth:`wait` (0 when it was on time)
+        self.last_skipped = 0
         self.cycles = 0
 
     def start(self, now_s: float | None = None) -> None:
@@ -54,10 +56,12 @@ class DeadlineTimer:
     def wait(self) -> float:
         """Sleep until the next deadline; returns the wake-up lateness (s, ≥ 0 normally)."""
         now = self._clock()
+        self.last_skipped = 0
         if now > self._next:
             missed = int((now - self._next) // self.period_s)
             self._next += missed * self.period_s
             self.skipped += missed
+            self.last_skipped = missed
             self._overrun(now, missed)
         else:
             while now < self._next:  # sleep may return a little early: sleep again, never spin
