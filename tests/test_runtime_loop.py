@@ -124,17 +124,26 @@ def test_phase_lock_converges_to_target_age() -> None:
     period, phase, target = 1e-3, 0.37e-3, 150e-6
     lock = PhaseLock(period, target)
     deadline = 0.9e-3  # arbitrary start phase
-    for _ in range(2000):
+    ages = []
+    for n in range(2000):
+        if n == 1:  # after the one-off alignment at the first frame, jump the sensor's phase
+            phase += 0.41e-3
         arrival = np.floor((deadline - phase) / period) * period + phase  # newest frame so far
         shift = lock.correction(deadline, arrival)
-        assert abs(shift) <= lock.max_slew_s  # bounded slew: the grid never jumps
+        if n == 0:  # the first frame aligns the grid at once
+            assert (deadline + shift) - arrival == pytest.approx(target, abs=1e-12)
+        else:
+            assert abs(shift) <= lock.max_slew_s  # then bounded slew: the grid never jumps
         deadline += period + shift
-    assert lock.last_age_s == pytest.approx(target, abs=1e-6)
+        ages.append(lock.last_age_s)
+    assert ages[1] != pytest.approx(target, abs=1e-5)  # the phase jump shows ...
+    assert lock.last_age_s == pytest.approx(target, abs=1e-6)  # ... and is slewed out
 
 
 def test_phase_lock_wraps_a_just_missed_frame() -> None:
     from ehpss_hil.runtime.phaselock import PhaseLock
 
     lock = PhaseLock(1e-3, 150e-6)
+    lock.locked = True  # past the first frame's alignment
     assert lock.error(0.99e-3) == pytest.approx(-0.16e-3)  # just missed: pull back, not +T
     assert lock.correction(1.0, 1.0 - 0.99e-3) == pytest.approx(16e-6)  # later, bounded

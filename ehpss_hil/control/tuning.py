@@ -26,7 +26,7 @@ class ControlTuning:
     min_theta_separation: float = field(default=0.02, metadata=rng(0.0))
     guard_epsilon: float = field(default=0.4, metadata=rng(0.0, lo_open=True))
     sensor_failed_below: float = field(default=0.15, metadata=rng(0.0, 1.0))
-    anchor_rate_1_s: float = field(default=0.2, metadata=rng(0.0))
+    anchor_rate_1_s: float = field(default=2.0, metadata=rng(0.0))
     fixed_k_loe: tuple[float, ...] = (1.0, 0.5)
     fixed_k_dft: tuple[float, ...] = (1.0, 0.5, 0.0)
     k_loe_limits: tuple[float, ...] = (0.05, 1.5)

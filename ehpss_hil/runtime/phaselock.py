@@ -5,7 +5,8 @@ grids of the same period have a random phase, so a sensor frame would wait up to
 before the controller picks it up (sensor→command latency uniform in [0, T)). The controller keeps
 its fixed grid (``next += period``) but slews it by at most ``max_slew_s`` per cycle so that its
 deadline falls ``target_age_s`` after the sensor frame arrives: the frame's age at the deadline
-is driven to the target, and the latency becomes target + compute time.
+is driven to the target, and the latency becomes target + compute time. The first correction
+(the first sensor frame, the controller still CONFIGURED) aligns the grid at once.
 
 The age error is wrapped into [−T/2, T/2): a frame that just missed a deadline (age ≈ T) reads as
 a small negative error, so the lock pulls the grid back instead of a whole period forward.
@@ -28,6 +29,7 @@ class PhaseLock:
         self.gain = gain
         self.max_slew_s = 0.02 * period_s if max_slew_s is None else max_slew_s
         self.last_age_s = float("nan")
+        self.locked = False
 
     def error(self, age_s: float) -> float:
         """Wrapped age error (s): positive = the deadline comes too long after the arrival."""
@@ -39,5 +41,8 @@ class PhaseLock:
         time of the newest sensor frame it used (same clock)."""
         age = deadline_s - arrival_s
         self.last_age_s = age
+        if not self.locked:  # the first frame: align at once (nothing runs yet to disturb)
+            self.locked = True
+            return -self.error(age)
         c = -self.gain * self.error(age)
         return max(-self.max_slew_s, min(self.max_slew_s, c))
