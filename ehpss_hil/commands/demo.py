@@ -67,8 +67,9 @@ def _hil(args: argparse.Namespace) -> dict[str, tuple[dict[str, Any], str]]:
         check_exit_codes(res)
         row = metrics_from_run(d, plot=(mode == "mmac"))
         summ = json.loads((d / "controller-summary.json").read_text())
-        extra = (f"watchdog trips {summ.get('watchdog_trips')}, fail-safe cycles "
-                 f"{summ.get('failsafe_cycles')}, overruns {summ.get('stats', {}).get('overruns')}")
+        extra = (f"watchdog trips {summ.get('watchdog_trips')} (incl. the emulator's stop at "
+                 f"the end), overruns {summ.get('stats', {}).get('overruns')}, skipped periods "
+                 f"{summ.get('skipped_periods', 0)}")
         out[mode] = (row, extra)
     return out
 
