@@ -182,7 +182,8 @@ def _resolve(base: Path, value: str) -> str:
 
 
 def load_controller_config(path: str | Path) -> ControllerConfig:
-    """Load ``controller.yaml``; relative ``params``/``dbc``/``log.path`` resolve against its dir."""
+    """Load ``controller.yaml``; relative ``params``/``dbc`` paths resolve against its directory
+    (``log.path`` stays relative to the working directory, like ``--log``)."""
     p = Path(path)
     cfg = build(ControllerConfig, load_yaml(p), str(p))
     base = p.resolve().parent

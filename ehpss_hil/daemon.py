@@ -11,7 +11,7 @@ import importlib
 import json
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import cast
 
@@ -139,7 +139,8 @@ def run_daemon(a: DaemonArgs) -> int:
     controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
     bus = open_bus(cfg.bus)
     logger = open_can_logger(a.log or cfg.log.path, cfg.log, cfg.bus, sidecar={
-        "tool": "ehpss-hil controller", "config": str(a.config), "dbc": cfg.dbc or None,
+        "tool": "ehpss-hil controller", "config": asdict(cfg), "config_path": str(a.config),
+        "dbc": cfg.dbc or None,
         "mode": cfg.mode, "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
         "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "lockstep": a.lockstep})
     io = FrameIO(bus, codec, OWN_FRAMES, logger)

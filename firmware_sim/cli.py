@@ -14,7 +14,7 @@ import json
 import logging
 import sys
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 from ehpss_hil.bus import open_bus
@@ -113,8 +113,9 @@ def run(args: argparse.Namespace) -> int:
     emu = PlantEmulation(params, scenario)
     bus = open_bus(cfg.bus)
     logger = open_can_logger(args.log or cfg.log.path, cfg.log, cfg.bus, sidecar={
-        "tool": "firmware-sim", "config": str(args.config), "dbc": cfg.dbc or None,
-        "scenario": scenario.name, "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
+        "tool": "firmware-sim", "config": asdict(cfg), "config_path": str(args.config),
+        "dbc": cfg.dbc or None, "scenario": asdict(scenario), "scenario_name": scenario.name,
+        "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
         "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "mode": cfg.mode})
     io = FrameIO(bus, codec, OWN_FRAMES, logger)
     proc = EmulatorProcess(emu, io, EmulatorOptions(

@@ -4,6 +4,8 @@ drift meets a bound that the unreconfigured loop misses by far. No timing is ass
 
 from __future__ import annotations
 
+import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +62,17 @@ def test_lockstep_run_gives_the_simulation_commands_and_metrics(scenario: Path,
     assert row["rms_error_m"] == pytest.approx(sim_rms, rel=0.02, abs=0.05e-6)  # truth: 0.1 µm LSB
     assert row["rms_error_m"] < 5e-6
     assert replay_log(out / "controller.log").identical
+    # the logs carry their own metadata: moved away from the run, they still give the run
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    for f in ("emulator.log", "emulator.log.json", "controller.log", "controller.log.json"):
+        shutil.copy(out / f, moved / f)
+    side = json.loads((moved / "emulator.log.json").read_text())
+    assert isinstance(side["scenario"], dict) and isinstance(side["config"], dict)
+    emu = load_log_run(moved / "emulator.log")
+    assert emu.scenario is not None and emu.scenario.events == load_scenario(scenario).events
+    ctl = load_log_run(moved / "controller.log")
+    assert ctl.has_reference and ctl.result.ts_s == 1e-3 and ctl.result.controller == "mmac"
 
 
 @pytest.mark.parametrize(("mode", "bound_m", "above"), [("mmac", 30e-6, False),
