@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _scenarios import short_scenario_yaml
 
 from ehpss_hil.commands.replay import replay_log
 from ehpss_hil.netns import netns_unavailable_reason
@@ -23,17 +24,7 @@ NETNS_SKIP = netns_unavailable_reason()
 pytestmark = pytest.mark.skipif(NETNS_SKIP is not None,
                                 reason=f"cross-process test: {NETNS_SKIP}")
 
-DRIFT = """\
-name: short-drift
-duration_s: 0.8
-sample_time_s: 0.001
-seed: 3
-reference: {kind: sine, amplitude_m: 0.001, omega_rad_s: 5.0}
-noise: {position_m: 1.0e-6, spool_m: 1.52e-6, pressure_pa: 1.0e4}
-transport_delay_samples: 1
-events:
-  - {t_s: 0.3, k_dft: 0.5}
-"""
+DRIFT = short_scenario_yaml("short-drift", 0.8, "{t_s: 0.3, k_dft: 0.5}")
 
 
 @pytest.fixture(scope="module")

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import can
 import pytest
+from _scenarios import short_scenario_yaml
 
 from ehpss_hil.bus import af_can_available, open_bus
 from ehpss_hil.codec import FrameCodec, Verdict
@@ -66,17 +67,7 @@ def test_socketcan_bus_applies_the_projects_filters(vcan0: str) -> None:
         tx.shutdown()
 
 
-SHORT = """\
-name: vcan-short
-duration_s: 0.6
-sample_time_s: 0.001
-seed: 3
-reference: {kind: sine, amplitude_m: 0.001, omega_rad_s: 5.0}
-noise: {position_m: 1.0e-6, spool_m: 1.52e-6, pressure_pa: 1.0e4}
-transport_delay_samples: 1
-events:
-  - {t_s: 0.3, k_loe: 0.5}
-"""
+SHORT = short_scenario_yaml("vcan-short", 0.6, "{t_s: 0.3, k_loe: 0.5}")
 
 
 def test_controller_and_emulator_processes_on_vcan0(vcan0: str, tmp_path: Path) -> None:
