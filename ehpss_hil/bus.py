@@ -15,16 +15,23 @@ Filters on ``udp_multicast``/``virtual`` are applied by python-can in user space
 ``BusABC.recv(timeout=0)`` returns ``None`` as soon as one frame is filtered out even if more are
 queued — that would end a non-blocking drain early. So filters are passed only where the kernel
 applies them (socketcan); on the other interfaces the loops filter by ID themselves.
+
+For loops that drain the bus every cycle: :func:`frame_reader` (one non-blocking read; on
+``udp_multicast`` without python-can's ``select()`` per frame) and :func:`drop_own_frames` (on
+``udp_multicast`` a kernel filter for the process's own IDs), both in :mod:`ehpss_hil.bus_udp`.
 """
 
 from __future__ import annotations
 
 import logging
 import socket
+from collections.abc import Callable, Iterable
+from functools import partial
 from typing import Any
 
 import can
 
+from .bus_udp import UdpReader, attach_own_id_filter
 from .config import BusConfig
 from .errors import BusUnavailableError
 
@@ -112,3 +119,24 @@ def set_receive_buffer(bus: can.BusABC, size_bytes: int) -> int:
         log.warning("udp_multicast: receive buffer %d bytes < requested %d (raise "
                     "net.core.rmem_max or run as root)", granted, size_bytes)
     return granted
+
+
+def frame_reader(bus: can.BusABC) -> Callable[[], can.Message | None]:
+    """One pending frame or None, never waiting: ``bus.recv(0.0)``, or on ``udp_multicast`` the
+    same read without its ``select()`` system call (:class:`~ehpss_hil.bus_udp.UdpReader`)."""
+    if UdpReader.supports(bus):
+        return UdpReader(bus).read
+    return partial(bus.recv, 0.0)
+
+
+def drop_own_frames(bus: can.BusABC, can_ids: Iterable[int]) -> bool:
+    """Stop receiving the echoes of the process's own frames where the bus delivers them: a
+    kernel socket filter on ``udp_multicast`` (socketcan and virtual never deliver them here).
+    True when a filter was attached; the caller still drops own IDs itself."""
+    if not UdpReader.supports(bus):
+        return False
+    ok = attach_own_id_filter(bus, can_ids)
+    if not ok:
+        log.warning("udp_multicast: own frames are dropped in user space (kernel filter not "
+                    "attached)")
+    return ok

@@ -61,7 +61,8 @@ class RunPlan:
     watchdog_cycles: int | None = 10
     #: phase lock for this run (µs, ``rt.sensor_age_us``; None: the config's, off by default):
     #: each controller deadline falls this long after the sensor frame arrives, so each cycle
-    #: gets exactly one fresh frame despite the host's jitter (docs/runtime.md)
+    #: gets exactly one fresh frame despite the host's jitter (docs/runtime.md); at most 0.3 of
+    #: the scenario's sample time (at 2 kHz: 150 µs)
     sensor_age_us: float | None = 300.0
     #: how long the controller may take to appear on the bus (slow VMs need more)
     startup_timeout_s: float = 60.0
@@ -123,7 +124,8 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
         **bus, "mode": plan.mode, "reference": _reference_dict(sc),
         **({"watchdog.auto_recover": True} if plan.auto_recover else {}),
         **({"watchdog.timeout_cycles": plan.watchdog_cycles} if plan.watchdog_cycles else {}),
-        **({"rt.sensor_age_us": plan.sensor_age_us} if plan.sensor_age_us is not None else {}),
+        **({"rt.sensor_age_us": min(plan.sensor_age_us, 0.3e6 * sc.sample_time_s)}
+           if plan.sensor_age_us is not None else {}),
         "rate_hz": 1.0 / sc.sample_time_s})
     emu_cfg = _derived_config(plan.emulator_yaml, out / "emulator.yaml", {
         **bus, "mode": emu_mode, "scenario": str(Path(plan.scenario_path).resolve()),

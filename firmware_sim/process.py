@@ -212,6 +212,7 @@ class EmulatorProcess:
         self._send_sample(self.emu.measure())
         self.applied_a = self.emu.advance(setpoint)
         self._housekeeping()
+        self.io.idle()  # the log writer may run now, while this process sleeps
         return self.applied_a
 
     # ---- loops ------------------------------------------------------------------------------
@@ -268,6 +269,7 @@ class EmulatorProcess:
             self._housekeeping()
             if self.periods < n_periods:
                 sent = self._send_sample(self.emu.measure())
+            self.io.idle()
         return True
 
     # ---- report -----------------------------------------------------------------------------

@@ -289,3 +289,45 @@ def test_skipped_periods_are_stepped_without_frames(rig: Rig) -> None:
     assert rig.loop.k_active == k0 + 4 and rig.loop.skipped_periods == 3
     assert rig.loop.life.state is State.ACTIVE and rig.loop.wd.trips == 0
     assert rig.loop.meas.position_m == pytest.approx(5e-4)  # the frame is used after the catch-up
+
+
+class IndexedPI(MiniPI):
+    """MiniPI reporting nine model slots (like mmac: 4 spool + 5 position)."""
+
+    def status(self) -> ControllerStatus:
+        return ControllerStatus(mode=self.mode, index={s: 0.1 * s for s in range(9)},
+                                theta={s: 1.0 for s in range(9)})
+
+
+def test_status_frames_one_per_cycle_at_their_rates() -> None:
+    """CTRL_STATUS (50 Hz), CTRL_STATS and heartbeat (10 Hz) and the nine CTRL_INDEX of each
+    snapshot: never two in one cycle, none lost, the index frames in slot order."""
+    r = Rig("periodic")
+    r.ctrl = IndexedPI()
+    r.loop.controller = r.ctrl  # type: ignore[assignment]
+    periodic = ("CTRL_STATUS", "CTRL_INDEX", "CTRL_STATS", "HEARTBEAT_CTRL")
+    try:
+        _activate(r)
+        while r.loop.cycles % 100:  # count from just after a cycle with all three due
+            r.sensors()
+            r.cycle()
+        per_cycle: list[list[str]] = []
+        slots: list[int] = []
+        for _ in range(1000):
+            r.sensors()
+            r.loop.poll_cycle()
+            names = []
+            while (m := r.peer.recv(0.0)) is not None:
+                d = r.rx.classify(m)
+                if d.name in periodic and d.values is not None:
+                    names.append(d.name)
+                    if d.name == "CTRL_INDEX":
+                        slots.append(d.values["ModelSlot"])
+            per_cycle.append(names)
+        assert max(len(n) for n in per_cycle) == 1
+        count = {p: sum(n.count(p) for n in per_cycle) for p in periodic}
+        assert count == {"CTRL_STATUS": 50, "CTRL_INDEX": 450, "CTRL_STATS": 10,
+                         "HEARTBEAT_CTRL": 10}
+        assert slots[:18] == [*range(9), *range(9)]
+    finally:
+        r.close()

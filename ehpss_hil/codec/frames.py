@@ -1,9 +1,11 @@
 """Encode and classify the frames of ``dbc/ehpss.dbc``.
 
-The DBC is parsed once; each message's codec is precomputed by cantools. Encoding uses
-``strict=False`` on the hot path with our own plausibility check (cantools does not range-check);
-decoding uses ``decode_choices=False``. Every received frame gets exactly one :class:`Verdict`,
-and the receiver counts them.
+The DBC is parsed once; each message's codec is precomputed by cantools, and from it a
+:class:`~.layout.BitLayout` (shifts and masks) that encodes and decodes exactly as cantools does
+(``strict=False`` encode, ``decode_choices=False`` decode) at a fraction of the cost; whatever the
+layout does not cover falls back to cantools itself. Plausibility is our own check (cantools does
+not range-check). Every received frame gets exactly one :class:`Verdict`, and the receiver counts
+them.
 
 IDs: the application frames of the DBC sit at 0x110–0x16F for ``id_base = 0x100``; a different
 ``id_base`` shifts them all. Heartbeats are ``0x700 + node id`` (CiA 301).
@@ -24,6 +26,7 @@ from cantools.database.can import Message as DbcMessage
 from .. import DEFAULT_DBC
 from ..errors import FrameError
 from .e2e import CounterCheck, E2EState, crc_ok, protect
+from .layout import BitLayout, LayoutMiss
 
 DBC_ID_BASE = 0x100
 HEARTBEAT_BASE = 0x700
@@ -61,11 +64,16 @@ class Decoded:
 @dataclass(frozen=True, slots=True)
 class _Spec:
     msg: DbcMessage
+    name: str
+    length: int  # bytes
     can_id: int
     data_ids: tuple[int, ...] | None  # None: not E2E protected
     bounds: tuple[tuple[str, float | None, float | None], ...]
+    bounds_by_name: dict[str, tuple[float | None, float | None]]  # the same, by signal name
     zeros: dict[str, int]  # every non-multiplexed signal at 0 (defaults for encode)
     conversions: dict[str, Any]  # signal name -> cantools conversion (scaling)
+    layout: BitLayout | None  # None: cantools only
+    e2e_fields: frozenset[str]  # CRC and Counter of a protected frame: encoded as 0, then set
 
 
 def _data_ids(msg: DbcMessage) -> tuple[int, ...] | None:
@@ -118,7 +126,10 @@ class FrameCodec:
             bounds = tuple(_bounds(s) for s in msg.signals if s.name not in ("CRC", "Counter"))
             zeros = {s.name: 0 for s in msg.signals if s.multiplexer_ids is None}
             conv = {s.name: s.conversion for s in msg.signals}
-            spec = _Spec(msg, can_id, _data_ids(msg), bounds, zeros, conv)
+            data_ids = _data_ids(msg)
+            e2e = frozenset(("CRC", "Counter") if data_ids is not None else ())
+            spec = _Spec(msg, msg.name, msg.length, can_id, data_ids, bounds,
+                         {b[0]: b[1:] for b in bounds}, zeros, conv, BitLayout.of(msg, e2e), e2e)
             if can_id in self._by_id:
                 raise FrameError(f"{msg.name} and {self._by_id[can_id].msg.name} share ID 0x{can_id:X}")
             self._by_name[msg.name] = spec
@@ -165,6 +176,26 @@ class FrameCodec:
                 return f"{sig}={v} outside [{lo}, {hi}]"
         return None
 
+    def _implausible(self, spec: _Spec, values: dict[str, Any]) -> str | None:
+        """:meth:`check_plausible`, walking only the values given (a multiplexed frame carries a
+        few of its many signals); when that finds anything, the ordered walk gives the answer."""
+        by_name = spec.bounds_by_name
+        try:
+            for sig, v in values.items():
+                lim = by_name.get(sig)
+                if lim is None or v is None:
+                    continue
+                if isinstance(v, float) and not math.isfinite(v):
+                    break
+                lo, hi = lim
+                if lo is not None and hi is not None and not lo <= v <= hi:
+                    break
+            else:
+                return None
+        except TypeError:
+            pass
+        return self.check_plausible(spec.name, values)
+
     def encode(self, name: str, values: dict[str, Any], timestamp_s: float = 0.0,
                counter: int | None = None) -> can.Message:
         """Encode ``values`` (physical units) into a protected frame; advances the TX counter.
@@ -175,23 +206,17 @@ class FrameCodec:
         spec = self._by_name.get(name)
         if spec is None:
             raise FrameError(f"unknown frame {name!r}")
-        bad = self.check_plausible(name, values)
+        bad = self._implausible(spec, values)
         if bad is not None:
             raise FrameError(f"{name}: {bad}")
-        msg = spec.msg
-        full = dict(spec.zeros)
-        full.update(values)
-        if spec.data_ids is not None:
-            full["CRC"] = 0
-            full["Counter"] = 0
-        data = bytearray(msg.encode(full, scaling=True, padding=False, strict=False))
+        data = _payload(spec, values)
         if spec.data_ids is not None:
             if counter is None:
                 counter = self._tx_counter[name]
                 self._tx_counter[name] = (counter + 1) & 0x0F
-            data = bytearray(protect(data, counter, spec.data_ids))
-        return can.Message(arbitration_id=spec.can_id, data=bytes(data), is_extended_id=False,
-                           dlc=msg.length, timestamp=timestamp_s)
+            data = protect(bytearray(data), counter, spec.data_ids)
+        return can.Message(arbitration_id=spec.can_id, data=data, is_extended_id=False,
+                           dlc=spec.length, timestamp=timestamp_s)
 
     def quantize(self, name: str, values: dict[str, float]) -> dict[str, float]:
         """The values a receiver decodes after :meth:`encode` — the same cantools conversions
@@ -219,7 +244,9 @@ class FrameCodec:
             decoded = Decoded(Verdict.OUT_OF_RANGE, name, None, frame.timestamp)
         self.counts[decoded.verdict] += 1
         if decoded.name is not None:
-            per = self.counts_by_name.setdefault(decoded.name, {v: 0 for v in Verdict})
+            per = self.counts_by_name.get(decoded.name)
+            if per is None:
+                per = self.counts_by_name[decoded.name] = {v: 0 for v in Verdict}
             per[decoded.verdict] += 1
         return decoded
 
@@ -229,9 +256,9 @@ class FrameCodec:
         if (spec is None or frame.is_extended_id or frame.is_remote_frame or frame.is_error_frame
                 or frame.is_fd):
             return Decoded(Verdict.UNKNOWN_ID, None, None, ts)
-        name = spec.msg.name
+        name = spec.name
         data = frame.data
-        if frame.dlc != spec.msg.length or len(data) != spec.msg.length:
+        if frame.dlc != spec.length or len(data) != spec.length:
             return Decoded(Verdict.BAD_DLC, name, None, ts)
         if spec.data_ids is not None:
             if not crc_ok(data, spec.data_ids):
@@ -247,11 +274,10 @@ class FrameCodec:
             verdict = Verdict.OK if state is E2EState.OK else Verdict.OK_SOME_LOST
         else:
             verdict = Verdict.OK
-        values = spec.msg.decode(bytes(data), decode_choices=False, scaling=True,
-                                 allow_truncated=False)
-        if self.check_plausible(name, values) is not None:  # type: ignore[arg-type]
+        values = _values(spec, data)
+        if self._implausible(spec, values) is not None:
             return Decoded(Verdict.OUT_OF_RANGE, name, None, ts)
-        return Decoded(verdict, name, values, ts)  # type: ignore[arg-type]
+        return Decoded(verdict, name, values, ts)
 
     def reset_rx(self) -> None:
         """Forget all receive sequence state (e.g. after a bus restart)."""
@@ -261,3 +287,28 @@ class FrameCodec:
     def rejected(self) -> int:
         """Number of received frames whose data was not usable."""
         return sum(n for v, n in self.counts.items() if not v.usable)
+
+
+def _payload(spec: _Spec, values: dict[str, Any]) -> bytes:
+    """The unprotected payload (E2E fields 0); signals missing from ``values`` are 0."""
+    if spec.layout is not None:
+        try:
+            return spec.layout.encode(values)
+        except LayoutMiss:
+            pass  # cantools decides (and raises what it always raised)
+    full = dict(spec.zeros)
+    full.update(values)
+    for f in spec.e2e_fields:
+        full[f] = 0
+    return spec.msg.encode(full, scaling=True, padding=False, strict=False)
+
+
+def _values(spec: _Spec, data: bytes | bytearray) -> dict[str, Any]:
+    """Physical values of a payload of the right length (cantools' result, key order too)."""
+    if spec.layout is not None:
+        try:
+            return spec.layout.decode(data)
+        except LayoutMiss:
+            pass
+    return spec.msg.decode(bytes(data), decode_choices=False,  # type: ignore[return-value]
+                           scaling=True, allow_truncated=False)

@@ -119,6 +119,10 @@ class ControllerLoop:
         self._override_m: float | None = None
         self._compute_max_s = 0.0
         self._index_queue: list[tuple[int, float, float]] = []
+        self._stats_due = False
+        self._hb_due = False
+        self._periodic_cycle = 0  # self.cycles at the last _periodic
+        self._rx_ids = frozenset((self._id_pos, self._id_aux, self._id_setpoint))
         self._reset_cycle_rx()
 
     # ---- receive ----------------------------------------------------------------------------
@@ -132,7 +136,7 @@ class ControllerLoop:
     def on_frame(self, msg: can.Message) -> None:
         """Consume one received frame (IDs other than sensors/SETPOINT are only logged)."""
         fid = msg.arbitration_id
-        if fid not in (self._id_pos, self._id_aux, self._id_setpoint):
+        if fid not in self._rx_ids:
             return
         d = self.codec.classify(msg)
         if not d.verdict.usable or d.values is None:
@@ -243,6 +247,7 @@ class ControllerLoop:
         self._reset_cycle_rx()
         self.cycles += 1
         self._periodic()
+        self.io.idle()
 
     def send_command(self, current_a: float, enable: bool) -> None:
         """One VALVE_CMD (A) with the sensor counter echo and the cycle count."""
@@ -254,19 +259,34 @@ class ControllerLoop:
 
     # ---- status frames ----------------------------------------------------------------------
     def _periodic(self) -> None:
-        c = self.cycles
-        if c % self._status_every == 0:
+        """At most one status frame per cycle, so that no cycle carries two or three of them:
+        CTRL_STATUS when due, else a CTRL_STATS or heartbeat that fell due (when they coincide
+        with CTRL_STATUS they go out one and two cycles later), else the next CTRL_INDEX of the
+        snapshot. (A frame sent every cycle does not take the slot.) A frame falls due when
+        :attr:`cycles` reaches a multiple of its period, also when :meth:`catch_up` jumped it."""
+        c, prev = self.cycles, self._periodic_cycle
+        self._periodic_cycle = c
+        self._stats_due = self._stats_due or c // self._stats_every > prev // self._stats_every
+        self._hb_due = self._hb_due or c // self._hb_every > prev // self._hb_every
+        status_now = c // self._status_every > prev // self._status_every
+        busy = False
+        if status_now:
             self.send_status()
-        elif self._index_queue:  # one CTRL_INDEX per cycle keeps the cycle time flat
-            self._send_index(*self._index_queue.pop())
-        if c % self._stats_every == 0:
+            busy = self._status_every > 1
+        if self._stats_due and not busy:
             self.io.send("CTRL_STATS", {
                 "Overruns": self.overruns & 0xFFFF, "RejectedFrames": self.codec.rejected & 0xFFFF,
                 "CycleTimeMax": min(self._compute_max_s, 0.065535)})
             self._compute_max_s = 0.0
-        if c % self._hb_every == 0:
+            self._stats_due = False
+            busy = self._stats_every > 1
+        if self._hb_due and not busy:
             self.io.send("HEARTBEAT_CTRL", {"NmtState": self.life.nmt_state})
-        if self._log_every and c % self._log_every == 0:
+            self._hb_due = False
+            busy = self._hb_every > 1
+        if self._index_queue and not busy and not status_now:
+            self._send_index(*self._index_queue.pop())
+        if self._log_every and c // self._log_every > prev // self._log_every:
             self._log_counters()
 
     def _log_counters(self) -> None:

@@ -2,8 +2,10 @@
 
 On ``udp_multicast`` a process receives its own frames; :class:`FrameIO` drops every received
 frame whose ID is one this process transmits (``own_ids``) before anything else sees it, so
-each frame is logged exactly once (when sent). Every other frame is logged when received, then
-handed to the loop, which classifies only the IDs it consumes.
+each frame is logged exactly once (when sent). There a kernel socket filter drops them first
+(:func:`~ehpss_hil.bus.drop_own_frames`: no read, no decoding), and the drain reads without a
+``select()`` per frame (:func:`~ehpss_hil.bus.frame_reader`). Every other frame is logged when
+received, then handed to the loop, which classifies only the IDs it consumes.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from typing import Any, Protocol
 
 import can
 
+from ..bus import drop_own_frames, frame_reader
 from ..codec import FrameCodec
 from ..config import BusConfig, LogConfig
 from ..errors import FrameError
@@ -26,6 +29,8 @@ class FrameLogger(Protocol):
     """What a loop needs of ``ehpss_hil.canlog.CandumpLogger``."""
 
     def log(self, msg: can.Message) -> None: ...
+
+    def kick(self) -> None: ...
 
     def close(self) -> object: ...
 
@@ -56,6 +61,9 @@ class FrameIO:
         self.codec = codec
         self.logger = logger
         self.own_ids = frozenset(codec.can_id(n) for n in own_names)
+        #: True when the kernel drops the echoes of own frames (udp_multicast)
+        self.own_filtered_in_kernel = drop_own_frames(bus, self.own_ids)
+        self._read = frame_reader(bus)
         self.sent: dict[str, int] = {n: 0 for n in own_names}
         self.tx_errors = 0
         self.received = 0
@@ -75,6 +83,12 @@ class FrameIO:
             self.logger.log(msg)
         return msg
 
+    def idle(self) -> None:
+        """The loop is done with its cycle and about to sleep: the log writer may run now
+        (rather than in the middle of a cycle, holding the GIL the loop needs)."""
+        if self.logger is not None:
+            self.logger.kick()
+
     def _accept(self, msg: can.Message | None) -> bool:
         if msg is None or msg.arbitration_id in self.own_ids:
             return False
@@ -85,8 +99,9 @@ class FrameIO:
 
     def drain(self, limit: int = 1000) -> Iterator[can.Message]:
         """Every frame pending now (non-blocking), own echoes dropped; at most ``limit``."""
+        read = self._read
         for _ in range(limit):
-            msg = self.bus.recv(0.0)
+            msg = read()
             if msg is None:
                 return
             if self._accept(msg):
