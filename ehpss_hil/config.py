@@ -174,6 +174,14 @@ def apply_overrides(src: str, bus: BusConfig, rate_hz: float, rt: RtOptions, *,
     return bus, rate_hz, rt
 
 
+def _existing(src: Path, key: str, value: str) -> str:
+    """``value`` when empty (the default file) or an existing file, else a ConfigError for
+    ``key`` (so a wrong path is a config error naming its key, before any bus is opened)."""
+    if value and not Path(value).is_file():
+        raise ConfigError(str(src), key, f"no such file: {value}")
+    return value
+
+
 def _resolve(base: Path, value: str) -> str:
     if not value:
         return value
@@ -188,7 +196,8 @@ def load_controller_config(path: str | Path) -> ControllerConfig:
     cfg = build(ControllerConfig, load_yaml(p), str(p))
     base = p.resolve().parent
     from dataclasses import replace
-    return replace(cfg, params=_resolve(base, cfg.params), dbc=_resolve(base, cfg.dbc))
+    return replace(cfg, params=_existing(p, "params", _resolve(base, cfg.params)),
+                   dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)))
 
 
 def load_emulator_config(path: str | Path) -> EmulatorConfig:
@@ -197,5 +206,6 @@ def load_emulator_config(path: str | Path) -> EmulatorConfig:
     cfg = build(EmulatorConfig, load_yaml(p), str(p))
     base = p.resolve().parent
     from dataclasses import replace
-    return replace(cfg, params=_resolve(base, cfg.params), dbc=_resolve(base, cfg.dbc),
-                   scenario=_resolve(base, cfg.scenario))
+    return replace(cfg, params=_existing(p, "params", _resolve(base, cfg.params)),
+                   dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)),
+                   scenario=_existing(p, "scenario", _resolve(base, cfg.scenario)))

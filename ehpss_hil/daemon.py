@@ -135,14 +135,22 @@ def run_daemon(a: DaemonArgs) -> int:
     """Configure, run until stopped, shut down fail-safe; returns the exit code (0)."""
     cfg = resolve_config(a)
     params = load_params(cfg.params or None)
-    codec = make_codec(cfg)
+    try:
+        codec = make_codec(cfg)
+    except ValueError as exc:  # FrameError, or cantools on a file that is no DBC
+        raise ConfigError(str(a.config), "dbc", f"cannot load {cfg.dbc}: {exc}") from exc
     controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
     bus = open_bus(cfg.bus)
-    logger = open_can_logger(a.log or cfg.log.path, cfg.log, cfg.bus, sidecar={
-        "tool": "ehpss-hil controller", "config": asdict(cfg), "config_path": str(a.config),
-        "dbc": cfg.dbc or None,
-        "mode": cfg.mode, "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
-        "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "lockstep": a.lockstep})
+    try:
+        logger = open_can_logger(a.log or cfg.log.path, cfg.log, cfg.bus, sidecar={
+            "tool": "ehpss-hil controller", "config": asdict(cfg), "config_path": str(a.config),
+            "dbc": cfg.dbc or None,
+            "mode": cfg.mode, "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
+            "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "lockstep": a.lockstep})
+    except OSError as exc:  # nothing was sent yet
+        bus.shutdown()
+        raise ConfigError(str(a.config), "--log" if a.log else "log.path",
+                          f"cannot write the log: {exc}") from exc
     io = FrameIO(bus, codec, OWN_FRAMES, logger)
     loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us))
     stop, previous = install_stop_handlers()

@@ -103,6 +103,27 @@ class Disturbance:
         return self.offset_m + self.amplitude_m * math.sin(self.omega_rad_s * t_s)
 
 
+@dataclass(frozen=True, slots=True)
+class FrameLoss:
+    """Loss probability per frame and direction: ``sensor`` (SENSOR_POS + SENSOR_AUX of a
+    sample, one draw) and ``command`` (VALVE_CMD).
+
+    ``frame_loss`` sets both directions; ``sensor_frame_loss`` / ``command_frame_loss`` then
+    override one of them (in a scenario's top level and in each event alike: an event's
+    ``frame_loss`` sets both again, a directional key changes only its direction).
+    """
+
+    sensor: float = 0.0
+    command: float = 0.0
+
+    def updated(self, both: float | None, sensor: float | None,
+                command: float | None) -> FrameLoss:
+        """This loss with the given keys applied (None = key not set)."""
+        s = self.sensor if both is None else both
+        c = self.command if both is None else both
+        return FrameLoss(s if sensor is None else sensor, c if command is None else command)
+
+
 @dataclass(frozen=True)
 class Event:
     """A fault change at ``t_s``; every value given persists until changed by a later event."""
@@ -115,6 +136,8 @@ class Event:
     stuck: bool | None = None
     current_limit_a: float | None = field(default=None, metadata=rng(0.0, 1.0, lo_open=True))
     frame_loss: float | None = field(default=None, metadata=rng(0.0, 1.0))
+    sensor_frame_loss: float | None = field(default=None, metadata=rng(0.0, 1.0))
+    command_frame_loss: float | None = field(default=None, metadata=rng(0.0, 1.0))
 
     def __post_init__(self) -> None:
         if all(getattr(self, k) is None for k in _EVENT_KEYS):
@@ -125,14 +148,23 @@ class Event:
         changes = {k: getattr(self, k) for k in _FAULT_KEYS if getattr(self, k) is not None}
         return replace(faults, **changes)
 
+    def apply_loss(self, loss: FrameLoss) -> FrameLoss:
+        """The per-direction loss after this event (see :class:`FrameLoss`)."""
+        return loss.updated(self.frame_loss, self.sensor_frame_loss, self.command_frame_loss)
+
 
 _FAULT_KEYS = ("k_loe", "k_q", "k_dft", "position_bias_m", "stuck", "current_limit_a")
-_EVENT_KEYS = (*_FAULT_KEYS, "frame_loss")
+_LOSS_KEYS = ("frame_loss", "sensor_frame_loss", "command_frame_loss")
+_EVENT_KEYS = (*_FAULT_KEYS, *_LOSS_KEYS)
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """One test scenario (DESIGN.md §9). Times in s, lengths in m."""
+    """One test scenario (DESIGN.md §9). Times in s, lengths in m.
+
+    Frame loss (probability per frame): ``frame_loss`` for both directions, optionally
+    overridden per direction by ``sensor_frame_loss`` / ``command_frame_loss`` (:class:`FrameLoss`).
+    """
 
     name: str
     duration_s: float = field(metadata=rng(0.0, 86400.0, lo_open=True))
@@ -141,6 +173,9 @@ class Scenario:
     reference: Reference = field(default_factory=Reference)
     noise: Noise = field(default_factory=Noise)
     frame_loss: float = field(default=0.0, metadata=rng(0.0, 1.0))
+    #: overrides of ``frame_loss`` for one direction (None: ``frame_loss``), see FrameLoss
+    sensor_frame_loss: float | None = field(default=None, metadata=rng(0.0, 1.0))
+    command_frame_loss: float | None = field(default=None, metadata=rng(0.0, 1.0))
     transport_delay_samples: int = field(default=1, metadata=rng(0, 100))
     disturbance: Disturbance = field(default_factory=lambda: Disturbance(kind="none"))
     events: tuple[Event, ...] = ()
@@ -164,14 +199,20 @@ class Scenario:
         """Number of samples in the run."""
         return round(self.duration_s / self.sample_time_s)
 
-    def fault_timeline(self) -> list[tuple[int, FaultState, float]]:
-        """``(sample index, fault state, frame loss)`` at the start and at every event."""
-        out: list[tuple[int, FaultState, float]] = [(0, FaultState(), self.frame_loss)]
-        faults, loss = FaultState(), self.frame_loss
+    @property
+    def initial_loss(self) -> FrameLoss:
+        """The per-direction frame loss at k = 0."""
+        return FrameLoss().updated(self.frame_loss, self.sensor_frame_loss,
+                                   self.command_frame_loss)
+
+    def fault_timeline(self) -> list[tuple[int, FaultState, FrameLoss]]:
+        """``(sample index, fault state, frame loss per direction)`` at the start and at every
+        event."""
+        faults, loss = FaultState(), self.initial_loss
+        out: list[tuple[int, FaultState, FrameLoss]] = [(0, faults, loss)]
         for ev in self.events:
             faults = ev.apply(faults)
-            if ev.frame_loss is not None:
-                loss = ev.frame_loss
+            loss = ev.apply_loss(loss)
             out.append((round(ev.t_s / self.sample_time_s), faults, loss))
         return out
 

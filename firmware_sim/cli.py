@@ -109,14 +109,22 @@ def run(args: argparse.Namespace) -> int:
     """Configure, run until the end/stop signal, print the counters; returns the exit code."""
     cfg, scenario = _resolve(args)
     params = load_params(cfg.params or None)
-    codec = make_codec(cfg)
+    try:
+        codec = make_codec(cfg)
+    except ValueError as exc:  # FrameError, or cantools on a file that is no DBC
+        raise ConfigError(str(args.config), "dbc", f"cannot load {cfg.dbc}: {exc}") from exc
     emu = PlantEmulation(params, scenario)
     bus = open_bus(cfg.bus)
-    logger = open_can_logger(args.log or cfg.log.path, cfg.log, cfg.bus, sidecar={
-        "tool": "firmware-sim", "config": asdict(cfg), "config_path": str(args.config),
-        "dbc": cfg.dbc or None, "scenario": asdict(scenario), "scenario_name": scenario.name,
-        "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
-        "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "mode": cfg.mode})
+    try:
+        logger = open_can_logger(args.log or cfg.log.path, cfg.log, cfg.bus, sidecar={
+            "tool": "firmware-sim", "config": asdict(cfg), "config_path": str(args.config),
+            "dbc": cfg.dbc or None, "scenario": asdict(scenario), "scenario_name": scenario.name,
+            "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
+            "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "mode": cfg.mode})
+    except OSError as exc:  # nothing was sent yet
+        bus.shutdown()
+        raise ConfigError(str(args.config), "--log" if args.log else "log.path",
+                          f"cannot write the log: {exc}") from exc
     io = FrameIO(bus, codec, OWN_FRAMES, logger)
     proc = EmulatorProcess(emu, io, EmulatorOptions(
         command_timeout_s=cfg.command_timeout_s, truth=cfg.truth, fault_inject=cfg.fault_inject,

@@ -17,7 +17,7 @@ import numpy as np
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.physics.params import Params
 from ehpss_hil.physics.plant import PlantStepper
-from ehpss_hil.scenario import Scenario
+from ehpss_hil.scenario import FrameLoss, Scenario
 
 _BLOCK = 4096
 
@@ -81,7 +81,7 @@ class PlantEmulation:
         self.plant.reset()
         self.k = 0
         self._next_event = 0
-        self.frame_loss = self.scenario.frame_loss
+        self.loss = self.scenario.initial_loss
         self._override: dict[str, float | bool] = {}
         self._stuck_value_m = 0.0
         self._last_applied_a = 0.0
@@ -95,7 +95,7 @@ class PlantEmulation:
         while self._next_event < len(tl) and tl[self._next_event][0] <= self.k:
             _, faults, loss = tl[self._next_event]
             self._scheduled = faults
-            self.frame_loss = loss
+            self.loss = loss
             self._next_event += 1
             changed = True
         if changed:
@@ -110,10 +110,12 @@ class PlantEmulation:
         """Set fault values at run time (FAULT_INJECT); they override the schedule until cleared.
 
         Keys: ``k_loe``, ``k_q``, ``k_dft``, ``position_bias_m``, ``stuck``, ``current_limit_a``;
-        ``frame_loss`` sets the loss probability. Returns the new fault state.
+        ``frame_loss`` sets the loss probability of both directions (until the next scheduled
+        loss change). Returns the new fault state.
         """
         if "frame_loss" in values:
-            self.frame_loss = float(values.pop("frame_loss"))
+            p = float(values.pop("frame_loss"))
+            self.loss = FrameLoss(p, p)
         self._override.update(values)
         self._set(replace(self.plant.faults, **values))  # type: ignore[arg-type]
         return self.plant.faults
@@ -157,8 +159,12 @@ class PlantEmulation:
             current_saturated=self._saturated)
 
     def frame_lost(self, direction: int) -> bool:
-        """Seeded loss draw for this sample: direction 0 = sensor frames, 1 = command frames."""
-        return self._loss[direction].next() < self.frame_loss
+        """Seeded loss draw for this sample: direction 0 = sensor frames (probability
+        ``loss.sensor``), 1 = command frames (``loss.command``). Each direction has its own
+        stream, drawn once per call whatever the probability (the streams stay on the sample
+        grid, so a scenario without the directional keys gives the same draws as before)."""
+        p = self.loss.sensor if direction == 0 else self.loss.command
+        return self._loss[direction].next() < p
 
     # ---- dynamics ---------------------------------------------------------------------------
     def advance(self, current_a: float) -> float:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -24,3 +25,15 @@ def write_json(path: str | Path | None, payload: Any) -> None:
     """Write ``payload`` as indented JSON when a path is given."""
     if path:
         Path(path).write_text(json.dumps(payload, indent=2, allow_nan=False, default=str) + "\n")
+
+
+def finite_json(payload: Any) -> Any:
+    """``payload`` with NaN/±∞ floats replaced by None (strict JSON, as :func:`write_json`
+    writes; e.g. a percentile of an empty series)."""
+    if isinstance(payload, float):
+        return payload if math.isfinite(payload) else None
+    if isinstance(payload, dict):
+        return {k: finite_json(v) for k, v in payload.items()}
+    if isinstance(payload, list | tuple):
+        return [finite_json(v) for v in payload]
+    return payload

@@ -12,7 +12,7 @@ from .. import bench as bench_pkg
 from ..cli import discover
 
 NAME = "bench"
-HELP = "benchmarks: codec, control, loop (print figures beside their targets)"
+HELP = "benchmarks: codec, control, loop, faults, soak (print figures beside their targets)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 from ..config import load_controller_config, load_emulator_config
 from ..errors import ConfigError
 from ..physics.params import load_params
-from ..scenario import load_scenario
+from ..scenario import Scenario, load_scenario
 from ..schema import load_yaml
 
 NAME = "check-config"
@@ -33,6 +33,14 @@ def _kind(path: Path) -> str:
     return "controller"
 
 
+def _loss_text(s: Scenario) -> str:
+    """``0.05``, or ``sensor 0.05 command 0.2`` when the directions differ (at k = 0)."""
+    loss = s.initial_loss
+    if loss.sensor == loss.command:
+        return f"{loss.sensor:g}"
+    return f"sensor {loss.sensor:g} command {loss.command:g}"
+
+
 def summarize(path: Path) -> str:
     """Load ``path`` as whatever it is and return a one-line summary (raises ConfigError)."""
     kind = _kind(path)
@@ -40,7 +48,7 @@ def summarize(path: Path) -> str:
         s = load_scenario(path)
         return (f"scenario {s.name}: {s.duration_s:g} s at {1 / s.sample_time_s:g} Hz, "
                 f"{s.reference.kind} {s.reference.amplitude_m * 1e3:g} mm, {len(s.events)} events, "
-                f"loss {s.frame_loss:g}, delay {s.transport_delay_samples}")
+                f"loss {_loss_text(s)}, delay {s.transport_delay_samples}")
     if kind == "params":
         p = load_params(path)
         return (f"params: K_c {p.plant.velocity_gain_1_s:.4g} 1/s, K_f {p.controller.k_f:g}, "

@@ -22,7 +22,10 @@ class Ring:
     def __init__(self, capacity: int) -> None:
         if capacity < 1:
             raise ValueError("capacity must be >= 1")
-        self.buf = np.zeros(capacity)
+        # written now, not lazily: zero pages would become resident one 4 KiB page per 512
+        # samples inside the cycle (a page fault each time, and RSS growing for the first
+        # ``capacity`` cycles, e.g. 14 MB over 10 minutes at 1 kHz for three rings)
+        self.buf = np.full(capacity, 0.0)
         self.n = 0
         self.max = 0.0
 

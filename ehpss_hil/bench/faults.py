@@ -1,0 +1,138 @@
+"""``ehpss-hil bench faults``: the reliability suite of issue 8 as one table.
+
+Fuzzing (crafted frames with a known verdict and random ones through the codec, the controller
+loop and the emulator), frame loss per direction (lockstep simulator: case 1 mmac RMS against
+lossless; processes: ``ehpss-hil run`` with a watchdog audit), duplicated/reordered/burst sensor
+frames against a controller process, kill -9 of either process (``--trials``), SIGTERM during a
+run, and every config/scenario key made wrong. Process sections need a private network namespace
+(root + ``unshare``) and say so when they cannot run. Exit 1 when any row fails. Implementation:
+:mod:`ehpss_hil.reliability`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import random
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from ..reliability import badinput, duplicates, fuzz, kills, loss
+from ..reliability.procs import skip_reason
+from ..reliability.table import (
+    Row,
+    Summary,
+    bad_rows,
+    dup_rows,
+    format_table,
+    fuzz_rows,
+    kill_rows,
+    loss_rows,
+    term_rows,
+)
+from .common import finite_json, write_json
+
+NAME = "faults"
+HELP = "reliability suite: fuzzing, frame loss, duplicates, kill -9, SIGTERM, bad configs"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--trials", type=int, default=10, help="kill -9 trials (default 10)")
+    p.add_argument("--quick", action="store_true",
+                   help="small counts, short runs, a quarter of the bad keys (< 1 min)")
+    p.add_argument("--seed", type=int, default=1, help="seed of fuzzing and fault timing")
+    p.add_argument("--out", type=Path, help="keep the trial directories here")
+    p.add_argument("--json", metavar="FILE", help="write every result as JSON")
+
+
+def _say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _victims(n: int, rng: random.Random) -> list[str]:
+    """Both processes equally often (one more controller kill when n is odd), shuffled."""
+    v = ["controller", "emulator"] * (n // 2) + (["controller"] if n % 2 else [])
+    rng.shuffle(v)
+    return v
+
+
+def _process_sections(a: argparse.Namespace, out: Path, rng: random.Random,
+                      rows: list[Row], s: Summary, raw: dict[str, Any]) -> None:
+    q = a.quick
+    _say("frame loss across processes ...")
+    if q:
+        pl = loss.processes_loss(out / "loss", levels=(0.2,), lossless=False, duration_s=1.0)
+    else:
+        pl = loss.processes_loss(out / "loss")
+        pl.append(loss.process_loss(out / "loss" / "deploy-sensor-0.2", "sensor", 0.2,
+                                    timeout_cycles=loss.configured_timeout_cycles()))
+    rows += loss_rows(pl, s)
+    _say("duplicated / reordered / burst sensor frames ...")
+    n_dup = 1 if q else max(1, a.trials // 5)
+    dups = [duplicates.dup_trial(out / f"dup-{i}", 500 if q else 2000, a.seed + i)
+            for i in range(n_dup)]
+    rows += dup_rows(dups, s)
+    n_kill = min(a.trials, 2) if q else a.trials
+    _say(f"kill -9: {n_kill} trials ...")
+    ks = [kills.kill_trial(out / f"kill-{i}", i, v, rng)
+          for i, v in enumerate(_victims(n_kill, rng))]
+    rows += kill_rows(ks, s)
+    _say("SIGTERM during a run ...")
+    firsts = ["controller"] if q else ["controller", "emulator"]
+    ts = [kills.term_trial(out / f"term-{i}", i, f, rng) for i, f in enumerate(firsts)]
+    rows += term_rows(ts, s)
+    _say("bad configs and scenarios ...")
+    muts = badinput.mutations(out / "bad")
+    if q:
+        muts = muts[::4]
+    bad, frames = badinput.run_bad_inputs(out / "bad", muts)
+    rows += bad_rows(bad, frames, s)
+    raw.update(process_loss=pl, duplicates=dups, kills=ks, sigterm=ts, bad_inputs=bad,
+               bad_input_bus_frames=frames)
+
+
+def run(args: argparse.Namespace) -> int:
+    t0 = time.monotonic()
+    rng = random.Random(args.seed)
+    rows: list[Row] = []
+    s = Summary()
+    raw: dict[str, Any] = {}
+    n = 3000 if args.quick else 30000
+    _say(f"fuzzing: {n} crafted + {n} random frames through 3 receivers ...")
+    tallies = fuzz.fuzz_all(n, n, args.seed)
+    rows += fuzz_rows(tallies, s)
+    _say("frame loss on the lockstep simulator ...")
+    sim = loss.sim_loss()
+    rows += loss_rows(sim, s)
+    raw.update(fuzz=tallies, sim_loss=sim)
+    why = skip_reason()
+    if why is None:
+        with tempfile.TemporaryDirectory(prefix="ehpss-bench-faults-") as tmp:
+            out = args.out or Path(tmp)
+            _process_sections(args, out, rng, rows, s, raw)
+    else:
+        rows.append(Row("processes", "skipped", why, trial=False))
+        s.failed.append("process sections skipped")
+    s.add(rows)
+    wall = time.monotonic() - t0
+    mode = "quick" if args.quick else "full"
+    print(f"ehpss-hil bench faults ({mode}, {args.trials} kill trials requested, seed "
+          f"{args.seed}, wall {wall:.0f} s)")
+    print(format_table(rows))
+    print(s.line())
+    write_json(args.json, finite_json({
+        "summary": dataclasses.asdict(s), "wall_s": wall,
+        "rows": [dataclasses.asdict(r) for r in rows],
+        "results": {k: _jsonable(v) for k, v in raw.items()}}))
+    return 0 if s.ok else 1
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, list):
+        return [_jsonable(x) for x in v]
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        return dataclasses.asdict(v)
+    return v
