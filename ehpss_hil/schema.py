@@ -159,7 +159,7 @@ def build(cls: type[T], data: Any, src: str = "", path: str = "") -> T:
     fields = {f.name: f for f in dataclasses.fields(typing.cast(Any, cls)) if f.init}
     unknown = [k for k in data if k not in fields]
     if unknown:
-        known = ", ".join(sorted(fields))
+        known = ", ".join(sorted(n for n, f in fields.items() if not f.metadata.get("internal")))
         raise ConfigError(src, _join(path, str(unknown[0])), f"unknown key (known keys: {known})")
     kwargs: dict[str, Any] = {}
     for name, f in fields.items():

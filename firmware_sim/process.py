@@ -143,8 +143,10 @@ class EmulatorProcess:
             self.io.send("PLANT_TRUTH", self._clip("PLANT_TRUTH", {
                 "Position": y.true_position_m, "SpoolActual": y.true_spool_m,
                 "Stuck": int(y.faults.stuck)}))
-        if self.emu.frame_lost(0):
+        if self.emu.frame_lost(0):  # lost on the way: the counters move on (receiver: a gap)
             self.lost_sensor += 1
+            self.codec.skip("SENSOR_POS")
+            self.codec.skip("SENSOR_AUX")
             return False
         self.io.send("SENSOR_POS", self._clip("SENSOR_POS", {
             "Position": y.position_m, "Spool": y.spool_m}))

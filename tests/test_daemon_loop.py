@@ -11,7 +11,7 @@ from typing import Any
 import can
 import pytest
 
-from ehpss_hil.codec import FrameCodec
+from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.codec.e2e import protect
 from ehpss_hil.config import Watchdog
 from ehpss_hil.control.base import ControllerStatus, Measurement, ValveCommand
@@ -331,3 +331,53 @@ def test_status_frames_one_per_cycle_at_their_rates() -> None:
         assert slots[:18] == [*range(9), *range(9)]
     finally:
         r.close()
+
+
+def _lockstep_run(rig: Rig, feed: Any) -> list[dict[str, Any]]:
+    """Run the lockstep loop until the bus is idle for 0.3 s while ``feed()`` sends frames;
+    returns the VALVE_CMDs it answered with."""
+    loop = ControllerLoop(rig.ctrl, rig.loop.io, Reference(kind="step", amplitude_m=1e-3),
+                          LoopOptions(lockstep_idle_s=0.3))
+    rig.loop = loop
+    th = threading.Thread(target=loop.run_lockstep, args=(StopFlag(),))
+    th.start()
+    feed()
+    th.join(timeout=30)
+    assert not th.is_alive()
+    cmds = []
+    while (m := rig.peer.recv(0.0)) is not None:
+        d = rig.rx.classify(m)
+        if d.name == "VALVE_CMD" and d.values is not None:
+            cmds.append(d.values)
+    return cmds
+
+
+def test_lockstep_answers_a_duplicate_pair_never(rig: Rig) -> None:
+    """A repeated sensor pair (same bytes) is counted REPEATED and gets no cycle: the law steps
+    and answers once per distinct pair."""
+    def feed() -> None:
+        for i in range(3):
+            pos = rig.sensors(1e-4 * i)
+            if i == 1:
+                rig.peer.send(pos)  # the same frames again
+                rig.peer.send(rig.tx.encode("SENSOR_AUX", {"CoilCurrent": 1e-5}, counter=1))
+    cmds = _lockstep_run(rig, feed)
+    assert len(cmds) == 3 and rig.ctrl.steps == 3
+    assert [c["CycleCount"] for c in cmds] == [0, 1, 2]
+    assert rig.loop.codec.counts_by_name["SENSOR_POS"][Verdict.REPEATED] == 1
+
+
+def test_lockstep_steps_over_lost_sensor_samples(rig: Rig) -> None:
+    """Two sensor samples lost on the way (the counter jumps by 3): the law steps twice without
+    data before the cycle, so the reference stays on the plant's sample clock."""
+    def feed() -> None:
+        rig.sensors()
+        rig.sensors()
+        for _ in range(2):
+            rig.tx.skip("SENSOR_POS")
+            rig.tx.skip("SENSOR_AUX")
+        rig.sensors(3e-4)
+    cmds = _lockstep_run(rig, feed)
+    assert len(cmds) == 3 and rig.ctrl.steps == 5
+    assert [c["CycleCount"] for c in cmds] == [0, 1, 4]
+    assert rig.loop.k_active == 5 and rig.loop.skipped_periods == 2

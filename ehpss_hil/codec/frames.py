@@ -218,6 +218,14 @@ class FrameCodec:
         return can.Message(arbitration_id=spec.can_id, data=data, is_extended_id=False,
                            dlc=spec.length, timestamp=timestamp_s)
 
+    def skip(self, name: str) -> None:
+        """Advance ``name``'s TX counter without a frame: one that was sent and lost on the
+        way (the emulator's seeded transport loss), so the receiver sees the gap
+        (OK_SOME_LOST), as on a real bus."""
+        if name not in self._tx_counter:
+            raise FrameError(f"unknown frame {name!r}")
+        self._tx_counter[name] = (self._tx_counter[name] + 1) & 0x0F
+
     def quantize(self, name: str, values: dict[str, float]) -> dict[str, float]:
         """The values a receiver decodes after :meth:`encode` — the same cantools conversions
         (``round((v − offset)/scale)·scale + offset``), without building bytes or CRCs.

@@ -76,6 +76,7 @@ class LoopBase:
         self._blend = 1.0
         self._echo = 0.0
         self._y_s = 0.0
+        self._warm_samples = round(self.tuning.warmup_s / ts_s)
         self._build()
         self.reset()
 
@@ -94,6 +95,7 @@ class LoopBase:
         self.k_q_hat = 1.0
         self.sensor_trusted = True
         self._blend = 1.0
+        self._warm_left = self._warm_samples
         self._reset_mode()
 
     def _reset_mode(self) -> None:
@@ -117,9 +119,15 @@ class LoopBase:
         self.sensor_trusted = trusted
         xh, kq = self.xhat, self.k_q_hat
         model_x = kq * xh.x  # x̂ integrates the spool without k_Q: true x ≈ k̂_Q·x̂
+        warm = self._warm_left > 0
+        if warm:
+            self._warm_left -= 1
         if trusted:
             y = meas.position_m / td
-            xh.anchor(y / kq)
+            if warm:  # start-up: the system starts healthy; x̂ is the sensor (no model yet)
+                xh.x = y / kq
+            else:
+                xh.anchor(y / kq)
             b = self._blend
             if b < 1.0:
                 b = self._blend = min(1.0, b + self._blend_step)

@@ -123,6 +123,8 @@ class ControllerLoop:
         self._hb_due = False
         self._periodic_cycle = 0  # self.cycles at the last _periodic
         self._rx_ids = frozenset((self._id_pos, self._id_aux, self._id_setpoint))
+        self._lockstep = False
+        self._last_pos_counter = 0  # counter of the newest usable SENSOR_POS (lockstep gaps)
         self._reset_cycle_rx()
 
     # ---- receive ----------------------------------------------------------------------------
@@ -133,11 +135,16 @@ class ControllerLoop:
         self._pos_counter = 0
         self._pos_ts = 0.0
 
-    def on_frame(self, msg: can.Message) -> None:
-        """Consume one received frame (IDs other than sensors/SETPOINT are only logged)."""
+    def on_frame(self, msg: can.Message) -> Verdict | None:
+        """Consume one received frame (IDs other than sensors/SETPOINT are only logged); returns
+        its verdict (None for IDs not consumed).
+
+        Lockstep only: a SENSOR_POS whose counter shows lost sensor samples (OK_SOME_LOST) first
+        steps those samples without data (:meth:`catch_up`), as the emulator advanced over them,
+        so the reference stays on the plant's sample clock."""
         fid = msg.arbitration_id
         if fid not in self._rx_ids:
-            return
+            return None
         d = self.codec.classify(msg)
         if not d.verdict.usable or d.values is None:
             if fid != self._id_setpoint:
@@ -145,19 +152,24 @@ class ControllerLoop:
                     self._implausible += 1
                 elif d.verdict in _E2E_VERDICTS:
                     self._e2e_bad += 1
-            return
+            return d.verdict
         v = d.values
         if fid == self._id_pos:
+            counter = msg.data[1] & 0x0F
+            if self._lockstep and d.verdict is Verdict.OK_SOME_LOST:
+                self.catch_up((counter - self._last_pos_counter - 1) & 0x0F)
+            self._last_pos_counter = counter
             self.meas.position_m = float(v["Position"])
             self.meas.spool_m = float(v["Spool"])
             self._fresh = True
-            self._pos_counter = msg.data[1] & 0x0F
+            self._pos_counter = counter
             self._pos_ts = msg.timestamp
         elif fid == self._id_aux:
             self.meas.coil_current_a = float(v["CoilCurrent"])
             self.meas.load_pressure_pa = float(v["LoadPressure"])
         else:
             self._override_m = float(v["Position"]) if v["Override"] else None
+        return d.verdict
 
     # ---- one cycle --------------------------------------------------------------------------
     def _update_state(self) -> None:
@@ -348,10 +360,15 @@ class ControllerLoop:
     def run_lockstep(self, stop: StopFlag, n_cycles: int | None = None) -> None:
         """One cycle per received sensor pair, until ``stop``, ``n_cycles`` or the bus is idle
         for ``lockstep_idle_s`` after the first frame (before it, the loop waits for the peer
-        however long it takes to start)."""
+        however long it takes to start).
+
+        A cycle follows each SENSOR_AUX after a SENSOR_POS that was not a REPEATED copy (a
+        duplicate must not step the law or answer twice; a corrupted or out-of-sequence one is
+        still answered, as a cycle without data, so that the emulator's period completes)."""
         perf = time.perf_counter
         pending = False
         started = False
+        self._lockstep = True
         while not stop and (n_cycles is None or self.cycles < n_cycles):
             msg = self.io.recv(self.opts.lockstep_idle_s if started else 0.5)
             if msg is None:
@@ -361,9 +378,9 @@ class ControllerLoop:
                 return
             started = True
             t0 = perf()
+            verdict = self.on_frame(msg)
             if msg.arbitration_id == self._id_pos:
-                pending = True
-            self.on_frame(msg)
+                pending = verdict is not Verdict.REPEATED
             if msg.arbitration_id == self._id_aux and pending:
                 pending = False
                 self.cycle()
