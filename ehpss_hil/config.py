@@ -88,6 +88,9 @@ class RtOptions:
     #: phase lock: the controller's deadline falls this long after the SENSOR_POS frame
     #: arrives (µs; 0 = a free grid; must be below half a period). See docs/runtime.md.
     sensor_age_us: float = field(default=0.0, metadata=rng(0.0, 1e6))
+    #: start each cycle as soon as its SENSOR_POS + SENSOR_AUX have arrived (the deadline is
+    #: then the latest start): sensor→command latency ≈ compute time. See docs/runtime.md.
+    wake_on_sensor: bool = False
 
 
 @dataclass(frozen=True)

@@ -112,7 +112,7 @@ def loop_options(cfg: ControllerConfig, sensor_age_us: float | None = None) -> L
     age_us = sensor_age_us if sensor_age_us is not None else cfg.rt.sensor_age_us
     if not 0.0 <= age_us * 1e-6 < 0.5 / cfg.rate_hz:
         raise ConfigError("", key, f"must be in [0, half a period = {0.5e6 / cfg.rate_hz:g} µs)")
-    return replace(opts, sensor_age_target_s=age_us * 1e-6)
+    return replace(opts, sensor_age_target_s=age_us * 1e-6, wake_on_sensor=cfg.rt.wake_on_sensor)
 
 
 def format_summary(s: dict[str, object]) -> str:

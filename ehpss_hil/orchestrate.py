@@ -64,6 +64,9 @@ class RunPlan:
     #: gets exactly one fresh frame despite the host's jitter (docs/runtime.md); at most 0.3 of
     #: the scenario's sample time (at 2 kHz: 150 µs)
     sensor_age_us: float | None = 300.0
+    #: ``rt.wake_on_sensor`` for this run (None: the config's): each cycle starts when its
+    #: sensor pair arrives, the phase-locked deadline being the latest start
+    wake_on_sensor: bool | None = True
     #: how long the controller may take to appear on the bus (slow VMs need more)
     startup_timeout_s: float = 60.0
 
@@ -126,6 +129,7 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
         **({"watchdog.timeout_cycles": plan.watchdog_cycles} if plan.watchdog_cycles else {}),
         **({"rt.sensor_age_us": min(plan.sensor_age_us, 0.3e6 * sc.sample_time_s)}
            if plan.sensor_age_us is not None else {}),
+        **({"rt.wake_on_sensor": plan.wake_on_sensor} if plan.wake_on_sensor is not None else {}),
         "rate_hz": 1.0 / sc.sample_time_s})
     emu_cfg = _derived_config(plan.emulator_yaml, out / "emulator.yaml", {
         **bus, "mode": emu_mode, "scenario": str(Path(plan.scenario_path).resolve()),

@@ -147,3 +147,33 @@ def test_phase_lock_wraps_a_just_missed_frame() -> None:
     lock.locked = True  # past the first frame's alignment
     assert lock.error(0.99e-3) == pytest.approx(-0.16e-3)  # just missed: pull back, not +T
     assert lock.correction(1.0, 1.0 - 0.99e-3) == pytest.approx(16e-6)  # later, bounded
+
+
+def test_wake_starts_the_cycle_early_and_keeps_the_grid() -> None:
+    """``wait(wake)``: the wake callback blocks instead of sleep; when it reports the awaited
+    frames (here 0.3 ms into a period) the cycle starts early (negative lateness), when it
+    times out the cycle starts at the deadline; either way the grid is unchanged."""
+    clock = FakeClock()
+    t = _timer(clock)
+    t0 = clock.t
+    timeouts: list[float] = []
+
+    def frames_at(offset_s: float | None):  # type: ignore[no-untyped-def]
+        def wake(timeout_s: float) -> bool:
+            timeouts.append(timeout_s)
+            assert timeout_s > 0.0
+            period_start = t.next_deadline_s - 1e-3
+            if offset_s is not None and period_start + offset_s < clock.t + timeout_s:
+                clock.t = max(clock.t, period_start + offset_s)
+                return True
+            clock.t += timeout_s
+            return False
+        return wake
+
+    assert t.wait(frames_at(0.3e-3)) == pytest.approx(-0.7e-3)  # 0.3 ms into period 1
+    assert clock.t == pytest.approx(t0 + 0.3e-3)
+    assert t.wait(frames_at(None)) == 0.0  # nothing came: at the deadline t0 + 2 ms
+    assert clock.t == pytest.approx(t0 + 2e-3)
+    assert t.wait(frames_at(0.5e-3)) == pytest.approx(-0.5e-3)  # grid unchanged: 2 ms + 0.5
+    assert clock.t == pytest.approx(t0 + 2.5e-3)
+    assert t.overruns == 0 and t.cycles == 3 and clock.sleeps == []

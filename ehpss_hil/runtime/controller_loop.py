@@ -19,7 +19,9 @@ from __future__ import annotations
 import logging
 import math
 import resource
+import select
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import can
@@ -62,6 +64,10 @@ class LoopOptions:
     #: (off by default: a small age also shrinks the stall tolerance of the watchdog, see
     #: docs/runtime.md)
     sensor_age_target_s: float = 0.0
+    #: start the cycle as soon as a usable SENSOR_POS + SENSOR_AUX pair has arrived (waiting on
+    #: the bus socket, never spinning), the deadline being the latest start; needs a bus with
+    #: a file descriptor (udp_multicast, socketcan), else the plain grid is used
+    wake_on_sensor: bool = False
     stats_capacity: int = 600_000
 
 
@@ -112,6 +118,10 @@ class ControllerLoop:
         self.failsafe_cycles = 0
         #: grid periods skipped by overruns, stepped without a frame (:meth:`catch_up`)
         self.skipped_periods = 0
+        #: cycles started before their deadline by the sensor pair's arrival (wake_on_sensor)
+        self.woken_by_sensor = 0
+        self._woke_wall_s = 0.0
+        self._aux_ts = 0.0
         self.saturations = 0
         self.overruns = 0
         self.last_current_a = 0.0
@@ -130,6 +140,7 @@ class ControllerLoop:
     # ---- receive ----------------------------------------------------------------------------
     def _reset_cycle_rx(self) -> None:
         self._fresh = False
+        self._aux_fresh = False
         self._e2e_bad = 0
         self._implausible = 0
         self._pos_counter = 0
@@ -165,6 +176,8 @@ class ControllerLoop:
             self._pos_counter = counter
             self._pos_ts = msg.timestamp
         elif fid == self._id_aux:
+            self._aux_fresh = True
+            self._aux_ts = msg.timestamp
             self.meas.coil_current_a = float(v["CoilCurrent"])
             self.meas.load_pressure_pa = float(v["LoadPressure"])
         else:
@@ -339,11 +352,15 @@ class ControllerLoop:
         timer = DeadlineTimer(self.ts_s, name="controller")
         target = min(self.opts.sensor_age_target_s, 0.5 * self.ts_s)
         lock = PhaseLock(self.ts_s, target) if target > 0.0 else None
+        wake = self._sensor_wake() if self.opts.wake_on_sensor else None
         timer.start()
         perf = time.perf_counter
         while not stop and (n_cycles is None or self.cycles < n_cycles):
-            lateness = timer.wait()
+            lateness = timer.wait(wake)
             t0 = perf()
+            if lateness < 0.0:  # woken by the sensor pair: lateness from its arrival
+                self.woken_by_sensor += 1
+                lateness = max(0.0, self._woke_wall_s - self._aux_ts)
             rx_wall = self.poll_cycle(timer.last_skipped)
             if lock is not None and rx_wall is not None:
                 arrival = rx_wall - (time.time() - time.monotonic())
@@ -356,6 +373,29 @@ class ControllerLoop:
             self.overruns = timer.overruns
         self.stats.overruns = timer.overruns
         self.stats.skipped = timer.skipped
+
+    def _sensor_wake(self) -> Callable[[float], bool] | None:
+        """The ``wake`` of :meth:`DeadlineTimer.wait`: block on the bus socket up to the
+        deadline, consume what arrives (the cycle's drain, done early), True once this cycle
+        has a usable sensor pair. None when the bus has no file descriptor."""
+        try:
+            fd = self.io.bus.fileno()
+        except (NotImplementedError, OSError, AttributeError):
+            fd = -1
+        if fd < 0:
+            log.warning("wake_on_sensor: this bus has no file descriptor; plain deadline grid")
+            return None
+        fds = (fd,)
+
+        def wake(timeout_s: float) -> bool:
+            if not select.select(fds, (), (), timeout_s)[0]:
+                return False
+            self._woke_wall_s = time.time()
+            for msg in self.io.drain():
+                self.on_frame(msg)
+            return self._fresh and self._aux_fresh
+
+        return wake
 
     def run_lockstep(self, stop: StopFlag, n_cycles: int | None = None) -> None:
         """One cycle per received sensor pair, until ``stop``, ``n_cycles`` or the bus is idle
@@ -398,6 +438,7 @@ class ControllerLoop:
     def summary(self) -> dict[str, object]:
         """Counters and loop statistics (JSON-able)."""
         return {"cycles": self.cycles, "skipped_periods": self.skipped_periods,
+                "woken_by_sensor": self.woken_by_sensor,
                 "state": self.life.state.name,
                 "failsafe_reason": self.life.reason.name, "watchdog_trips": self.wd.trips,
                 "failsafe_cycles": self.failsafe_cycles, "saturations": self.saturations,

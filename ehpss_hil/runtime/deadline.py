@@ -53,8 +53,13 @@ class DeadlineTimer:
         """Move the next deadline by ``delta_s`` (s): a bounded phase slew (see phaselock)."""
         self._next += delta_s
 
-    def wait(self) -> float:
-        """Sleep until the next deadline; returns the wake-up lateness (s, ≥ 0 normally)."""
+    def wait(self, wake: Callable[[float], bool] | None = None) -> float:
+        """Sleep until the next deadline; returns the wake-up lateness (s, ≥ 0 normally).
+
+        ``wake(timeout_s)``, when given, replaces the sleep: it blocks at most ``timeout_s`` and
+        returns True when the cycle should start now (e.g. the sensor frames it waits for have
+        arrived); the cycle then starts before its deadline (negative lateness) and the grid
+        goes on from that deadline, unchanged."""
         now = self._clock()
         self.last_skipped = 0
         if now > self._next:
@@ -65,7 +70,12 @@ class DeadlineTimer:
             self._overrun(now, missed)
         else:
             while now < self._next:  # sleep may return a little early: sleep again, never spin
-                self._sleep(self._next - now)
+                if wake is not None:
+                    if wake(self._next - now):
+                        now = self._clock()
+                        break
+                else:
+                    self._sleep(self._next - now)
                 now = self._clock()
         lateness = now - self._next
         self._next += self.period_s
