@@ -99,3 +99,24 @@ def test_oracle_uses_the_truth() -> None:
     assert c.k_loe_hat == pytest.approx(0.4)
     c.step(Measurement(position_m=5e-4, reference_m=1e-3))
     assert not c.sensor_trusted  # k_DFT below 0.15: model position instead of the sensor
+
+
+def test_mmac_reanchors_x_hat_after_a_gap_and_only_then() -> None:
+    """x̂ is dead-reckoned through cycles without data; the first trusted sample after the gap
+    puts it on y_s/θ̂_D (and the position bank skips that sample), while an ordinary sample only
+    nudges it at the anchor rate. Past the start-up warm-up in both cases."""
+    c = make_controller("mmac", PARAMS, TS)
+    m = Measurement()
+    for _ in range(200):  # at rest, past the 0.1 s warm-up
+        c.step(m)
+    j_before = list(c.pos_bank.j)
+    m.position_m = 20e-6  # the sensor disagrees with x̂ (0) by 20 µm
+    c.step(m)
+    assert 0.0 < c.xhat.x < 1e-6  # an ordinary sample: a nudge of Ts·2 s⁻¹
+    m.fresh = False
+    c.step(m)
+    c.step(m)
+    m.fresh = True
+    c.step(m)
+    assert c.xhat.x == pytest.approx(20e-6 / c.k_dft_hat, rel=1e-12)  # re-anchored after the gap
+    assert c.pos_sup.active == 0 and len(j_before) == len(c.pos_bank.j)

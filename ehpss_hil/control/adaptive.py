@@ -58,6 +58,7 @@ class MmacController(LoopBase):
         self.pos_sup.reset()
         self.flow.reset()
         self._in_flow = False
+        self._gap = False
 
     def step(self, meas: Measurement) -> ValveCommand:
         """Predict, score both banks, supervise, compensate, PI."""
@@ -70,7 +71,18 @@ class MmacController(LoopBase):
             ss.update(abs(v) * self._inv_s_spool)
             xh = self.xhat.integrate(y_v)
             pb, ps = self.pos_bank, self.pos_sup
-            if not self.flow.flow_fault:  # under H_Q the position channel has nothing to explain
+            if self._gap:  # first sample after cycles without data: x̂ was dead-reckoned
+                self._gap = False
+                td = self.k_dft_hat
+                if (not self.pos_sup.guarded and td >= self._failed_below
+                        and not self.flow.flow_fault):
+                    # re-anchor on the trusted sensor (a dead-reckoned offset must not be taken
+                    # for a drift by the position bank) and skip this sample's regression
+                    xh = self.xhat.x = meas.position_m / td
+                elif not self.flow.flow_fault:
+                    pb.update(meas.position_m, xh)
+                    ps.update(abs(xh) * self._inv_s_pos)
+            elif not self.flow.flow_fault:  # under H_Q the position channel has nothing to explain
                 pb.update(meas.position_m, xh)
                 ps.update(abs(xh) * self._inv_s_pos)
             tl = 1.0 if ss.guarded else sb.theta[ss.active]
@@ -80,6 +92,7 @@ class MmacController(LoopBase):
             if self._flow_on:
                 self._flow_split(meas, y_v, tl)
         else:
+            self._gap = True
             v = self.valve.step(self._echo)
             self.xhat.integrate(self.k_loe_hat / self.k_q_hat * v)
             if self._flow_on:
