@@ -91,7 +91,7 @@ def multicast_route_reason(group: str = DEFAULT_MULTICAST_GROUP) -> str | None:
             "--interface socketcan --channel vcan0")
 
 
-def _derived_config(src: Path, dst: Path, overrides: dict[str, Any]) -> Path:
+def write_config(src: Path, dst: Path, overrides: dict[str, Any]) -> Path:
     """Write ``src`` with ``overrides`` applied and its relative paths made absolute."""
     data = load_yaml(src) or {}
     base = src.resolve().parent
@@ -123,7 +123,7 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
     if plan.channel:
         bus["bus.channel"] = plan.channel
     emu_mode = "lockstep" if plan.lockstep else "realtime"
-    ctrl_cfg = _derived_config(plan.controller_yaml, out / "controller.yaml", {
+    ctrl_cfg = write_config(plan.controller_yaml, out / "controller.yaml", {
         **bus, "mode": plan.mode, "reference": _reference_dict(sc),
         **({"watchdog.auto_recover": True} if plan.auto_recover else {}),
         **({"watchdog.timeout_cycles": plan.watchdog_cycles} if plan.watchdog_cycles else {}),
@@ -131,7 +131,7 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
            if plan.sensor_age_us is not None else {}),
         **({"rt.wake_on_sensor": plan.wake_on_sensor} if plan.wake_on_sensor is not None else {}),
         "rate_hz": 1.0 / sc.sample_time_s})
-    emu_cfg = _derived_config(plan.emulator_yaml, out / "emulator.yaml", {
+    emu_cfg = write_config(plan.emulator_yaml, out / "emulator.yaml", {
         **bus, "mode": emu_mode, "scenario": str(Path(plan.scenario_path).resolve()),
         "truth": True, "rate_hz": 1.0 / sc.sample_time_s})
     bus_cfg = load_yaml(ctrl_cfg)["bus"]

@@ -20,9 +20,10 @@ from typing import Any
 import yaml
 
 from .. import PROJECT_ROOT
+from ..orchestrate import write_config
 from ..schema import load_yaml
 from .logcheck import read_candump
-from .procs import CONTROLLER_YAML, EMULATOR_YAML, PY, Child, Trial, write_config
+from .procs import CONTROLLER_YAML, EMULATOR_YAML, PY, Child, Trial
 
 SCENARIO = PROJECT_ROOT / "scenarios" / "case1-loe.yaml"
 #: keys that name files: wrong values beyond the type error

@@ -19,10 +19,9 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-import yaml
-
 from .. import PROJECT_ROOT
 from ..netns import PrivateNetns, netns_unavailable_reason
+from ..orchestrate import write_config
 from ..schema import load_yaml
 
 PY = sys.executable
@@ -92,24 +91,6 @@ class Child:
         if self.popen.poll() is None:
             self.popen.send_signal(signal.SIGKILL)
         self.popen.wait()
-
-
-def write_config(src: Path, dst: Path, overrides: dict[str, Any]) -> Path:
-    """``src`` with dotted-key ``overrides`` applied and relative file paths made absolute."""
-    data = load_yaml(src) or {}
-    base = src.resolve().parent
-    for key in ("params", "dbc", "scenario"):
-        v = data.get(key)
-        if isinstance(v, str) and v and not Path(v).is_absolute():
-            data[key] = str((base / v).resolve())
-    for dotted, value in overrides.items():
-        node = data
-        *parents, leaf = dotted.split(".")
-        for p in parents:
-            node = node.setdefault(p, {})
-        node[leaf] = value
-    dst.write_text(yaml.safe_dump(data, sort_keys=False))
-    return dst
 
 
 class Trial:
