@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import cast
 
 from .bus import open_bus
-from .codec import FrameCodec
 from .config import (
     DAEMON_MODES,
     ControllerConfig,
@@ -28,7 +27,7 @@ from .control.base import Controller
 from .errors import ConfigError
 from .physics.params import Params, load_params
 from .runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
-from .runtime.frameio import FrameIO, open_can_logger
+from .runtime.frameio import FrameIO, open_process_logger, process_codec
 from .runtime.rt import apply_rt_options, freeze_gc
 from .runtime.signals import install_stop_handlers, restore_handlers
 from .sim.blas import limit_blas_threads
@@ -95,14 +94,6 @@ def load_factory(spec: str | None) -> ControllerFactory:
     return fn
 
 
-def make_codec(cfg: ControllerConfig) -> FrameCodec:
-    """The frame codec with this config's DBC and ID layout."""
-    return FrameCodec(cfg.dbc or None, id_base=cfg.ids.id_base,
-                      node_ids={"HEARTBEAT_CTRL": cfg.ids.controller_node,
-                                "HEARTBEAT_EMU": cfg.ids.emulator_node},
-                      max_delta_counter=cfg.ids.max_delta_counter)
-
-
 def loop_options(cfg: ControllerConfig, sensor_age_us: float | None = None) -> LoopOptions:
     """The loop's rates, fail-safe policy and phase-lock target from the config (+ override)."""
     opts = LoopOptions(rate_hz=cfg.rate_hz, status_rate_hz=cfg.status_rate_hz,
@@ -135,22 +126,13 @@ def run_daemon(a: DaemonArgs) -> int:
     """Configure, run until stopped, shut down fail-safe; returns the exit code (0)."""
     cfg = resolve_config(a)
     params = load_params(cfg.params or None)
-    try:
-        codec = make_codec(cfg)
-    except ValueError as exc:  # FrameError, or cantools on a file that is no DBC
-        raise ConfigError(str(a.config), "dbc", f"cannot load {cfg.dbc}: {exc}") from exc
+    codec = process_codec(cfg.dbc, cfg.ids, str(a.config))
     controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
     bus = open_bus(cfg.bus)
-    try:
-        logger = open_can_logger(a.log or cfg.log.path, cfg.log, cfg.bus, sidecar={
-            "tool": "ehpss-hil controller", "config": asdict(cfg), "config_path": str(a.config),
-            "dbc": cfg.dbc or None,
-            "mode": cfg.mode, "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
-            "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "lockstep": a.lockstep})
-    except OSError as exc:  # nothing was sent yet
-        bus.shutdown()
-        raise ConfigError(str(a.config), "--log" if a.log else "log.path",
-                          f"cannot write the log: {exc}") from exc
+    logger = open_process_logger(a.log, cfg.log, cfg.bus, bus, str(a.config), sidecar={
+        "tool": "ehpss-hil controller", "config": asdict(cfg), "config_path": str(a.config),
+        "dbc": cfg.dbc or None, "mode": cfg.mode, "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
+        "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "lockstep": a.lockstep})
     io = FrameIO(bus, codec, OWN_FRAMES, logger)
     loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us))
     stop, previous = install_stop_handlers()

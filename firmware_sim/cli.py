@@ -18,11 +18,10 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 from ehpss_hil.bus import open_bus
-from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import EmulatorConfig, apply_overrides, load_emulator_config
 from ehpss_hil.errors import ConfigError, EhpssError
 from ehpss_hil.physics.params import load_params
-from ehpss_hil.runtime.frameio import FrameIO, open_can_logger
+from ehpss_hil.runtime.frameio import FrameIO, open_process_logger, process_codec
 from ehpss_hil.runtime.rt import apply_rt_options, freeze_gc
 from ehpss_hil.runtime.signals import install_stop_handlers, restore_handlers
 from ehpss_hil.scenario import Scenario, load_scenario
@@ -79,14 +78,6 @@ def _resolve(args: argparse.Namespace) -> tuple[EmulatorConfig, Scenario]:
     return cfg, scenario
 
 
-def make_codec(cfg: EmulatorConfig) -> FrameCodec:
-    """The frame codec with this config's DBC and ID layout."""
-    return FrameCodec(cfg.dbc or None, id_base=cfg.ids.id_base,
-                      node_ids={"HEARTBEAT_CTRL": cfg.ids.controller_node,
-                                "HEARTBEAT_EMU": cfg.ids.emulator_node},
-                      max_delta_counter=cfg.ids.max_delta_counter)
-
-
 def format_summary(s: dict[str, object]) -> str:
     """The counters printed at exit."""
     st = s["stats"]
@@ -109,22 +100,14 @@ def run(args: argparse.Namespace) -> int:
     """Configure, run until the end/stop signal, print the counters; returns the exit code."""
     cfg, scenario = _resolve(args)
     params = load_params(cfg.params or None)
-    try:
-        codec = make_codec(cfg)
-    except ValueError as exc:  # FrameError, or cantools on a file that is no DBC
-        raise ConfigError(str(args.config), "dbc", f"cannot load {cfg.dbc}: {exc}") from exc
+    codec = process_codec(cfg.dbc, cfg.ids, str(args.config))
     emu = PlantEmulation(params, scenario)
     bus = open_bus(cfg.bus)
-    try:
-        logger = open_can_logger(args.log or cfg.log.path, cfg.log, cfg.bus, sidecar={
-            "tool": "firmware-sim", "config": asdict(cfg), "config_path": str(args.config),
-            "dbc": cfg.dbc or None, "scenario": asdict(scenario), "scenario_name": scenario.name,
-            "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
-            "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "mode": cfg.mode})
-    except OSError as exc:  # nothing was sent yet
-        bus.shutdown()
-        raise ConfigError(str(args.config), "--log" if args.log else "log.path",
-                          f"cannot write the log: {exc}") from exc
+    logger = open_process_logger(args.log, cfg.log, cfg.bus, bus, str(args.config), sidecar={
+        "tool": "firmware-sim", "config": asdict(cfg), "config_path": str(args.config),
+        "dbc": cfg.dbc or None, "scenario": asdict(scenario), "scenario_name": scenario.name,
+        "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
+        "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "mode": cfg.mode})
     io = FrameIO(bus, codec, OWN_FRAMES, logger)
     proc = EmulatorProcess(emu, io, EmulatorOptions(
         command_timeout_s=cfg.command_timeout_s, truth=cfg.truth, fault_inject=cfg.fault_inject,

@@ -19,8 +19,8 @@ import can
 
 from ..bus import drop_own_frames, frame_reader
 from ..codec import FrameCodec
-from ..config import BusConfig, LogConfig
-from ..errors import FrameError
+from ..config import BusConfig, CanIds, LogConfig
+from ..errors import ConfigError, FrameError
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +50,32 @@ def open_can_logger(path: str, cfg: LogConfig, bus: BusConfig,
                                         backups=cfg.backups, queue_lines=cfg.queue_lines,
                                         sidecar=sidecar)
     return logger
+
+
+def process_codec(dbc: str, ids: CanIds, config_path: str) -> FrameCodec:
+    """The frame codec with a process config's DBC (empty: the shipped one) and ID layout; a DBC
+    that cannot be loaded is a :class:`ConfigError` naming ``dbc`` (exit 2)."""
+    try:
+        return FrameCodec(dbc or None, id_base=ids.id_base,
+                          node_ids={"HEARTBEAT_CTRL": ids.controller_node,
+                                    "HEARTBEAT_EMU": ids.emulator_node},
+                          max_delta_counter=ids.max_delta_counter)
+    except ValueError as exc:  # FrameError, or cantools on a file that is no DBC
+        raise ConfigError(config_path, "dbc", f"cannot load {dbc}: {exc}") from exc
+
+
+def open_process_logger(cli_path: str | None, cfg: LogConfig, bus_cfg: BusConfig,
+                        bus: can.BusABC, config_path: str,
+                        sidecar: dict[str, Any]) -> FrameLogger | None:
+    """:func:`open_can_logger` for a process whose bus is open (``--log`` wins over
+    ``log.path``): a log that cannot be written shuts the bus (nothing was sent yet) and is a
+    :class:`ConfigError` naming the option or key it came from (exit 2)."""
+    try:
+        return open_can_logger(cli_path or cfg.path, cfg, bus_cfg, sidecar=sidecar)
+    except OSError as exc:
+        bus.shutdown()
+        raise ConfigError(config_path, "--log" if cli_path else "log.path",
+                          f"cannot write the log: {exc}") from exc
 
 
 class FrameIO:
