@@ -32,6 +32,7 @@ from ..canlog.reader import resolve_log
 from ..codec import FrameCodec, Verdict
 from ..physics.params import Params, load_params
 from ..physics.reference import ReferenceModel
+from ..runtime.status_frames import MODE_CODE
 from ..scenario import Scenario
 from ..sim.result import N_SLOTS, SimResult
 from .logmeta import RunInfo, reference_of, run_info
@@ -39,7 +40,7 @@ from .metrics import RunMetrics, compute_metrics
 
 __all__ = ["LogMetrics", "LogRun", "load_log_run", "log_metrics", "reference_of"]
 
-MODE_NAMES = {0: "nrc", 1: "smac", 2: "mmac-paper", 3: "mmac", 4: "oracle"}
+MODE_NAMES = {code: mode for mode, code in MODE_CODE.items()}  # CTRL_STATUS Mode → mode
 _NO_MODEL = 15  # CTRL_STATUS nibble of "no bank" (−1 & 0xF)
 
 

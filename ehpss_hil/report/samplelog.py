@@ -23,9 +23,9 @@ from ..control.base import Measurement
 from ..control.controllers import LoopBase, make_controller
 from ..control.tuning import ControlTuning
 from ..physics.params import Params, load_params
+from ..runtime.status_frames import MODE_CODE
 from ..scenario import Scenario
 
-MODE_CODE = {"nrc": 0, "smac": 1, "mmac-paper": 2, "mmac": 3, "oracle": 4}
 _T0_S = 1_767_225_600.0  # 2026-01-01T00:00:00Z: a fixed wall-clock origin (reproducible logs)
 
 

@@ -19,9 +19,7 @@ from __future__ import annotations
 import logging
 import math
 import resource
-import select
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import can
@@ -31,20 +29,19 @@ from ..codec import Verdict
 from ..config import Watchdog
 from ..control.base import Controller, Measurement
 from ..scenario import Reference
-from .deadline import DeadlineTimer
+from .deadline import DeadlineTimer, socket_wake
 from .frameio import FrameIO
 from .lifecycle import Lifecycle, State
 from .phaselock import PhaseLock
 from .signals import StopFlag
 from .stats import LoopStats
+from .status_frames import StatusReporter
 from .watchdog import SensorWatchdog
 
 log = logging.getLogger("ehpss_hil.controller")
 
 OWN_FRAMES = ("VALVE_CMD", "CTRL_STATUS", "CTRL_INDEX", "CTRL_STATS", "HEARTBEAT_CTRL")
-MODE_CODE = {"nrc": 0, "smac": 1, "mmac-paper": 2, "mmac": 3, "oracle": 4}
 _E2E_VERDICTS = (Verdict.CRC_ERROR, Verdict.REPEATED, Verdict.WRONG_SEQUENCE, Verdict.BAD_DLC)
-_F32_MAX = 3.0e38
 
 
 @dataclass(frozen=True)
@@ -128,7 +125,7 @@ class ControllerLoop:
         self.last_enable = False
         self._override_m: float | None = None
         self._compute_max_s = 0.0
-        self._index_queue: list[tuple[int, float, float]] = []
+        self.reporter = StatusReporter(io)
         self._stats_due = False
         self._hb_due = False
         self._periodic_cycle = 0  # self.cycles at the last _periodic
@@ -309,8 +306,8 @@ class ControllerLoop:
             self.io.send("HEARTBEAT_CTRL", {"NmtState": self.life.nmt_state})
             self._hb_due = False
             busy = self._hb_every > 1
-        if self._index_queue and not busy and not status_now:
-            self._send_index(*self._index_queue.pop())
+        if self.reporter.pending and not busy and not status_now:
+            self.reporter.send_next_index()
         if self._log_every and c // self._log_every > prev // self._log_every:
             self._log_counters()
 
@@ -323,24 +320,8 @@ class ControllerLoop:
         self._interval_compute_max_s = 0.0
 
     def send_status(self, all_index: bool = False) -> None:
-        """CTRL_STATUS now; the CTRL_INDEX frames (one per model slot) one per following cycle,
-        or all at once with ``all_index``."""
-        s = self.controller.status()
-        self.io.send("CTRL_STATUS", {
-            "State": int(self.life.state), "FailsafeReason": int(self.life.reason),
-            "Mode": MODE_CODE.get(self.controller.mode, 15),
-            "ActiveSpoolModel": _nibble(s.active_model.get("spool", 0)),
-            "ActivePosModel": _nibble(s.active_model.get("position", 0)),
-            "KLoeHat": _clip(s.k_loe_hat, 0.0, 4.095), "KDftHat": _clip(s.k_dft_hat, 0.0, 4.095),
-            "Switches": min(s.switches, 255)})
-        self._index_queue = [(slot, j, s.theta.get(slot, 0.0))
-                             for slot, j in reversed(s.index.items()) if 0 <= slot <= 15]
-        while all_index and self._index_queue:
-            self._send_index(*self._index_queue.pop())
-
-    def _send_index(self, slot: int, j: float, theta: float) -> None:
-        self.io.send("CTRL_INDEX", {"ModelSlot": slot, f"J_{slot}": _clip(j, -_F32_MAX, _F32_MAX),
-                                    f"Theta_{slot}": _clip(theta, 0.0, 6.5535)})
+        """CTRL_STATUS now, its CTRL_INDEX frames one per following cycle (or all at once)."""
+        self.reporter.send(self.controller, self.life, all_index)
 
     # ---- drivers ----------------------------------------------------------------------------
     def start(self) -> None:
@@ -352,7 +333,7 @@ class ControllerLoop:
         timer = DeadlineTimer(self.ts_s, name="controller")
         target = min(self.opts.sensor_age_target_s, 0.5 * self.ts_s)
         lock = PhaseLock(self.ts_s, target) if target > 0.0 else None
-        wake = self._sensor_wake() if self.opts.wake_on_sensor else None
+        wake = socket_wake(self.io.bus, self._drain_for_wake) if self.opts.wake_on_sensor else None
         timer.start()
         perf = time.perf_counter
         while not stop and (n_cycles is None or self.cycles < n_cycles):
@@ -374,28 +355,13 @@ class ControllerLoop:
         self.stats.overruns = timer.overruns
         self.stats.skipped = timer.skipped
 
-    def _sensor_wake(self) -> Callable[[float], bool] | None:
-        """The ``wake`` of :meth:`DeadlineTimer.wait`: block on the bus socket up to the
-        deadline, consume what arrives (the cycle's drain, done early), True once this cycle
-        has a usable sensor pair. None when the bus has no file descriptor."""
-        try:
-            fd = self.io.bus.fileno()
-        except (NotImplementedError, OSError, AttributeError):
-            fd = -1
-        if fd < 0:
-            log.warning("wake_on_sensor: this bus has no file descriptor; plain deadline grid")
-            return None
-        fds = (fd,)
-
-        def wake(timeout_s: float) -> bool:
-            if not select.select(fds, (), (), timeout_s)[0]:
-                return False
-            self._woke_wall_s = time.time()
-            for msg in self.io.drain():
-                self.on_frame(msg)
-            return self._fresh and self._aux_fresh
-
-        return wake
+    def _drain_for_wake(self) -> bool:
+        """The bus became readable before the deadline: consume what arrived (this cycle's
+        drain, done early); True once the cycle has a usable sensor pair."""
+        self._woke_wall_s = time.time()
+        for msg in self.io.drain():
+            self.on_frame(msg)
+        return self._fresh and self._aux_fresh
 
     def run_lockstep(self, stop: StopFlag, n_cycles: int | None = None) -> None:
         """One cycle per received sensor pair, until ``stop``, ``n_cycles`` or the bus is idle
@@ -448,12 +414,3 @@ class ControllerLoop:
                 "stats": self.stats.summary(),
                 "max_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}
 
-
-def _clip(v: float, lo: float, hi: float) -> float:
-    if not math.isfinite(v):
-        return hi if v > 0 else lo
-    return max(lo, min(hi, v))
-
-
-def _nibble(v: int) -> int:
-    return int(v) & 0x0F

@@ -11,8 +11,11 @@ once a second.
 from __future__ import annotations
 
 import logging
+import select
 import time
 from collections.abc import Callable
+
+import can
 
 log = logging.getLogger(__name__)
 
@@ -91,3 +94,22 @@ class DeadlineTimer:
                         self.period_s * 1e3, self.overruns)
             self._last_warn = now
             self._unwarned = 0
+
+
+def socket_wake(bus: can.BusABC, on_readable: Callable[[], bool]) -> Callable[[float], bool] | None:
+    """A ``wake`` for :meth:`DeadlineTimer.wait`: block in ``select()`` on the bus socket up to
+    the deadline; when it becomes readable, ``on_readable()`` (which drains it) says whether the
+    cycle should start now. None (and a warning) when the bus has no file descriptor."""
+    try:
+        fd = bus.fileno()
+    except (NotImplementedError, OSError, AttributeError):
+        fd = -1
+    if fd < 0:
+        log.warning("wake_on_sensor: this bus has no file descriptor; plain deadline grid")
+        return None
+    fds = (fd,)
+
+    def wake(timeout_s: float) -> bool:
+        return bool(select.select(fds, (), (), timeout_s)[0]) and on_readable()
+
+    return wake
