@@ -202,11 +202,15 @@ class EmulatorProcess:
 
         ``skipped``: grid periods this process slept through (an overrun). The plant does not
         stop when its emulator is late: it advances over them with the held command (the one
-        just drained) before this period's sample, sending nothing for them, so the plant stays
-        on the wall clock (and so do the scenario's events)."""
+        just drained) before this period's sample, so the plant stays on the wall clock (and so
+        do the scenario's events). Their sensor samples are lost: nothing is sent for them, and
+        the sensor frames' E2E counters move on, so the receiver sees how many samples passed
+        (OK_SOME_LOST), as from a sensor that samples on its own clock."""
         setpoint = self._take_command(self._drain())
         for _ in range(skipped):
             self.emu.measure()  # draws the sample's noise: the streams stay on the sample grid
+            self.codec.skip("SENSOR_POS")
+            self.codec.skip("SENSOR_AUX")
             self.emu.advance(setpoint)
             self._check_faults()
             self.periods += 1

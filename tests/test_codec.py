@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ehpss_hil import DEFAULT_DBC
-from ehpss_hil.codec import FrameCodec, Verdict
+from ehpss_hil.codec import FrameCodec, Verdict, counter_steps
 from ehpss_hil.codec.e2e import CounterCheck, E2EState, protect
 from ehpss_hil.errors import FrameError
 
@@ -169,3 +169,14 @@ def test_cantools_dump_reads_the_dbc() -> None:
                          capture_output=True, text=True, check=True).stdout
     for name in CODEC.names:
         assert f"Name:           {name}" in out
+
+
+def test_counter_steps_counts_samples_across_the_wrap() -> None:
+    """Samples between two E2E counters (what the controller's ``Measurement.samples`` is):
+    1 for the next frame, the wrap from 15 to 0 included, 16 for a whole wrap; consistent with
+    the receiver's sequence check (delta 1 → OK, 2…3 → OK_SOME_LOST)."""
+    assert [counter_steps(c, p) for c, p in ((3, 2), (0, 15), (2, 15), (5, 5), (1, 13))] == \
+        [1, 1, 3, 16, 4]
+    chk = CounterCheck(3)
+    chk.check(14)
+    assert chk.check(1) is E2EState.OK_SOME_LOST and counter_steps(1, 14) == 3

@@ -156,8 +156,9 @@ def test_fault_inject_only_when_enabled() -> None:
 
 def test_skipped_periods_advance_the_plant_without_frames(rig: Rig) -> None:
     """An emulator overrun that skipped 2 periods: the plant still advances 3 periods with the
-    held command (the plant does not stop), one sensor pair goes out, and the state equals an
-    offline emulation stepped 3 times with that command."""
+    held command (the plant does not stop), one sensor pair goes out with its E2E counters 3
+    on (2 samples lost), and the state equals an offline emulation stepped 3 times with that
+    command."""
     rig.cmd(4e-4)
     rig.step()
     k0 = rig.proc.emu.k
@@ -173,6 +174,14 @@ def test_skipped_periods_advance_the_plant_without_frames(rig: Rig) -> None:
     rig.proc.step_period(skipped=2)
     assert rig.proc.emu.k == k0 + 3 and rig.proc.skipped_periods == 2
     assert rig.proc.io.sent["SENSOR_POS"] == sent + 1
+    # the receiver sees the two skipped samples as lost: counters moved on by 3 (OK_SOME_LOST)
+    got = {}
+    while (m := rig.peer.recv(0.0)) is not None:
+        d = rig.rx.classify(m)
+        if d.name in ("SENSOR_POS", "SENSOR_AUX"):
+            got.setdefault(d.name, []).append((m.data[1] & 0x0F, d.verdict))
+    assert got == {"SENSOR_POS": [(3, Verdict.OK_SOME_LOST)],  # the first pair had counter 0
+                   "SENSOR_AUX": [(3, Verdict.OK_SOME_LOST)]}
     for _ in range(3):
         ref.measure()
         ref.advance(i_a)

@@ -76,6 +76,12 @@ def crc_ok(payload: bytes | bytearray, data_ids: tuple[int, ...]) -> bool:
     return payload[0] == profile2_crc(payload, data_ids[payload[1] & 0x0F])
 
 
+def counter_steps(counter: int, previous: int) -> int:
+    """Samples from the frame with 4-bit counter ``previous`` to the one with ``counter``:
+    1…16 (a whole wrap, 0 apart, counts as 16; more than 16 cannot be told from the counter)."""
+    return ((counter - previous - 1) & 0x0F) + 1
+
+
 class CounterCheck:
     """Profile-2 style sequence check for one frame ID.
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..canlog import read_log, read_sidecar
 from ..canlog.reader import resolve_log
-from ..codec import FrameCodec
+from ..codec import FrameCodec, counter_steps
 from ..config import load_controller_config
 from ..control.base import Measurement
 from ..control.tuning import ControlTuning
@@ -156,6 +156,8 @@ class _Replayer:
         self.k = 0
         self.cycle_count = 0
         self.prev = Measurement()
+        self._pos_counter = 0  # E2E counter of the newest usable SENSOR_POS
+        self._used_counter: int | None = None  # … of the one last stepped on (as the daemon)
         self._names = {self.codec.can_id(n): n for n in
                        ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD", "SETPOINT")}
 
@@ -181,6 +183,7 @@ class _Replayer:
         v, m = d.values, self.meas
         if name == "SENSOR_POS":
             m.position_m, m.spool_m, self.fresh = float(v["Position"]), float(v["Spool"]), True
+            self._pos_counter = msg.data[1] & 0x0F
         elif name == "SENSOR_AUX":
             m.coil_current_a, m.load_pressure_pa = float(v["CoilCurrent"]), float(v["LoadPressure"])
         elif name == "SETPOINT":
@@ -221,9 +224,14 @@ class _Replayer:
         if self.in_failsafe:  # FAULT → ACTIVE: the daemon resets the controller
             self.ctrl.reset()
             self.in_failsafe = False
+            self._used_counter = None
         m = self.meas
         m.reference_m = self.override if self.override is not None else self.x_d(k)
         m.fresh = self.fresh
+        if self.fresh:
+            used = self._used_counter
+            m.samples = 0 if used is None else counter_steps(self._pos_counter, used)
+            self._used_counter = self._pos_counter
         cmd = self.ctrl.step(m)
         self._snapshot()
         cur = cmd.current_a if math.isfinite(cmd.current_a) else 0.0

@@ -25,6 +25,10 @@ from .flowgain import FlowGainMonitor
 from .supervisor import Supervisor
 from .tuning import ControlTuning
 
+#: the predictors are redone over at most this many sensor samples (beyond: dead-reckoned and
+#: re-anchored): far from the counter's wrap at 16, the spool still close to linear between
+RESYNC_SAMPLES = 8
+
 
 class MmacController(LoopBase):
     """Corrected MMAC on two channels (spool, position) with bumpless compensation."""
@@ -58,21 +62,27 @@ class MmacController(LoopBase):
         self.pos_sup.reset()
         self.flow.reset()
         self._in_flow = False
-        self._gap = False
+        self._dead = 0
+        self._span = 1  # sensor samples this fresh cycle stands for (when redone on them)
 
     def step(self, meas: Measurement) -> ValveCommand:
         """Predict, score both banks, supervise, compensate, PI."""
         if meas.fresh:
-            self._echo = meas.coil_current_a
-            v = self.valve.step(self._echo)
             y_v = meas.spool_m
+            dead, self._dead = self._dead, 0
+            resync = self._resync(meas.samples, dead)
+            self._span = meas.samples if resync else 1
+            if resync:
+                v, xh = self._predict_span(meas.coil_current_a, y_v, meas.samples, dead)
+            else:
+                self._echo = meas.coil_current_a
+                v = self.valve.step(self._echo)
+                xh = self.xhat.integrate(y_v)
             sb, ss = self.spool_bank, self.spool_sup
             sb.update(y_v, v)
             ss.update(abs(v) * self._inv_s_spool)
-            xh = self.xhat.integrate(y_v)
             pb, ps = self.pos_bank, self.pos_sup
-            if self._gap:  # first sample after cycles without data: x̂ was dead-reckoned
-                self._gap = False
+            if dead and not resync:  # after cycles without data x̂ was dead-reckoned
                 td = self.k_dft_hat
                 if (not self.pos_sup.guarded and td >= self._failed_below
                         and not self.flow.flow_fault):
@@ -92,12 +102,49 @@ class MmacController(LoopBase):
             if self._flow_on:
                 self._flow_split(meas, y_v, tl)
         else:
-            self._gap = True
+            if self._dead == 0:  # the predictors' state at the last sample seen
+                self.valve.mark()
+                self.xhat.mark()
+                self.flow.mark()
+            self._dead += 1
             v = self.valve.step(self._echo)
             self.xhat.integrate(self.k_loe_hat / self.k_q_hat * v)
             if self._flow_on:
                 self.flow.propagate(self._echo)
         return self._close(meas)
+
+    @staticmethod
+    def _resync(samples: int, dead: int) -> bool:
+        """Should the predictors be redone on the sensor's sample clock? Whenever the sensor
+        samples since the last one seen differ from one, or cycles without data lie between
+        (``dead``), as long as both spans are short (≤ :data:`RESYNC_SAMPLES`): a realtime slip,
+        samples superseded within one cycle, a few lost frames. A long gap keeps the
+        dead-reckoned x̂ and re-anchors it (the 4-bit counter cannot count past 16)."""
+        if samples <= 0 or (samples == 1 and dead == 0):
+            return False
+        return samples <= RESYNC_SAMPLES and dead < RESYNC_SAMPLES
+
+    def _predict_span(self, echo_a: float, y_v: float, samples: int,
+                      dead: int) -> tuple[float, float]:
+        """Valve model and x̂ stepped over ``samples`` sensor samples from the last one seen
+        (the dead-reckoned steps of the ``dead`` cycles without data undone): the valve model on
+        this sample's current echo throughout (exact when the samples were skipped by a late
+        emulator, which holds one command over them; when frames were superseded within a cycle
+        the currents between are not known, and the last is as good a guess as any), x̂ on the
+        spool it predicts (k̂_LOE·v) for the samples not seen, then on this sample's spool LVDT.
+        Returns (v, x̂) (m)."""
+        valve, xh, flow = self.valve, self.xhat, self.flow
+        if dead:
+            valve.rewind()
+            xh.rewind()
+            flow.rewind()
+        gain = self.k_loe_hat / self.k_q_hat
+        for _ in range(samples - 1):
+            xh.integrate(gain * valve.step(echo_a))
+            if self._flow_on:  # the pressure model too (its update steps this sample)
+                flow.propagate(echo_a)
+        self._echo = echo_a
+        return valve.step(echo_a), xh.integrate(y_v)
 
     def _flow_split(self, meas: Measurement, y_v: float, tl: float) -> None:
         """Load-pressure test: is the position-channel change a flow-gain loss (flowgain.py)?
@@ -107,7 +154,7 @@ class MmacController(LoopBase):
         kept on the sensor so that nothing jumps when the test returns to H_D.
         """
         fl = self.flow
-        prod = fl.product(meas.position_m, y_v)
+        prod = fl.product(meas.position_m, y_v, self._span)
         fl.update(self._echo, meas.load_pressure_pa, tl, prod)
         if fl.flow_fault:
             self.k_q_hat = prod

@@ -18,6 +18,11 @@ class Measurement:
     ``load_pressure_pa``: P_L (Pa), logged, not used for identification.
     ``reference_m``: desired position x_d for this cycle (m).
     ``fresh``: False when no valid sensor frame arrived this cycle (values are the last valid ones).
+    ``samples``: sensor samples from the previous fresh measurement to this one, from the
+    frames' E2E counter (1: the next sample; 2: one sample between them was lost or superseded
+    in the same cycle; 0: unknown, taken as one per cycle). A realtime loop's cycles slip against
+    the sensor's sample clock; this keeps the model position on the sample clock (DESIGN §5,
+    docs/control.md §3).
     """
 
     position_m: float = 0.0
@@ -26,6 +31,7 @@ class Measurement:
     load_pressure_pa: float = 0.0
     reference_m: float = 0.0
     fresh: bool = True
+    samples: int = 0
 
 
 @dataclass(slots=True)

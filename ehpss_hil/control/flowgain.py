@@ -51,6 +51,7 @@ class FlowGainMonitor:
         "_i",
         "_int",
         "_m",
+        "_mark",
         "_min_dev",
         "_min_evidence",
         "_n",
@@ -94,6 +95,7 @@ class FlowGainMonitor:
     def reset(self) -> None:
         """At rest, hypothesis H_D (k_Q = 1), empty window."""
         self.s = (0.0, 0.0, 0.0, 0.0)
+        self._mark = self.s
         self.k_q = 1.0
         self.flow_fault = False
         self.llr = 0.0
@@ -109,11 +111,21 @@ class FlowGainMonitor:
         """Empty the evidence window (the product moved: the hypotheses changed)."""
         self._sff = self._sfy = self._syy = self._w = 0.0
 
-    def product(self, position_m: float, spool_m: float) -> float:
+    def mark(self) -> None:
+        """Remember the model state (to :meth:`rewind` to it)."""
+        self._mark = self.s
+
+    def rewind(self) -> None:
+        """Back to the model state at the last :meth:`mark`."""
+        self.s = self._mark
+
+    def product(self, position_m: float, spool_m: float, samples: int = 1) -> float:
         """Offset-free estimate of k_DFT·k_Q: NLMS on M-sample increments of the position against
         ``K_c·∫y_v``, updated only while the increments are excited (a k_Q change leaves x̂ with a
-        level offset; increments have none)."""
-        self._int += self._h * (spool_m + self._prev)
+        level offset; increments have none). ``samples``: sensor samples since the previous call
+        (the spool taken linear over those not seen), so that both sides of an increment span
+        the same time."""
+        self._int += self._h * samples * (spool_m + self._prev)
         self._prev = spool_m
         i = self._i
         y = position_m - self._ys[i]

@@ -19,7 +19,7 @@ class ValvePredictor:
     the spool LVDT then reads ``k_LOE·v``.
     """
 
-    __slots__ = ("_a00", "_a01", "_a10", "_a11", "_b0", "_b1", "v", "vel")
+    __slots__ = ("_a00", "_a01", "_a10", "_a11", "_b0", "_b1", "_mark", "v", "vel")
 
     def __init__(self, plant: PlantParams, ts_s: float) -> None:
         a, b = valve_matrices(plant)
@@ -29,11 +29,21 @@ class ValvePredictor:
         self._b0, self._b1 = float(bd[0, 0]), float(bd[1, 0])
         self.vel = 0.0
         self.v = 0.0
+        self._mark = (0.0, 0.0)
 
     def reset(self) -> None:
         """At rest."""
         self.vel = 0.0
         self.v = 0.0
+        self._mark = (0.0, 0.0)
+
+    def mark(self) -> None:
+        """Remember the state (to :meth:`rewind` to it)."""
+        self._mark = (self.vel, self.v)
+
+    def rewind(self) -> None:
+        """Back to the state at the last :meth:`mark`."""
+        self.vel, self.v = self._mark
 
     def step(self, current_a: float) -> float:
         """Advance with ``current_a`` (A) held over the last sample; returns v (m)."""
@@ -50,22 +60,40 @@ class ModelPosition:
     It carries the loop through a position-sensor failure; K_c = flow_gain/hydraulic_stiffness.
     """
 
-    __slots__ = ("_anchor", "_h", "_rate", "x")
+    __slots__ = ("_anchor", "_h", "_mark", "_rate", "x")
 
     def __init__(self, plant: PlantParams, ts_s: float, anchor_rate_1_s: float) -> None:
         self._h = 0.5 * ts_s * plant.velocity_gain_1_s
         self._anchor = ts_s * anchor_rate_1_s
         self.x = 0.0
         self._rate = 0.0
+        self._mark = (0.0, 0.0)
 
     def reset(self) -> None:
         """At rest at the origin."""
         self.x = 0.0
         self._rate = 0.0
+        self._mark = (0.0, 0.0)
+
+    def mark(self) -> None:
+        """Remember x̂ and the last spool (to :meth:`rewind` to them)."""
+        self._mark = (self.x, self._rate)
+
+    def rewind(self) -> None:
+        """Back to x̂ and the spool at the last :meth:`mark`."""
+        self.x, self._rate = self._mark
 
     def integrate(self, spool_m: float) -> float:
         """Trapezoid step with the actual spool at this sample (m); returns x̂ (m)."""
         self.x += self._h * (spool_m + self._rate)
+        self._rate = spool_m
+        return self.x
+
+    def integrate_span(self, spool_m: float, samples: int) -> float:
+        """``samples`` trapezoid steps ending at this sample's spool ``spool_m`` (m), the spool
+        taken linear from the last one (the samples between were not seen); returns x̂ (m).
+        Equal to :meth:`integrate` for one sample."""
+        self.x += self._h * samples * (spool_m + self._rate)
         self._rate = spool_m
         return self.x
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import can
 import numpy as np
 
-from ..codec import Verdict
+from ..codec import Verdict, counter_steps
 from ..config import Watchdog
 from ..control.base import Controller, Measurement
 from ..scenario import Reference
@@ -132,6 +132,7 @@ class ControllerLoop:
         self._rx_ids = frozenset((self._id_pos, self._id_aux, self._id_setpoint))
         self._lockstep = False
         self._last_pos_counter = 0  # counter of the newest usable SENSOR_POS (lockstep gaps)
+        self._used_counter: int | None = None  # counter of the SENSOR_POS last stepped on
         self._reset_cycle_rx()
 
     # ---- receive ----------------------------------------------------------------------------
@@ -197,6 +198,7 @@ class ControllerLoop:
                       self.wd.reason.name, self.opts.watchdog.failsafe)
         elif st is State.FAULT and not tripped:
             self.controller.reset()
+            self._used_counter = None
             self.life.to(State.ACTIVE)
             log.warning("cycle %d: sensor data fresh for %d cycles: ACTIVE again", self.cycles,
                         self.wd.fresh_cycles)
@@ -207,6 +209,10 @@ class ControllerLoop:
             x_d = self._override_m if self._override_m is not None else self.ref.at(self.k_active)
             self.meas.reference_m = x_d
             self.meas.fresh = self._fresh
+            if self._fresh:
+                used = self._used_counter
+                self.meas.samples = 0 if used is None else counter_steps(self._pos_counter, used)
+                self._used_counter = self._pos_counter
             cmd = self.controller.step(self.meas)
             self.k_active += 1
             return cmd.current_a, cmd.enable

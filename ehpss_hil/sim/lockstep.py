@@ -99,6 +99,7 @@ def _loop(emu: PlantEmulation, ctrl: LoopBase, tr: QuantizeTransport | FramesTra
     measure, lost, advance = emu.measure, emu.frame_lost, emu.advance
     sensor, command, step = tr.sensor, tr.command, ctrl.step
     probe, index_values, push = ctrl.probe, ctrl.index_values, rows.append
+    k_seen = -1  # the sample of the last fresh measurement
     for k, xd in enumerate(x_d):
         s = measure()
         vals = sensor(s.position_m, s.spool_m, s.load_pressure_pa, s.coil_current_a,
@@ -108,6 +109,9 @@ def _loop(emu: PlantEmulation, ctrl: LoopBase, tr: QuantizeTransport | FramesTra
         else:
             meas.position_m, meas.spool_m, meas.load_pressure_pa, meas.coil_current_a = vals
             meas.fresh = True
+            # as the daemon counts them from the E2E counter (counter_steps: 1…16)
+            meas.samples = 0 if k_seen < 0 else (k - k_seen - 1) % 16 + 1
+            k_seen = k
         meas.reference_m = xd
         if set_truth is not None:
             set_truth(s.faults)
