@@ -84,6 +84,8 @@ class EmulatorProcess:
         self.inject_ignored = 0
         self.applied_a = 0.0
         self._faults: FaultState = emu.faults
+        #: the newest valid command among the frames drained before the first period
+        self._early: tuple[float, bool] | None = None
 
     # ---- receive ----------------------------------------------------------------------------
     def _on_frame(self, msg: can.Message) -> tuple[float, bool] | bool | None:
@@ -206,7 +208,10 @@ class EmulatorProcess:
         do the scenario's events). Their sensor samples are lost: nothing is sent for them, and
         the sensor frames' E2E counters move on, so the receiver sees how many samples passed
         (OK_SOME_LOST), as from a sensor that samples on its own clock."""
-        setpoint = self._take_command(self._drain())
+        newest = self._drain()
+        if self._early is not None:
+            newest, self._early = newest or self._early, None
+        setpoint = self._take_command(newest)
         for _ in range(skipped):
             self.emu.measure()  # draws the sample's noise: the streams stay on the sample grid
             self.codec.skip("SENSOR_POS")
@@ -226,6 +231,10 @@ class EmulatorProcess:
         """Run on the deadline grid until ``stop`` or ``n_periods`` periods."""
         timer = DeadlineTimer(self.emu.ts_s, name="firmware-sim")
         self.io.send("HEARTBEAT_EMU", {"NmtState": 0})  # CiA 301 boot-up
+        # the frames queued since the bus opened (a running controller sends ~1000/s): handled
+        # now, not in the first period, which they made several ms late — a stall right at the
+        # controller's first samples, whose reference starts with them
+        self._early = self._drain()
         timer.start()
         perf = time.perf_counter
         while not stop and (n_periods is None or self.periods < n_periods):

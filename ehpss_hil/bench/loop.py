@@ -6,7 +6,8 @@ and prints the controller's cycle compute time (with ``wake_on_sensor``, as in b
 sensor pair's receive/classify happens while waiting and is not in it; it is in the latency),
 wake-up lateness and sensor→command latency (p50/p99/p99.9/max), the overrun ratio, rejected
 frames and peak RSS beside DESIGN §11's targets. Figures come from each process's own
-preallocated statistics (``--summary-json``).
+preallocated statistics (``--summary-json``). Then the host's share (:mod:`.hostref`): the
+control step + VALVE_CMD encode alone, after a sleep and back to back.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from ..orchestrate import RunPlan, check_exit_codes, execute
+from . import hostref
 from .common import write_json
 
 NAME = "loop"
@@ -77,6 +79,17 @@ def _us(d: dict[str, float]) -> str:
     return " ".join(f"{d[k] * 1e6:8.1f}" for k in ("p50", "p99", "p99_9", "max"))
 
 
+def _print_host(ref: dict[str, Any]) -> None:
+    a, b = ref["after_sleep_s"], ref["back_to_back_s"]
+    print(f"{'host':<7} {'mmac step + encode, slept':<28} {_us(a)}  (no bus, no peer)")
+    print(f"{'host':<7} {'mmac step + encode, hot':<28} {_us(b)}  cold/hot p99 "
+          f"{a['p99'] / b['p99']:.1f}×")
+    if a["p99"] > 1e-4:
+        print(f"{'host':<7} this host cannot meet compute p99 ≤ 100 µs with this code: the step and "
+              f"encode alone take {a['p99'] * 1e6:.0f} µs at p99 after a sleep "
+              "(docs/runtime.md: 'The host's share')")
+
+
 def _print(rows: list[dict[str, Any]]) -> None:
     print(f"{'variant':<7} {'figure':<28} {'p50 µs':>8} {'p99 µs':>8} {'p99.9 µs':>8} "
           f"{'max µs':>8}  target")
@@ -112,6 +125,9 @@ def run(args: argparse.Namespace) -> int:
                 raise SystemExit(f"unknown variant {v!r} (plain, rt)")
             print(f"running {v} at {args.rate:g} Hz for {args.seconds:g} s ...", flush=True)
             rows.append(_measure(v, args.rate, args.seconds, out))
+    print("timing the controller's own work on this host (no bus) ...", flush=True)
+    host = hostref.measure(args.rate)
     _print(rows)
-    write_json(args.json, rows)
+    _print_host(host)
+    write_json(args.json, {"variants": rows, "host": host})
     return 0

@@ -158,6 +158,7 @@ class _Replayer:
         self.prev = Measurement()
         self._pos_counter = 0  # E2E counter of the newest usable SENSOR_POS
         self._used_counter: int | None = None  # … of the one last stepped on (as the daemon)
+        self._superseded: list[tuple[float, float, float, float, int]] = []
         self._names = {self.codec.can_id(n): n for n in
                        ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD", "SETPOINT")}
 
@@ -182,6 +183,9 @@ class _Replayer:
             return
         v, m = d.values, self.meas
         if name == "SENSOR_POS":
+            if self.fresh:  # a burst: the daemon keeps the older sample for ``observe``
+                self._superseded.append((m.position_m, m.spool_m, m.coil_current_a,
+                                         m.load_pressure_pa, self._pos_counter))
             m.position_m, m.spool_m, self.fresh = float(v["Position"]), float(v["Spool"]), True
             self._pos_counter = msg.data[1] & 0x0F
         elif name == "SENSOR_AUX":
@@ -194,8 +198,9 @@ class _Replayer:
             self.started = True
             self.cycle_count = cc
             self.command(float(v["CurrentSetpoint"]), bool(v["Enable"]), number, gap)
-        else:
+        else:  # before the daemon's first ACTIVE cycle (CONFIGURED: nothing is stepped)
             self.fresh = False
+            self._superseded.clear()
 
     def _catch_up(self, periods: int) -> None:
         """Periods the daemon skipped (a CycleCount gap): stepped without a frame on the values
@@ -215,6 +220,7 @@ class _Replayer:
         self._catch_up(gap)
         k = self.k
         self.k += 1
+        superseded, self._superseded = self._superseded, []
         if not logged_en:  # the daemon's fail-safe (FAULT): no step, the reference runs on
             self.res.failsafe_cycles += 1
             self.in_failsafe = True
@@ -225,6 +231,12 @@ class _Replayer:
             self.ctrl.reset()
             self.in_failsafe = False
             self._used_counter = None
+        obs = Measurement()
+        for obs.position_m, obs.spool_m, obs.coil_current_a, obs.load_pressure_pa, c in superseded:
+            used = self._used_counter  # after the caught-up periods, before the step: as the daemon
+            obs.samples = 0 if used is None else counter_steps(c, used)
+            self._used_counter = c
+            self.ctrl.observe(obs)
         m = self.meas
         m.reference_m = self.override if self.override is not None else self.x_d(k)
         m.fresh = self.fresh

@@ -25,9 +25,9 @@ from .flowgain import FlowGainMonitor
 from .supervisor import Supervisor
 from .tuning import ControlTuning
 
-#: the predictors are redone over at most this many sensor samples (beyond: dead-reckoned and
-#: re-anchored): far from the counter's wrap at 16, the spool still close to linear between
-RESYNC_SAMPLES = 8
+#: the predictors are redone over at most this many sensor samples and after fewer cycles without
+#: data (beyond: dead-reckoned and re-anchored): the 4-bit counter tells up to 15 apart
+RESYNC_SAMPLES = 15
 
 
 class MmacController(LoopBase):
@@ -64,25 +64,21 @@ class MmacController(LoopBase):
         self._in_flow = False
         self._dead = 0
         self._span = 1  # sensor samples this fresh cycle stands for (when redone on them)
+        self._observed = 0  # … of the superseded samples observed before it in this cycle
 
     def step(self, meas: Measurement) -> ValveCommand:
         """Predict, score both banks, supervise, compensate, PI."""
         if meas.fresh:
             y_v = meas.spool_m
-            dead, self._dead = self._dead, 0
+            dead = self._dead
             resync = self._resync(meas.samples, dead)
-            self._span = meas.samples if resync else 1
-            if resync:
-                v, xh = self._predict_span(meas.coil_current_a, y_v, meas.samples, dead)
-            else:
-                self._echo = meas.coil_current_a
-                v = self.valve.step(self._echo)
-                xh = self.xhat.integrate(y_v)
+            v, xh = self._predict(meas, resync)
+            self._span, self._observed = self._observed + (meas.samples if resync else 1), 0
             sb, ss = self.spool_bank, self.spool_sup
             sb.update(y_v, v)
             ss.update(abs(v) * self._inv_s_spool)
             pb, ps = self.pos_bank, self.pos_sup
-            if dead and not resync:  # after cycles without data x̂ was dead-reckoned
+            if (dead or meas.samples > 1) and not resync:  # x̂ missed samples or was dead-reckoned
                 td = self.k_dft_hat
                 if (not self.pos_sup.guarded and td >= self._failed_below
                         and not self.flow.flow_fault):
@@ -113,13 +109,32 @@ class MmacController(LoopBase):
                 self.flow.propagate(self._echo)
         return self._close(meas)
 
+    def observe(self, meas: Measurement) -> None:
+        """A sample superseded within this cycle: valve model, x̂ and the pressure model step on
+        it (its own spool LVDT and current echo), so the next sample is 1 on from it."""
+        resync = self._resync(meas.samples, self._dead)
+        self._predict(meas, resync)
+        self._observed += meas.samples if resync else 1
+        if self._flow_on:
+            self.flow.propagate(meas.coil_current_a)
+
+    def _predict(self, meas: Measurement, resync: bool) -> tuple[float, float]:
+        """Valve model and x̂ up to this sample (over every sample since the last one seen when
+        ``resync``); returns (v, x̂) (m)."""
+        dead, self._dead = self._dead, 0
+        if resync:
+            return self._predict_span(meas.coil_current_a, meas.spool_m, meas.samples, dead)
+        self._echo = meas.coil_current_a
+        return self.valve.step(self._echo), self.xhat.integrate(meas.spool_m)
+
     @staticmethod
     def _resync(samples: int, dead: int) -> bool:
         """Should the predictors be redone on the sensor's sample clock? Whenever the sensor
         samples since the last one seen differ from one, or cycles without data lie between
-        (``dead``), as long as both spans are short (≤ :data:`RESYNC_SAMPLES`): a realtime slip,
-        samples superseded within one cycle, a few lost frames. A long gap keeps the
-        dead-reckoned x̂ and re-anchors it (the 4-bit counter cannot count past 16)."""
+        (``dead``), as long as both spans are < 16 (the counter's wrap): a realtime slip, samples
+        superseded within one cycle, lost frames, a stall of either process (over which the
+        emulator holds one command: the echo that ends it). Longer gaps keep the dead-reckoned
+        x̂ and re-anchor it."""
         if samples <= 0 or (samples == 1 and dead == 0):
             return False
         return samples <= RESYNC_SAMPLES and dead < RESYNC_SAMPLES
@@ -127,22 +142,23 @@ class MmacController(LoopBase):
     def _predict_span(self, echo_a: float, y_v: float, samples: int,
                       dead: int) -> tuple[float, float]:
         """Valve model and x̂ stepped over ``samples`` sensor samples from the last one seen
-        (the dead-reckoned steps of the ``dead`` cycles without data undone): the valve model on
-        this sample's current echo throughout (exact when the samples were skipped by a late
-        emulator, which holds one command over them; when frames were superseded within a cycle
-        the currents between are not known, and the last is as good a guess as any), x̂ on the
-        spool it predicts (k̂_LOE·v) for the samples not seen, then on this sample's spool LVDT.
+        (the dead-reckoned steps of the ``dead`` cycles without data undone). The valve model
+        steps on the last echo for the first period after the last sample seen (that period's
+        current was commanded before it) and on this sample's echo for the others (a late
+        emulator holds one command over the periods it skipped: this one); x̂ integrates the
+        spool it predicts (k̂_LOE·v) for the samples not seen, then this sample's spool LVDT.
         Returns (v, x̂) (m)."""
         valve, xh, flow = self.valve, self.xhat, self.flow
         if dead:
             valve.rewind()
             xh.rewind()
             flow.rewind()
-        gain = self.k_loe_hat / self.k_q_hat
+        gain, current = self.k_loe_hat / self.k_q_hat, self._echo
         for _ in range(samples - 1):
-            xh.integrate(gain * valve.step(echo_a))
+            xh.integrate(gain * valve.step(current))
             if self._flow_on:  # the pressure model too (its update steps this sample)
-                flow.propagate(echo_a)
+                flow.propagate(current)
+            current = echo_a
         self._echo = echo_a
         return valve.step(echo_a), xh.integrate(y_v)
 

@@ -76,5 +76,9 @@ class Controller(Protocol):
     def step(self, meas: Measurement) -> ValveCommand:
         """One cycle: measurement in, valve command out."""
 
+    # optional: ``observe(meas) -> None``, a sensor sample that a newer one superseded within
+    # the same cycle (a burst of late frames): the predictors step on it, nothing else does (no
+    # regression, no output). The daemon and replay call it when the controller has it.
+
     def status(self) -> ControllerStatus:
         """The current status (may allocate; call at status-frame rate, not every cycle)."""

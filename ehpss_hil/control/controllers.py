@@ -143,6 +143,10 @@ class LoopBase:
         """One cycle (each mode overrides this)."""
         raise NotImplementedError
 
+    def observe(self, meas: Measurement) -> None:
+        """A superseded sample (see ``Controller.observe``): only ``mmac`` keeps its predictors on
+        the sample clock; the other modes take the newest sample only."""
+
     # ---- probes ----------------------------------------------------------------------------
     index_slots: tuple[int, ...] = ()
 

@@ -20,6 +20,7 @@ import logging
 import math
 import resource
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import can
@@ -133,6 +134,12 @@ class ControllerLoop:
         self._lockstep = False
         self._last_pos_counter = 0  # counter of the newest usable SENSOR_POS (lockstep gaps)
         self._used_counter: int | None = None  # counter of the SENSOR_POS last stepped on
+        #: the controller's ``observe`` (optional in the Controller protocol: a controller
+        #: without it takes the newest sample of a burst only)
+        self._observe: Callable[[Measurement], None] | None = getattr(controller, "observe", None)
+        #: this cycle's superseded samples (position, spool, current echo, pressure, counter)
+        self._superseded: list[tuple[float, float, float, float, int]] = []
+        self._scratch = Measurement()
         self._reset_cycle_rx()
 
     # ---- receive ----------------------------------------------------------------------------
@@ -168,6 +175,10 @@ class ControllerLoop:
             if self._lockstep and d.verdict is Verdict.OK_SOME_LOST:
                 self.catch_up((counter - self._last_pos_counter - 1) & 0x0F)
             self._last_pos_counter = counter
+            if self._fresh and self._observe is not None:  # a burst: keep the older sample
+                m = self.meas
+                self._superseded.append((m.position_m, m.spool_m, m.coil_current_a,
+                                         m.load_pressure_pa, self._pos_counter))
             self.meas.position_m = float(v["Position"])
             self.meas.spool_m = float(v["Spool"])
             self._fresh = True
@@ -181,6 +192,19 @@ class ControllerLoop:
         else:
             self._override_m = float(v["Position"]) if v["Override"] else None
         return d.verdict
+
+    def _observe_superseded(self, observe: Callable[[Measurement], None]) -> None:
+        """SENSOR_POS frames that a newer one superseded in this cycle (frames that came in a
+        burst): the controller's predictors step on each, with the SENSOR_AUX that came with it,
+        after the periods caught up and before this cycle's step, so that no sample of the
+        plant's motion is skipped (``ehpss-hil replay`` does the same in the same order)."""
+        m = self._scratch
+        for m.position_m, m.spool_m, m.coil_current_a, m.load_pressure_pa, c in self._superseded:
+            used = self._used_counter
+            m.samples = 0 if used is None else counter_steps(c, used)
+            self._used_counter = c
+            observe(m)
+        self._superseded.clear()
 
     # ---- one cycle --------------------------------------------------------------------------
     def _update_state(self) -> None:
@@ -209,6 +233,8 @@ class ControllerLoop:
             x_d = self._override_m if self._override_m is not None else self.ref.at(self.k_active)
             self.meas.reference_m = x_d
             self.meas.fresh = self._fresh
+            if self._superseded and self._observe is not None:
+                self._observe_superseded(self._observe)
             if self._fresh:
                 used = self._used_counter
                 self.meas.samples = 0 if used is None else counter_steps(self._pos_counter, used)
@@ -216,6 +242,7 @@ class ControllerLoop:
             cmd = self.controller.step(self.meas)
             self.k_active += 1
             return cmd.current_a, cmd.enable
+        self._superseded.clear()
         if st is State.FAULT:
             self.failsafe_cycles += 1
             self.k_active += 1
