@@ -67,6 +67,9 @@ class RunPlan:
     #: ``rt.wake_on_sensor`` for this run (None: the config's): each cycle starts when its
     #: sensor pair arrives, the phase-locked deadline being the latest start
     wake_on_sensor: bool | None = True
+    #: the emulator's PLANT_TRUTH/PLANT_FAULTS (needed for metrics.json; a deployment has none:
+    #: ``bench loop`` turns them off to load both processes as deployed)
+    truth: bool = True
     #: how long the controller may take to appear on the bus (slow VMs need more)
     startup_timeout_s: float = 60.0
 
@@ -133,7 +136,7 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
         "rate_hz": 1.0 / sc.sample_time_s})
     emu_cfg = write_config(plan.emulator_yaml, out / "emulator.yaml", {
         **bus, "mode": emu_mode, "scenario": str(Path(plan.scenario_path).resolve()),
-        "truth": True, "rate_hz": 1.0 / sc.sample_time_s})
+        "truth": plan.truth, "rate_hz": 1.0 / sc.sample_time_s})
     bus_cfg = load_yaml(ctrl_cfg)["bus"]
     return {
         "logger": [py, "-m", "ehpss_hil.cli", "log", "-i", bus_cfg["interface"], "-c",

@@ -1,7 +1,9 @@
 """``ehpss-hil bench loop``: the real-time loop of both processes on the embedded bus.
 
 Runs ``firmware-sim`` and the controller (mode mmac, fault-free 1 mm sine) as two processes for
-``--seconds`` at ``--rate``, once plainly and once with RT options (SCHED_FIFO, one CPU each),
+``--seconds`` at ``--rate``, as deployed (the emulator's PLANT_TRUTH/PLANT_FAULTS off: a real
+valve sends none, and at 2 kHz they were a third of the emulator's frames and of the
+controller's receive load), once plainly and once with RT options (SCHED_FIFO, one CPU each),
 and prints the controller's cycle compute time (with ``wake_on_sensor``, as in bench runs, the
 sensor pair's receive/classify happens while waiting and is not in it; it is in the latency),
 wake-up lateness and sensor→command latency (p50/p99/p99.9/max), the overrun ratio, rejected
@@ -57,7 +59,7 @@ def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, 
     d = out / variant
     res = execute(RunPlan(scenario_path=sc, mode="mmac", out_dir=d, bus_logger=False,
                           extra_controller_args=ctrl_args, extra_emulator_args=emu_args,
-                          auto_recover=True, watchdog_cycles=10))
+                          auto_recover=True, watchdog_cycles=10, truth=False))
     check_exit_codes(res)
     c = json.loads((d / "controller-summary.json").read_text())
     e = json.loads((d / "emulator-summary.json").read_text())
