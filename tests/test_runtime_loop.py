@@ -105,14 +105,33 @@ def test_rt_options_warn_instead_of_failing(monkeypatch: pytest.MonkeyPatch) -> 
 
 
 def test_rt_cpu_and_timer_slack_apply() -> None:
+    """The CPU pin covers the threads already running (the log writer starts before the RT
+    options are applied) as well as the calling one."""
     import os
+    import threading
     before = os.sched_getaffinity(0)
     cpu = min(before)
+    started, release = threading.Event(), threading.Event()
+
+    def writer() -> None:
+        started.set()
+        release.wait(10.0)
+
+    t = threading.Thread(target=writer, daemon=True)
+    t.start()
+    started.wait(10.0)
     try:
         assert rt.set_cpu(cpu) is None
         assert os.sched_getaffinity(0) == {cpu}
+        assert t.native_id is not None and os.sched_getaffinity(t.native_id) == {cpu}
     finally:
-        os.sched_setaffinity(0, before)
+        release.set()
+        t.join()
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                os.sched_setaffinity(int(tid), before)
+            except ProcessLookupError:
+                pass
     assert rt.set_timer_slack(50_000) is None
 
 
