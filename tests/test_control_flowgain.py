@@ -56,3 +56,20 @@ def test_product_estimate_is_offset_free() -> None:
         prev = spool
         mon.product(x, spool)
     assert mon.theta_prod == pytest.approx(0.7, abs=0.005)
+
+
+def test_hold_off_takes_no_evidence_and_keeps_the_decision() -> None:
+    """After a gap the pressure model is stepped on guessed currents: for ``hold_off(n)``
+    updates no evidence enters the window and the decision stands; then it resumes."""
+    mon = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3)
+    rng = np.random.default_rng(3)
+    for _ in range(50):  # a deviating product: the window fills
+        mon.update(1e-4 * rng.standard_normal(), 1e4 * rng.standard_normal(), 1.0, 0.5)
+    w, llr, fault = mon._w, mon.llr, mon.flow_fault
+    assert w > 0.0
+    mon.hold_off(5)
+    for _ in range(5):  # a wild prediction error would otherwise swing the statistic
+        mon.update(1e-2, 5e6, 1.0, 0.5)
+        assert (mon._w, mon.llr, mon.flow_fault) == (w, llr, fault)
+    mon.update(1e-4, 0.0, 1.0, 0.5)
+    assert mon._w != w

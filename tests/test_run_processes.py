@@ -66,14 +66,14 @@ def test_lockstep_run_gives_the_simulation_commands_and_metrics(scenario: Path,
     assert ctl.has_reference and ctl.result.ts_s == 1e-3 and ctl.result.controller == "mmac"
 
 
-@pytest.mark.parametrize(("mode", "bound_m", "above"), [("mmac", 8e-6, False),
+@pytest.mark.parametrize(("mode", "bound_m", "above"), [("mmac", 15e-6, False),
                                                         ("nrc", 100e-6, True)])
 def test_realtime_drift_run(scenario: Path, tmp_path: Path, mode: str, bound_m: float,
                             above: bool) -> None:
-    """Sensor gain 0.5 at 0.3 s: ``mmac`` stays within 8 µm RMS on the real-time bus (0.67–1.75
-    µm measured, offline 0.64; before the predictors followed the sensor's sample clock a
-    jittery host gave runs of 3–5 µm and, rarely, 28–116 µm), ``nrc`` tracks x_d/0.5 (510 µm
-    measured)."""
+    """Sensor gain 0.5 at 0.3 s: ``mmac`` stays within 15 µm RMS on the real-time bus (0.67–2.9
+    µm measured, offline 0.64; in this 0.8 s run a start-up stall of a loaded host alone adds up
+    to ~3 µm; the failures this guards against gave 28–263 µm: x̂ off the sensor's sample clock,
+    a false flow-gain decision after a stall), ``nrc`` tracks x_d/0.5 (510 µm measured)."""
     out = tmp_path / mode
     check_exit_codes(execute(RunPlan(scenario_path=scenario, mode=mode, out_dir=out)))
     row = metrics_from_run(out)

@@ -25,6 +25,9 @@ from .flowgain import FlowGainMonitor
 from .supervisor import Supervisor
 from .tuning import ControlTuning
 
+#: after samples stepped without their data the flow-gain test takes no evidence for this many
+#: samples (≈ 6 time constants of the slowest valve/cylinder pole, −284 s⁻¹, at 1 kHz)
+FLOW_HOLD_S = 0.02
 #: the predictors are redone over at most this many sensor samples and after fewer cycles without
 #: data (beyond: dead-reckoned and re-anchored): the 4-bit counter tells up to 15 apart
 RESYNC_SAMPLES = 15
@@ -49,6 +52,7 @@ class MmacController(LoopBase):
                                     t.flow_gain_window_s, t.flow_gain_threshold)
         self._in_flow = False
         self._flow_on = t.flow_gain_test
+        self._flow_hold = max(1, round(FLOW_HOLD_S / ts))
         self._inv_s_spool = 1.0 / self.scale_spool_m
         self._inv_s_pos = 1.0 / self.scale_pos_m
         n_l, n_d = len(t.fixed_k_loe) + 2, len(t.fixed_k_dft) + 2
@@ -72,6 +76,8 @@ class MmacController(LoopBase):
             y_v = meas.spool_m
             dead = self._dead
             resync = self._resync(meas.samples, dead)
+            if self._flow_on and (dead or meas.samples > 1):
+                self.flow.hold_off(self._flow_hold)
             v, xh = self._predict(meas, resync)
             self._span, self._observed = self._observed + (meas.samples if resync else 1), 0
             sb, ss = self.spool_bank, self.spool_sup
@@ -113,6 +119,8 @@ class MmacController(LoopBase):
         """A sample superseded within this cycle: valve model, x̂ and the pressure model step on
         it (its own spool LVDT and current echo), so the next sample is 1 on from it."""
         resync = self._resync(meas.samples, self._dead)
+        if self._flow_on and (self._dead or meas.samples > 1):
+            self.flow.hold_off(self._flow_hold)
         self._predict(meas, resync)
         self._observed += meas.samples if resync else 1
         if self._flow_on:

@@ -48,6 +48,7 @@ class FlowGainMonitor:
         "_floor",
         "_g",
         "_h",
+        "_hold",
         "_i",
         "_int",
         "_m",
@@ -105,11 +106,19 @@ class FlowGainMonitor:
         self._vs = [0.0] * self._m
         self._i = self._n = 0
         self._int = self._prev = 0.0
+        self._hold = 0
         self.restart()
 
     def restart(self) -> None:
         """Empty the evidence window (the product moved: the hypotheses changed)."""
         self._sff = self._sfy = self._syy = self._w = 0.0
+
+    def hold_off(self, samples: int) -> None:
+        """Take no evidence for the next ``samples`` updates (the decision stands): after
+        samples the model was stepped through without their data, its P_L prediction is off until
+        the valve and cylinder dynamics forget the error, and a prediction error favours the
+        hypothesis with the smaller gain — a false H_Q."""
+        self._hold = max(self._hold, samples)
 
     def mark(self) -> None:
         """Remember the model state (to :meth:`rewind` to it)."""
@@ -153,6 +162,9 @@ class FlowGainMonitor:
         """One sample: current echo (A), measured P_L (Pa), k̂_LOE and the product estimate
         θ_pos = k_DFT·k_Q; returns k̂_Q (1.0 under H_D)."""
         self.propagate(current_a)
+        if self._hold > 0:  # no evidence now (hold_off): the decision stands
+            self._hold -= 1
+            return self.k_q
         if not self.flow_fault and abs(theta_pos - 1.0) < self._min_dev:
             # no deviation: H_D whatever the evidence; start the window afresh when it appears
             if self._w > 0.0 or self._theta_ref != 1.0:
