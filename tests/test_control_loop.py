@@ -178,3 +178,20 @@ def test_mmac_keeps_x_hat_on_the_sensor_sample_clock() -> None:
     # the superseded samples observed (as the daemon does with a burst): x̂ integrates their
     # own spool; what is left is the anchor's pull on the samples not stepped on
     assert worst(_x_hat_per_sample(res, slips=True, samples_known=True, observe=True)) < 0.05e-6
+
+
+def test_mmac_after_a_reset_mid_motion_starts_from_the_sensor() -> None:
+    """Leaving the fail-safe resets the controller while the plant is away from 0: x̂ starts on
+    the first sensor sample, the position channel stays out of guard and the sensor is fed back
+    (before, x̂ began at 0, the guard tripped at once and the loop fed back x̂: a runaway)."""
+    res = run_scenario(FAULT_FREE, "nrc")
+    c = make_controller("mmac", PARAMS, TS, reference=FAULT_FREE.reference)
+    m = Measurement()
+    k0 = 300  # ≈ 0.9 mm into the sine
+    for k in range(k0, k0 + 20):
+        m.position_m, m.spool_m = float(res.y_s_m[k]), float(res.spool_m[k])
+        m.coil_current_a, m.reference_m = float(res.current_a[k - 1]), float(res.x_d_m[k])
+        m.samples = 1 if k > k0 else 0
+        c.step(m)
+        assert not c.pos_sup.guarded and c.sensor_trusted
+        assert abs(c.xhat.x - float(res.x_true_m[k])) < 5e-6

@@ -67,6 +67,10 @@ class MmacController(LoopBase):
         self.flow.reset()
         self._in_flow = False
         self._dead = 0
+        #: x̂ starts on the first sensor sample after a reset (θ̂_D = 1 then): a reset on leaving
+        #: the fail-safe comes mid-motion, and x̂ from 0 put the position channel in guard at once,
+        #: the loop fed back x̂ and drove the plant away (a realtime run: 3 mm)
+        self._seed = True
         self._span = 1  # sensor samples this fresh cycle stands for (when redone on them)
         self._observed = 0  # … of the superseded samples observed before it in this cycle
 
@@ -79,6 +83,9 @@ class MmacController(LoopBase):
             if self._flow_on and (dead or meas.samples > 1):
                 self.flow.hold_off(self._flow_hold)
             v, xh = self._predict(meas, resync)
+            if self._seed:  # the first sample since a reset: the plant is where the sensor says
+                self._seed = False
+                xh = self.xhat.x = meas.position_m
             self._span, self._observed = self._observed + (meas.samples if resync else 1), 0
             sb, ss = self.spool_bank, self.spool_sup
             sb.update(y_v, v)
