@@ -70,6 +70,24 @@ class Reference:
         return self.amplitude_m * 5.0 / k_c
 
 
+class ReferenceBlocks:
+    """x_d sampled in blocks of ``block`` samples (m): cheap per cycle, no per-cycle arrays."""
+
+    def __init__(self, reference: Reference, ts_s: float, block: int = 1000) -> None:
+        self.reference = reference
+        self.ts_s = ts_s
+        self._block = block
+        self._k0 = 0
+        self._buf = reference.sample(np.arange(block) * ts_s)
+
+    def at(self, k: int) -> float:
+        """x_d at sample k ≥ the previous k (m)."""
+        if not self._k0 <= k < self._k0 + self._block:
+            self._k0 = k
+            self._buf = self.reference.sample((k + np.arange(self._block)) * self.ts_s)
+        return float(self._buf[k - self._k0])
+
+
 @dataclass(frozen=True)
 class Noise:
     """Standard deviations of white measurement noise (SI units)."""

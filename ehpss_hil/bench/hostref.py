@@ -16,20 +16,12 @@ import select
 import time
 from typing import Any
 
-import numpy as np
-
 from ..codec import FrameCodec
 from ..control.base import Measurement
 from ..control.controllers import make_controller
 from ..physics.params import load_params
+from ..runtime.stats import Ring
 from ..scenario import Reference
-
-
-def _percentiles_s(samples: list[float]) -> dict[str, float]:
-    a = np.asarray(samples)
-    p50, p99, p999 = np.percentile(a, [50.0, 99.0, 99.9])
-    return {"n": int(a.size), "p50": float(p50), "p99": float(p99), "p99_9": float(p999),
-            "max": float(a.max())}
 
 
 def measure(rate_hz: float, periods: int = 3000) -> dict[str, Any]:
@@ -55,10 +47,10 @@ def measure(rate_hz: float, periods: int = 3000) -> dict[str, Any]:
 
     for k in range(500):  # past the controller's warm-up
         work(k)
-    slept, hot = [], []
+    slept, hot = Ring(periods), Ring(periods)
     for k in range(500, 500 + periods):
         select.select([], [], [], ts)
-        slept.append(work(k))
+        slept.add(work(k))
     for k in range(500 + periods, 500 + 2 * periods):
-        hot.append(work(k))
-    return {"after_sleep_s": _percentiles_s(slept), "back_to_back_s": _percentiles_s(hot)}
+        hot.add(work(k))
+    return {"after_sleep_s": slept.summary(), "back_to_back_s": hot.summary()}

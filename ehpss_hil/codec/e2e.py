@@ -82,6 +82,26 @@ def counter_steps(counter: int, previous: int) -> int:
     return ((counter - previous - 1) & 0x0F) + 1
 
 
+class SampleCount:
+    """Sensor samples between the SENSOR_POS frames a controller steps on, from their E2E
+    counters (:func:`counter_steps`; the daemon and ``replay`` count alike): 0 for the first one
+    after a (re)start, when there is nothing to count from."""
+
+    __slots__ = ("last",)
+
+    def __init__(self) -> None:
+        self.last: int | None = None
+
+    def reset(self) -> None:
+        """Nothing stepped on yet (start, a controller reset)."""
+        self.last = None
+
+    def take(self, counter: int) -> int:
+        """The frame with ``counter`` is stepped on: samples since the previous one (0: first)."""
+        last, self.last = self.last, counter
+        return 0 if last is None else counter_steps(counter, last)
+
+
 class CounterCheck:
     """Profile-2 style sequence check for one frame ID.
 

@@ -25,19 +25,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ..canlog import read_log, read_sidecar
 from ..canlog.reader import resolve_log
-from ..codec import FrameCodec, counter_steps
+from ..codec import FrameCodec, SampleCount
 from ..config import load_controller_config
-from ..control.base import Measurement
+from ..control.base import HeldSample, Measurement, hold_sample, observe_held
 from ..control.tuning import ControlTuning
 from ..errors import EhpssError
 from ..physics.params import Params, load_params
 from ..report.logdata import MODE_NAMES
 from ..report.logmeta import run_info
-from ..scenario import Reference, load_scenario
+from ..scenario import Reference, ReferenceBlocks, load_scenario
 
 NAME = "replay"
 HELP = "feed a log's sensor frames through the controller offline; compare with its VALVE_CMDs"
@@ -152,13 +150,14 @@ class _Replayer:
         self.override: float | None = None
         self.ts = setup.ts_s
         self.ref = setup.reference
-        self._xd = np.zeros(0)
+        self._xd = ReferenceBlocks(self.ref, self.ts)
         self.k = 0
         self.cycle_count = 0
         self.prev = Measurement()
         self._pos_counter = 0  # E2E counter of the newest usable SENSOR_POS
-        self._used_counter: int | None = None  # … of the one last stepped on (as the daemon)
-        self._superseded: list[tuple[float, float, float, float, int]] = []
+        self._samples = SampleCount()  # sensor samples between those stepped on (as the daemon)
+        self._superseded: list[HeldSample] = []
+        self._scratch = Measurement()
         self._names = {self.codec.can_id(n): n for n in
                        ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD", "SETPOINT")}
 
@@ -168,11 +167,8 @@ class _Replayer:
         p.coil_current_a, p.load_pressure_pa = m.coil_current_a, m.load_pressure_pa
 
     def x_d(self, k: int) -> float:
-        """Reference at sample k (m), sampled in blocks of 4096."""
-        if k >= len(self._xd):
-            n = max(2 * len(self._xd), k + 4096)
-            self._xd = self.ref.sample(np.arange(n) * self.ts)
-        return float(self._xd[k])
+        """Reference at sample k (m)."""
+        return self._xd.at(k)
 
     def frame(self, msg: Any, number: int) -> None:
         name = self._names.get(msg.arbitration_id)
@@ -184,8 +180,7 @@ class _Replayer:
         v, m = d.values, self.meas
         if name == "SENSOR_POS":
             if self.fresh:  # a burst: the daemon keeps the older sample for ``observe``
-                self._superseded.append((m.position_m, m.spool_m, m.coil_current_a,
-                                         m.load_pressure_pa, self._pos_counter))
+                self._superseded.append(hold_sample(m, self._pos_counter))
             m.position_m, m.spool_m, self.fresh = float(v["Position"]), float(v["Spool"]), True
             self._pos_counter = msg.data[1] & 0x0F
         elif name == "SENSOR_AUX":
@@ -220,30 +215,23 @@ class _Replayer:
         self._catch_up(gap)
         k = self.k
         self.k += 1
-        superseded, self._superseded = self._superseded, []
         if not logged_en:  # the daemon's fail-safe (FAULT): no step, the reference runs on
             self.res.failsafe_cycles += 1
             self.in_failsafe = True
             self.fresh = False
+            self._superseded.clear()
             self._snapshot()
             return
         if self.in_failsafe:  # FAULT → ACTIVE: the daemon resets the controller
             self.ctrl.reset()
             self.in_failsafe = False
-            self._used_counter = None
-        obs = Measurement()
-        for obs.position_m, obs.spool_m, obs.coil_current_a, obs.load_pressure_pa, c in superseded:
-            used = self._used_counter  # after the caught-up periods, before the step: as the daemon
-            obs.samples = 0 if used is None else counter_steps(c, used)
-            self._used_counter = c
-            self.ctrl.observe(obs)
+            self._samples.reset()
+        observe_held(self.ctrl.observe, self._superseded, self._samples.take, self._scratch)
         m = self.meas
         m.reference_m = self.override if self.override is not None else self.x_d(k)
         m.fresh = self.fresh
         if self.fresh:
-            used = self._used_counter
-            m.samples = 0 if used is None else counter_steps(self._pos_counter, used)
-            self._used_counter = self._pos_counter
+            m.samples = self._samples.take(self._pos_counter)
         cmd = self.ctrl.step(m)
         self._snapshot()
         cur = cmd.current_a if math.isfinite(cmd.current_a) else 0.0

@@ -78,11 +78,7 @@ class MmacController(LoopBase):
         """Predict, score both banks, supervise, compensate, PI."""
         if meas.fresh:
             y_v = meas.spool_m
-            dead = self._dead
-            resync = self._resync(meas.samples, dead)
-            if self._flow_on and (dead or meas.samples > 1):
-                self.flow.hold_off(self._flow_hold)
-            v, xh = self._predict(meas, resync)
+            gap, resync, v, xh = self._advance(meas)
             if self._seed:  # the first sample since a reset: the plant is where the sensor says
                 self._seed = False
                 xh = self.xhat.x = meas.position_m
@@ -91,7 +87,7 @@ class MmacController(LoopBase):
             sb.update(y_v, v)
             ss.update(abs(v) * self._inv_s_spool)
             pb, ps = self.pos_bank, self.pos_sup
-            if (dead or meas.samples > 1) and not resync:  # x̂ missed samples or was dead-reckoned
+            if gap and not resync:  # x̂ missed samples or was dead-reckoned
                 td = self.k_dft_hat
                 if (not self.pos_sup.guarded and td >= self._failed_below
                         and not self.flow.flow_fault):
@@ -125,22 +121,25 @@ class MmacController(LoopBase):
     def observe(self, meas: Measurement) -> None:
         """A sample superseded within this cycle: valve model, x̂ and the pressure model step on
         it (its own spool LVDT and current echo), so the next sample is 1 on from it."""
-        resync = self._resync(meas.samples, self._dead)
-        if self._flow_on and (self._dead or meas.samples > 1):
-            self.flow.hold_off(self._flow_hold)
-        self._predict(meas, resync)
+        _, resync, _, _ = self._advance(meas)
         self._observed += meas.samples if resync else 1
         if self._flow_on:
             self.flow.propagate(meas.coil_current_a)
 
-    def _predict(self, meas: Measurement, resync: bool) -> tuple[float, float]:
-        """Valve model and x̂ up to this sample (over every sample since the last one seen when
-        ``resync``); returns (v, x̂) (m)."""
+    def _advance(self, meas: Measurement) -> tuple[bool, bool, float, float]:
+        """Valve model and x̂ up to this fresh sample. ``gap``: samples were missed or cycles ran
+        without data since the last one seen (the flow-gain test then takes no evidence for a
+        while); ``resync``: the predictors were redone over every sample since (see
+        :meth:`_resync`). Returns (gap, resync, v, x̂) (v, x̂ in m)."""
         dead, self._dead = self._dead, 0
-        if resync:
-            return self._predict_span(meas.coil_current_a, meas.spool_m, meas.samples, dead)
+        gap = dead > 0 or meas.samples > 1
+        if gap and self._flow_on:
+            self.flow.hold_off(self._flow_hold)
+        if self._resync(meas.samples, dead):
+            v, xh = self._predict_span(meas.coil_current_a, meas.spool_m, meas.samples, dead)
+            return gap, True, v, xh
         self._echo = meas.coil_current_a
-        return self.valve.step(self._echo), self.xhat.integrate(meas.spool_m)
+        return gap, False, self.valve.step(self._echo), self.xhat.integrate(meas.spool_m)
 
     @staticmethod
     def _resync(samples: int, dead: int) -> bool:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -32,6 +33,28 @@ class Measurement:
     reference_m: float = 0.0
     fresh: bool = True
     samples: int = 0
+
+
+#: a sensor sample superseded within a cycle, kept for ``observe``: position (m), spool (m),
+#: current echo (A), load pressure (Pa), and the E2E counter of its SENSOR_POS
+HeldSample = tuple[float, float, float, float, int]
+
+
+def hold_sample(m: Measurement, counter: int) -> HeldSample:
+    """The sensor values of ``m`` (SENSOR_POS with ``counter`` and its SENSOR_AUX), kept."""
+    return (m.position_m, m.spool_m, m.coil_current_a, m.load_pressure_pa, counter)
+
+
+def observe_held(observe: Callable[[Measurement], None], held: list[HeldSample],
+                 samples_of: Callable[[int], int], scratch: Measurement) -> None:
+    """Hand the held samples to ``observe`` in order (``samples_of(counter)``: sensor samples
+    since the one stepped or observed before), then forget them. The daemon calls it after the
+    caught-up periods and before the cycle's step; ``replay`` does the same."""
+    for scratch.position_m, scratch.spool_m, scratch.coil_current_a, scratch.load_pressure_pa, \
+            c in held:
+        scratch.samples = samples_of(c)
+        observe(scratch)
+    held.clear()
 
 
 @dataclass(slots=True)

@@ -89,14 +89,6 @@ class ModelPosition:
         self._rate = spool_m
         return self.x
 
-    def integrate_span(self, spool_m: float, samples: int) -> float:
-        """``samples`` trapezoid steps ending at this sample's spool ``spool_m`` (m), the spool
-        taken linear from the last one (the samples between were not seen); returns x̂ (m).
-        Equal to :meth:`integrate` for one sample."""
-        self.x += self._h * samples * (spool_m + self._rate)
-        self._rate = spool_m
-        return self.x
-
     def anchor(self, position_m: float) -> None:
         """Pull x̂ toward a trusted position estimate ``position_m`` = y_s/θ̂_D (m)."""
         self.x += self._anchor * (position_m - self.x)

@@ -24,12 +24,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import can
-import numpy as np
 
-from ..codec import Verdict, counter_steps
+from ..codec import SampleCount, Verdict
 from ..config import Watchdog
-from ..control.base import Controller, Measurement
-from ..scenario import Reference
+from ..control.base import Controller, HeldSample, Measurement, hold_sample, observe_held
+from ..scenario import Reference, ReferenceBlocks
 from .deadline import DeadlineTimer, socket_wake
 from .frameio import FrameIO
 from .lifecycle import Lifecycle, State
@@ -67,24 +66,6 @@ class LoopOptions:
     #: a file descriptor (udp_multicast, socketcan), else the plain grid is used
     wake_on_sensor: bool = False
     stats_capacity: int = 600_000
-
-
-class ReferenceBlocks:
-    """x_d sampled in blocks of ``block`` samples (m): cheap per cycle, no per-cycle arrays."""
-
-    def __init__(self, reference: Reference, ts_s: float, block: int = 1000) -> None:
-        self.reference = reference
-        self.ts_s = ts_s
-        self._block = block
-        self._k0 = 0
-        self._buf = reference.sample(np.arange(block) * ts_s)
-
-    def at(self, k: int) -> float:
-        """x_d at sample k ≥ the previous k (m)."""
-        if not self._k0 <= k < self._k0 + self._block:
-            self._k0 = k
-            self._buf = self.reference.sample((k + np.arange(self._block)) * self.ts_s)
-        return float(self._buf[k - self._k0])
 
 
 class ControllerLoop:
@@ -133,12 +114,12 @@ class ControllerLoop:
         self._rx_ids = frozenset((self._id_pos, self._id_aux, self._id_setpoint))
         self._lockstep = False
         self._last_pos_counter = 0  # counter of the newest usable SENSOR_POS (lockstep gaps)
-        self._used_counter: int | None = None  # counter of the SENSOR_POS last stepped on
+        self._samples = SampleCount()  # sensor samples between the SENSOR_POS stepped on
         #: the controller's ``observe`` (optional in the Controller protocol: a controller
         #: without it takes the newest sample of a burst only)
         self._observe: Callable[[Measurement], None] | None = getattr(controller, "observe", None)
-        #: this cycle's superseded samples (position, spool, current echo, pressure, counter)
-        self._superseded: list[tuple[float, float, float, float, int]] = []
+        #: this cycle's superseded sensor samples, for ``observe``
+        self._superseded: list[HeldSample] = []
         self._scratch = Measurement()
         self._reset_cycle_rx()
 
@@ -176,9 +157,7 @@ class ControllerLoop:
                 self.catch_up((counter - self._last_pos_counter - 1) & 0x0F)
             self._last_pos_counter = counter
             if self._fresh and self._observe is not None:  # a burst: keep the older sample
-                m = self.meas
-                self._superseded.append((m.position_m, m.spool_m, m.coil_current_a,
-                                         m.load_pressure_pa, self._pos_counter))
+                self._superseded.append(hold_sample(self.meas, self._pos_counter))
             self.meas.position_m = float(v["Position"])
             self.meas.spool_m = float(v["Spool"])
             self._fresh = True
@@ -192,19 +171,6 @@ class ControllerLoop:
         else:
             self._override_m = float(v["Position"]) if v["Override"] else None
         return d.verdict
-
-    def _observe_superseded(self, observe: Callable[[Measurement], None]) -> None:
-        """SENSOR_POS frames that a newer one superseded in this cycle (frames that came in a
-        burst): the controller's predictors step on each, with the SENSOR_AUX that came with it,
-        after the periods caught up and before this cycle's step, so that no sample of the
-        plant's motion is skipped (``ehpss-hil replay`` does the same in the same order)."""
-        m = self._scratch
-        for m.position_m, m.spool_m, m.coil_current_a, m.load_pressure_pa, c in self._superseded:
-            used = self._used_counter
-            m.samples = 0 if used is None else counter_steps(c, used)
-            self._used_counter = c
-            observe(m)
-        self._superseded.clear()
 
     # ---- one cycle --------------------------------------------------------------------------
     def _update_state(self) -> None:
@@ -222,7 +188,7 @@ class ControllerLoop:
                       self.wd.reason.name, self.opts.watchdog.failsafe)
         elif st is State.FAULT and not tripped:
             self.controller.reset()
-            self._used_counter = None
+            self._samples.reset()
             self.life.to(State.ACTIVE)
             log.warning("cycle %d: sensor data fresh for %d cycles: ACTIVE again", self.cycles,
                         self.wd.fresh_cycles)
@@ -234,11 +200,11 @@ class ControllerLoop:
             self.meas.reference_m = x_d
             self.meas.fresh = self._fresh
             if self._superseded and self._observe is not None:
-                self._observe_superseded(self._observe)
+                # frames that came in a burst: the predictors step on every sample, after the
+                # periods caught up and before this step (``replay`` does the same in this order)
+                observe_held(self._observe, self._superseded, self._samples.take, self._scratch)
             if self._fresh:
-                used = self._used_counter
-                self.meas.samples = 0 if used is None else counter_steps(self._pos_counter, used)
-                self._used_counter = self._pos_counter
+                self.meas.samples = self._samples.take(self._pos_counter)
             cmd = self.controller.step(self.meas)
             self.k_active += 1
             return cmd.current_a, cmd.enable

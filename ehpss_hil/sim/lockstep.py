@@ -21,6 +21,7 @@ import numpy as np
 
 from firmware_sim.emulation import PlantEmulation
 
+from ..codec.e2e import counter_steps
 from ..codec.frames import FrameCodec
 from ..control.base import Measurement
 from ..control.controllers import LoopBase, make_controller
@@ -109,8 +110,8 @@ def _loop(emu: PlantEmulation, ctrl: LoopBase, tr: QuantizeTransport | FramesTra
         else:
             meas.position_m, meas.spool_m, meas.load_pressure_pa, meas.coil_current_a = vals
             meas.fresh = True
-            # as the daemon counts them from the E2E counter (counter_steps: 1…16)
-            meas.samples = 0 if k_seen < 0 else (k - k_seen - 1) % 16 + 1
+            # as the daemon counts them from the E2E counter (1…16)
+            meas.samples = 0 if k_seen < 0 else counter_steps(k, k_seen)
             k_seen = k
         meas.reference_m = xd
         if set_truth is not None:
