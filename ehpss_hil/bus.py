@@ -17,8 +17,9 @@ queued — that would end a non-blocking drain early. So filters are passed only
 applies them (socketcan); on the other interfaces the loops filter by ID themselves.
 
 For loops that drain the bus every cycle: :func:`frame_reader` (one non-blocking read; on
-``udp_multicast`` without python-can's ``select()`` per frame) and :func:`drop_own_frames` (on
-``udp_multicast`` a kernel filter for the process's own IDs), both in :mod:`ehpss_hil.bus_udp`.
+``udp_multicast`` without python-can's ``select()`` per frame), :func:`frame_writer` (on
+``udp_multicast`` without a dict and ``msgpack.packb`` per frame) and :func:`drop_own_frames` (on
+``udp_multicast`` a kernel filter for the process's own IDs), all in :mod:`ehpss_hil.bus_udp`.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from typing import Any
 
 import can
 
-from .bus_udp import UdpReader, attach_own_id_filter
+from .bus_udp import UdpReader, UdpWriter, attach_own_id_filter
 from .config import BusConfig
 from .errors import BusUnavailableError
 
@@ -127,6 +128,14 @@ def frame_reader(bus: can.BusABC) -> Callable[[], can.Message | None]:
     if UdpReader.supports(bus):
         return UdpReader(bus).read
     return partial(bus.recv, 0.0)
+
+
+def frame_writer(bus: can.BusABC) -> Callable[[can.Message], None]:
+    """Send one frame: ``bus.send``, or on ``udp_multicast`` the same datagram built from a
+    per-frame-shape template (:class:`~ehpss_hil.bus_udp.UdpWriter`)."""
+    if UdpWriter.supports(bus):
+        return UdpWriter(bus).write
+    return bus.send
 
 
 def drop_own_frames(bus: can.BusABC, can_ids: Iterable[int]) -> bool:

@@ -1,14 +1,16 @@
 """python-can ``udp_multicast`` at the cost a 1 kHz loop can afford.
 
-Two things python-can's generic path does per frame that a loop draining the bus every cycle
+Three things python-can's generic path does per frame that a loop draining the bus every cycle
 does not need:
 
 - ``bus.recv(0.0)`` calls ``select()`` before every ``recvmsg()``: two system calls per frame
   and one more to learn that nothing is left. :class:`UdpReader` reads the socket directly with
   ``MSG_DONTWAIT`` and otherwise does what python-can's ``UdpMulticastBus._recv_internal``
   does: the kernel receive timestamp (``SO_TIMESTAMPNS``), ``unpack_message(check=True)``, the
-  same errors. (One difference: python-can's ``recv`` treats a frame with DLC 0 as "no frame" —
-  ``if msg`` on a Message is its length — and drops it unlogged; here it is returned.)
+  same errors; a frame of a shape already seen is read off that shape's template
+  (:class:`DatagramParser`) instead of decoding the msgpack map into a dict and re-checking it.
+  (One difference: python-can's ``recv`` treats a frame with DLC 0 as "no frame" — ``if msg``
+  on a Message is its length — and drops it unlogged; here it is returned.)
 - The socket loops every frame back to its sender, so a process receives all its own frames
   and drops them after decoding. :func:`attach_own_id_filter` installs a classic BPF socket
   filter that drops them in the kernel. It matches the msgpack layout python-can's
@@ -16,6 +18,12 @@ does not need:
   ``arbitration_id``); a datagram that does not start that way is accepted, so the filter can
   only ever drop the listed IDs, and :class:`~ehpss_hil.runtime.frameio.FrameIO` still drops
   own IDs itself.
+- ``bus.send`` packs every frame through a fresh dict and ``msgpack.packb``. A loop sends the
+  same few frame shapes, whose datagrams differ only in the timestamp and the data bytes:
+  :class:`UdpWriter` builds each shape's datagram once with python-can's own ``pack_message``,
+  checks that splicing a timestamp and data into it reproduces ``pack_message`` exactly, and
+  then writes ``head + timestamp + middle + data + tail`` to the same socket and destination
+  (anything else goes through ``bus.send``).
 """
 
 from __future__ import annotations
@@ -33,6 +41,7 @@ from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 SO_ATTACH_FILTER = getattr(socket, "SO_ATTACH_FILTER", 26)
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 _TIMESPEC = struct.Struct("@ll")
+_F64 = struct.Struct(">d")  # msgpack float 64
 _UDP_HEADER = 8  # a UDP socket filter sees the UDP header first
 
 # classic BPF opcodes (linux/filter.h)
@@ -53,6 +62,7 @@ class UdpReader:
         self._max = int(mc.max_buffer)
         self._anc = int(mc.received_ancillary_buffer_size)
         self._fd = bus.protocol is can.CanProtocol.CAN_FD
+        self._parser = DatagramParser()
 
     @staticmethod
     def supports(bus: can.BusABC) -> bool:
@@ -80,14 +90,146 @@ class UdpReader:
         if nanoseconds >= 1e9:
             raise can.CanOperationError(f"Timestamp nanoseconds field was out of range: "
                                         f"{nanoseconds} not less than 1e9")
-        try:
-            msg = unpack_message(data, replace={"timestamp": seconds + nanoseconds * 1.0e-9},
-                                 check=True)
-        except Exception as exc:
-            raise can.CanOperationError("could not unpack received message") from exc
+        msg = self._parser.parse(data, seconds + nanoseconds * 1.0e-9)
         if not self._fd and msg.is_fd:
             return None
         return msg
+
+
+class DatagramParser:
+    """python-can's ``unpack_message(data, replace={"timestamp": ts}, check=True)``, with the
+    frame shapes already seen read off their templates (:func:`template`) instead.
+
+    A datagram that is exactly ``head + any 8 bytes + middle + n bytes + tail`` of a known shape
+    is what ``pack_message`` makes of a frame of that shape with those data bytes, so the
+    :class:`can.Message` is built from the shape without decoding the map and re-checking it.
+    Everything else goes through ``unpack_message``; its plain shapes (standard/extended data
+    frames, no channel) are learnt, at most :attr:`MAX_SHAPES` of them (a fuzzer's random IDs
+    cannot grow the table without bound)."""
+
+    MAX_SHAPES = 64
+
+    def __init__(self) -> None:
+        #: per middle length: middle → (ID, extended, DLC, data length, tail)
+        self._by_len: dict[int, dict[bytes, tuple[int, bool, int, int, bytes]]] = {}
+        self.shapes = 0
+
+    def parse(self, data: bytes, timestamp_s: float) -> can.Message:
+        """The frame in ``data`` with ``timestamp_s``; CanOperationError when it is none."""
+        if data.startswith(_HEAD):
+            for mlen, table in self._by_len.items():
+                hit = table.get(data[_AT_MIDDLE:_AT_MIDDLE + mlen])
+                if hit is None:
+                    continue
+                can_id, ext, dlc, n, tail = hit
+                at = _AT_MIDDLE + mlen
+                if len(data) == at + n + len(tail) and data.endswith(tail):
+                    return can.Message(timestamp=timestamp_s, arbitration_id=can_id,
+                                       is_extended_id=ext, dlc=dlc, data=data[at:at + n],
+                                       check=False)
+        try:
+            msg = unpack_message(data, replace={"timestamp": timestamp_s}, check=True)
+        except Exception as exc:
+            raise can.CanOperationError("could not unpack received message") from exc
+        if self.shapes < self.MAX_SHAPES:
+            self._learn(msg)
+        return msg
+
+    def _learn(self, msg: can.Message) -> None:
+        if (msg.is_fd or msg.is_remote_frame or msg.is_error_frame or msg.channel is not None
+                or msg.bitrate_switch or msg.error_state_indicator or msg.dlc != len(msg.data)):
+            return
+        tpl = template(msg)
+        if tpl is None:
+            return
+        _, middle, tail = tpl
+        table = self._by_len.setdefault(len(middle), {})
+        if middle not in table:
+            table[middle] = (msg.arbitration_id, msg.is_extended_id, msg.dlc, len(msg.data), tail)
+            self.shapes += 1
+
+
+_HEAD = b"\x8b" + msgpack.packb("timestamp") + b"\xcb"  # fixmap(11), key, float64 tag
+_AT_MIDDLE = len(_HEAD) + 8
+
+
+def template(msg: can.Message) -> tuple[bytes, bytes, bytes] | None:
+    """(head, middle, tail) of ``msg``'s shape: ``pack_message`` of any frame of that shape is
+    ``head + float64 timestamp + middle + data + tail``; None when splicing does not give
+    ``pack_message``'s bytes for two different probes (a python-can that packs otherwise)."""
+    n = len(msg.data)
+
+    def probe(ts: float, data: bytes) -> can.Message:
+        return can.Message(timestamp=ts, arbitration_id=msg.arbitration_id,
+                           is_extended_id=msg.is_extended_id,
+                           is_remote_frame=msg.is_remote_frame,
+                           is_error_frame=msg.is_error_frame, channel=msg.channel,
+                           dlc=msg.dlc, data=data, is_fd=msg.is_fd,
+                           bitrate_switch=msg.bitrate_switch,
+                           error_state_indicator=msg.error_state_indicator, check=False)
+
+    data_key = msgpack.packb("data") + msgpack.packb(bytes(n))[:-n or None]
+    first = pack_message(probe(1.5, bytes(n)))
+    at = first.find(data_key, _AT_MIDDLE)
+    if not first.startswith(_HEAD) or at < 0 or first.find(data_key, at + 1) >= 0:
+        return None
+    middle = first[_AT_MIDDLE:at + len(data_key)]
+    tail = first[at + len(data_key) + n:]
+    for ts, data in ((1.5, bytes(n)), (1779999999.123456, bytes(range(1, n + 1)))):
+        if pack_message(probe(ts, data)) != b"".join((_HEAD, _F64.pack(ts), middle, data, tail)):
+            return None
+    return _HEAD, middle, tail
+
+
+_Shape = tuple[int, bool, bool, bool, object, int, int, bool, bool, bool]
+
+
+class UdpWriter:
+    """Sends python-can ``udp_multicast`` frames as spliced templates (see the module doc)."""
+
+    def __init__(self, bus: can.BusABC) -> None:
+        mc = bus._multicast  # type: ignore[attr-defined]
+        self._bus = bus
+        self._mc = mc
+        self._sock: socket.socket = mc._socket
+        self._dest = mc._send_destination
+        self._fd = bus.protocol is can.CanProtocol.CAN_FD
+        #: shape → (head, middle, tail), or None: that shape goes through ``bus.send``
+        self._templates: dict[_Shape, tuple[bytes, bytes, bytes] | None] = {}
+
+    @staticmethod
+    def supports(bus: can.BusABC) -> bool:
+        """True for a python-can ``UdpMulticastBus`` with the attributes this relies on."""
+        mc = getattr(bus, "_multicast", None)
+        return (isinstance(bus, UdpMulticastBus) and mc is not None and hasattr(mc, "_socket")
+                and hasattr(mc, "_send_destination") and hasattr(mc, "_last_send_timeout"))
+
+    def write(self, msg: can.Message) -> None:
+        """Send ``msg`` as ``bus.send(msg)`` would (same datagram, same errors)."""
+        if self._mc._last_send_timeout is not None or type(msg.timestamp) is not float:
+            self._bus.send(msg)
+            return
+        data = msg.data
+        shape: _Shape = (msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame,
+                         msg.is_error_frame, msg.channel, msg.dlc, len(data), msg.is_fd,
+                         msg.bitrate_switch, msg.error_state_indicator)
+        try:
+            tpl = self._templates[shape]
+        except KeyError:
+            tpl = self._templates[shape] = template(msg)
+        if tpl is None or (msg.is_fd and not self._fd):
+            self._bus.send(msg)
+            return
+        head, middle, tail = tpl
+        datagram = b"".join((head, _F64.pack(msg.timestamp), middle, data, tail))
+        try:
+            sent = self._sock.sendto(datagram, self._dest)
+        except TimeoutError:
+            raise can.CanTimeoutError() from None
+        except OSError as error:
+            raise can.CanOperationError("failed to send via socket") from error
+        if sent < len(datagram):
+            raise can.CanTimeoutError()
 
 
 def _expect(offset: int, data: bytes, fail: str) -> list[tuple[int, int | str, int]]:

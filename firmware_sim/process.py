@@ -150,12 +150,14 @@ class EmulatorProcess:
             self.codec.skip("SENSOR_POS")
             self.codec.skip("SENSOR_AUX")
             return False
-        self.io.send("SENSOR_POS", self._clip("SENSOR_POS", {
-            "Position": y.position_m, "Spool": y.spool_m}))
-        self.io.send("SENSOR_AUX", self._clip("SENSOR_AUX", {
-            "LoadPressure": y.load_pressure_pa, "CoilCurrent": y.coil_current_a,
-            "ValveEnabled": int(self.hold.valve_enabled), "CmdTimeout": int(self.hold.timed_out),
-            "CurrentSaturated": int(y.current_saturated)}))
+        self.io.send_together(
+            ("SENSOR_POS", self._clip("SENSOR_POS", {
+                "Position": y.position_m, "Spool": y.spool_m})),
+            ("SENSOR_AUX", self._clip("SENSOR_AUX", {
+                "LoadPressure": y.load_pressure_pa, "CoilCurrent": y.coil_current_a,
+                "ValveEnabled": int(self.hold.valve_enabled),
+                "CmdTimeout": int(self.hold.timed_out),
+                "CurrentSaturated": int(y.current_saturated)})))
         return True
 
     def _send_faults(self) -> None:

@@ -1,21 +1,24 @@
 """udp_multicast at the frame level: the own-ID socket filter (its BPF program run by a small
-interpreter here, and by the kernel in a namespace) and the select()-free reader."""
+interpreter here, and by the kernel in a namespace), the select()-free reader and the template
+writer."""
 
 from __future__ import annotations
 
 import json
 import random
+import struct
 import subprocess
 import sys
 import textwrap
+from typing import Any
 
 import can
 import pytest
 from _proc import ROOT
-from can.interfaces.udp_multicast.utils import pack_message
+from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
 from ehpss_hil.bus import frame_reader
-from ehpss_hil.bus_udp import own_id_program
+from ehpss_hil.bus_udp import DatagramParser, own_id_program, template
 from ehpss_hil.netns import netns_prefix, netns_unavailable_reason
 
 NETNS_SKIP = netns_unavailable_reason()
@@ -76,6 +79,77 @@ def test_own_id_program_accepts_what_it_does_not_recognise() -> None:
     assert own_id_program([0x05, 0x85]) is not None  # fixint and uint8 encodings
 
 
+def test_writer_templates_give_pack_message_bytes() -> None:
+    """Splicing a timestamp and data into a shape's template is python-can's ``pack_message``,
+    byte for byte, for standard and extended IDs, every DLC, RTR and error frames."""
+    rng = random.Random(3)
+    shapes = 0
+    for _ in range(400):
+        n = rng.randrange(9)
+        ext = rng.random() < 0.3
+        msg = can.Message(arbitration_id=rng.randrange(1 << (29 if ext else 11)),
+                          is_extended_id=ext, data=rng.randbytes(n), dlc=n,
+                          is_remote_frame=rng.random() < 0.1, is_error_frame=rng.random() < 0.05,
+                          channel=rng.choice([None, "can0", 1]),
+                          timestamp=rng.choice([0.0, 1.5, 1.7e9 + rng.random(), -3.25]))
+        tpl = template(msg)
+        assert tpl is not None, msg
+        head, middle, tail = tpl
+        spliced = head + struct.pack(">d", msg.timestamp) + middle + bytes(msg.data) + tail
+        assert spliced == pack_message(msg), msg
+        shapes += 1
+    assert shapes == 400
+
+
+_FIELDS = ("timestamp", "arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame",
+           "channel", "dlc", "data", "is_fd", "bitrate_switch", "error_state_indicator", "is_rx")
+
+
+def _unpacked(datagram: bytes, ts: float) -> tuple[Any, ...] | None:
+    try:
+        m = unpack_message(datagram, replace={"timestamp": ts}, check=True)
+    except Exception:
+        return None
+    return tuple(getattr(m, f) for f in _FIELDS)
+
+
+def test_parser_gives_what_unpack_message_gives() -> None:
+    """Learnt shapes read off their templates give the same Message as ``unpack_message`` (every
+    field, for the same datagrams and for datagrams with a byte changed anywhere); what
+    ``unpack_message`` rejects is a CanOperationError; the shape table is bounded."""
+    rng = random.Random(5)
+    parser = DatagramParser()
+    frames = [can.Message(arbitration_id=i, is_extended_id=i > 0x7FF, data=rng.randbytes(n), dlc=n)
+              for i, n in ((0x110, 8), (0x111, 8), (0x05, 2), (0x1FFFF120, 8), (0x701, 1),
+                           (0x333, 0))]
+    frames.append(can.Message(arbitration_id=0x120, is_remote_frame=True, dlc=4))  # not learnt
+    fast = 0
+    for round_ in range(3):
+        for f in frames:
+            for _ in range(40):
+                f.data = bytearray(rng.randbytes(len(f.data))) if not f.is_remote_frame else f.data
+                f.timestamp = rng.random() * 2e9
+                dg = bytearray(pack_message(f))
+                if round_ == 2:  # corrupt one byte anywhere (key, type tag, ID, data, length)
+                    dg[rng.randrange(len(dg))] = rng.randrange(256)
+                ts = rng.random() * 2e9
+                want = _unpacked(bytes(dg), ts)
+                if want is None:
+                    with pytest.raises(can.CanOperationError):
+                        parser.parse(bytes(dg), ts)
+                    continue
+                before = parser.shapes
+                got = parser.parse(bytes(dg), ts)
+                fast += parser.shapes == before
+                assert tuple(getattr(got, k) for k in _FIELDS) == want, (f, bytes(dg).hex())
+    assert parser.shapes <= DatagramParser.MAX_SHAPES
+    assert fast > 500  # most frames went the template way
+    full = DatagramParser()
+    for i in range(200):
+        full.parse(pack_message(can.Message(arbitration_id=i, data=b"x")), 1.0)
+    assert full.shapes == DatagramParser.MAX_SHAPES
+
+
 def test_frame_reader_elsewhere_is_recv_zero() -> None:
     a = can.Bus(interface="virtual", channel="reader")
     b = can.Bus(interface="virtual", channel="reader")
@@ -92,15 +166,18 @@ def test_frame_reader_elsewhere_is_recv_zero() -> None:
 
 _PROBE = textwrap.dedent("""
     import json, time, can
-    from ehpss_hil.bus import open_bus, frame_reader, drop_own_frames
+    from ehpss_hil.bus import open_bus, frame_reader, frame_writer, drop_own_frames
     from ehpss_hil.config import BusConfig
     a, b = open_bus(BusConfig()), open_bus(BusConfig())
     own = [0x120, 0x140, 0x701, 0x05, 0x85]
     attached = drop_own_frames(b, own)
     sent = [0x110, 0x120, 0x111, 0x140, 0x160, 0x701, 0x702, 0x05, 0x06, 0x85, 0x86, 0x1FFFF120]
     t0 = time.time()
-    for i in sent:
-        a.send(can.Message(arbitration_id=i, data=bytes([i & 0xFF] * 8), is_extended_id=i > 0x7FF))
+    write = frame_writer(a)
+    for i in sent:  # every other one by python-can's send, the rest by the template writer
+        send = write if i % 2 else a.send
+        send(can.Message(arbitration_id=i, data=bytes([i & 0xFF] * 8), is_extended_id=i > 0x7FF,
+                         timestamp=time.time()))
     b.send(can.Message(arbitration_id=0x120, data=bytes(8), is_extended_id=False))  # own echo
     b.send(can.Message(arbitration_id=0x333, data=b"", is_extended_id=False))  # DLC 0, foreign
     time.sleep(0.2)
@@ -109,7 +186,8 @@ _PROBE = textwrap.dedent("""
     while (m := read()) is not None:
         got.append([m.arbitration_id, m.data.hex(), m.timestamp - t0])
     a.shutdown(); b.shutdown()
-    print(json.dumps({"attached": attached, "got": got}))
+    print(json.dumps({"attached": attached, "got": got,
+                      "writer": type(getattr(write, "__self__", None)).__name__}))
 """)
 
 
@@ -119,7 +197,7 @@ def test_kernel_drops_own_ids_and_reader_returns_the_rest() -> None:
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     d = json.loads(r.stdout)
-    assert d["attached"] is True
+    assert d["attached"] is True and d["writer"] == "UdpWriter"
     got = d["got"]
     assert [g[0] for g in got] == [0x110, 0x111, 0x160, 0x702, 0x06, 0x86, 0x1FFFF120, 0x333]
     assert all(g[1] == f"{g[0] & 0xFF:02x}" * 8 for g in got[:-1]) and got[-1][1] == ""

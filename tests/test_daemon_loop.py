@@ -381,3 +381,26 @@ def test_lockstep_steps_over_lost_sensor_samples(rig: Rig) -> None:
     assert len(cmds) == 3 and rig.ctrl.steps == 5
     assert [c["CycleCount"] for c in cmds] == [0, 1, 4]
     assert rig.loop.k_active == 5 and rig.loop.skipped_periods == 2
+
+
+def test_send_together_encodes_first_and_keeps_order() -> None:
+    """The emulator's sensor pair: both frames leave in order; a frame that cannot be encoded
+    is a counted transmit error and does not stop the others."""
+    tx = can.Bus(interface="virtual", channel="together")
+    rx = can.Bus(interface="virtual", channel="together")
+    try:
+        io = FrameIO(tx, FrameCodec(), ("SENSOR_POS", "SENSOR_AUX"))
+        n = io.send_together(("SENSOR_POS", {"Position": 1e-3, "Spool": 2e-6}),
+                             ("SENSOR_AUX", {"LoadPressure": float("nan")}),  # not encodable
+                             ("SENSOR_AUX", {"LoadPressure": 1e5, "CoilCurrent": 0.01}))
+        assert n == 2 and io.tx_errors == 1
+        assert io.sent == {"SENSOR_POS": 1, "SENSOR_AUX": 1}
+        codec = FrameCodec()
+        got = [codec.classify(m) for m in iter(lambda: rx.recv(0.1), None)]
+        assert [d.name for d in got] == ["SENSOR_POS", "SENSOR_AUX"]
+        assert all(d.verdict is Verdict.OK for d in got)
+        assert got[0].values is not None and abs(got[0].values["Position"] - 1e-3) < 1e-7
+        assert got[1].values is not None and abs(got[1].values["LoadPressure"] - 1e5) < 10
+    finally:
+        tx.shutdown()
+        rx.shutdown()

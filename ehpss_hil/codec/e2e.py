@@ -62,11 +62,12 @@ class E2EState(IntEnum):
 
 
 def protect(payload: bytearray, counter: int, data_ids: tuple[int, ...]) -> bytes:
-    """Write ``counter`` into the low nibble of byte 1 and the profile-2 CRC into byte 0."""
-    payload[1] = (payload[1] & 0xF0) | (counter & 0x0F)
-    out = bytearray(payload)
-    out[0] = profile2_crc(payload, data_ids[counter & 0x0F])
-    return bytes(out)
+    """Write ``counter`` into the low nibble of byte 1 and the profile-2 CRC into byte 0 of
+    ``payload`` (in place) and return the protected bytes."""
+    c = counter & 0x0F
+    payload[1] = (payload[1] & 0xF0) | c
+    payload[0] = profile2_crc(payload, data_ids[c])  # over bytes 1..: byte 0 does not count
+    return bytes(payload)
 
 
 def crc_ok(payload: bytes | bytearray, data_ids: tuple[int, ...]) -> bool:

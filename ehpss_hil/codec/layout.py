@@ -17,6 +17,7 @@ cantools instead, which then behaves (or raises) exactly as it always did.
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from typing import Any
 
 from cantools.database.can import Message as DbcMessage
@@ -80,13 +81,20 @@ def _field(sig: Any, n_bits: int) -> _Field | None:
 
 class _Node:
     """One level of cantools' codec tree: its signals and, per multiplexer signal, the node of
-    each multiplexer id (the same grouping as ``cantools`` ``Message._create_codec``)."""
+    each multiplexer id (the same grouping as ``cantools`` ``Message._create_codec``).
 
-    __slots__ = ("fields", "muxes")
+    ``pack(values, le, be)`` and ``unpack(le, be, out)``, compiled once
+    (:func:`_compile_pack`, :func:`_compile_unpack`), encode and decode the level's own signals
+    (``pack`` as a multiplexed level: every signal required)."""
+
+    __slots__ = ("fields", "muxes", "pack", "unpack")
 
     def __init__(self, fields: tuple[_Field, ...], muxes: tuple[tuple[str, dict[int, _Node]], ...]):
         self.fields = fields
         self.muxes = muxes
+        self.pack: _Pack = _cached("pack", fields, None, lambda: _compile_pack(fields, None))
+        self.unpack: Callable[[int, int, dict[str, Any]], None] = _cached(
+            "unpack", fields, None, lambda: _compile_unpack(fields))
 
 
 def _build(msg: DbcMessage, n_bits: int, parent: str | None, mux_id: int | None) -> _Node | None:
@@ -118,38 +126,81 @@ def _build(msg: DbcMessage, n_bits: int, parent: str | None, mux_id: int | None)
     return _Node(tuple(fields), tuple(muxes))
 
 
-def _to_raw(v: Any, kind: int, scale: Any, offset: Any, raw_float: bool) -> Any:
-    """cantools' ``numeric_scaled_to_raw`` of each conversion class, expression for expression."""
+_Pack = Callable[[dict[str, Any], int, int], tuple[int, int]]
+
+
+def _raw_lines(kind: int, raw_float: bool, i: int) -> list[str]:
+    """cantools' ``numeric_scaled_to_raw`` of each conversion class, expression for expression
+    (``v`` physical → ``r`` raw; ``S{i}``/``O{i}`` the field's scale and offset objects)."""
     if kind == _LINEAR:
-        r = (v - offset) / scale
-        return r if raw_float else round(r)
+        return [f"r = (v - O{i}) / S{i}"] + ([] if raw_float else ["r = round(r)"])
     if kind == _IDENTITY:
-        return v if raw_float else round(v)
-    r = v - offset
-    q, rem = divmod(r, scale)
-    return round(q if rem == 0 else r / scale)
+        return ["r = v" if raw_float else "r = round(v)"]
+    return [f"r = v - O{i}", f"q, rem = divmod(r, S{i})", f"r = round(q if rem == 0 else r / S{i})"]
 
 
-def _pack(fields: tuple[_Field, ...], values: dict[str, Any], default: int | None,
-          le: int, be: int) -> tuple[int, int]:
-    """OR the fields' bits into the little- and big-endian payload integers; a field missing
-    from ``values`` takes ``default`` (None: it is required)."""
-    for name, big, shift, mask, sign, floats, kind, scale, offset, raw_float in fields:
-        v = values.get(name, default)
-        if not isinstance(v, (int, float)):
-            raise LayoutMiss(name)
-        raw = _to_raw(v, kind, scale, offset, raw_float)
+#: compiled functions by (kind, repr of the fields, default): every FrameCodec of a process
+#: shares them (repr tells 1 from 1.0 and 0.0 from -0.0, which the conversions must keep apart)
+_COMPILED: dict[tuple[str, str, int | None], Any] = {}
+
+
+def _compile(name: str, args: str, body: list[str], env: dict[str, Any]) -> Any:
+    """Define function ``name(args)`` with ``body`` in namespace ``env`` and return it."""
+    lines = "\n    ".join(body)
+    src = f"def {name}({args}):\n    {lines}\n"
+    exec(compile(src, f"<layout {name}>", "exec"), env)  # source generated from the DBC only
+    return env[name]
+
+
+def _cached(kind: str, fields: tuple[_Field, ...], default: int | None,
+            make: Callable[[], Any]) -> Any:
+    key = (kind, repr(fields), default)
+    fn = _COMPILED.get(key)
+    if fn is None:
+        fn = _COMPILED[key] = make()
+    return fn
+
+
+def _compile_pack(fields: tuple[_Field, ...], default: int | None) -> _Pack:
+    """``pack(values, le, be) -> (le, be)``: OR the fields' bits into the little- and big-endian
+    payload integers; a field missing from ``values`` takes ``default`` (None: it is required).
+
+    The loop over the fields is written out once per level, with each field's shift, mask and
+    conversion as constants (what a per-field interpreter would look up every frame)."""
+    env: dict[str, Any] = {"Miss": LayoutMiss, "num": (int, float)}
+    body = ["get = values.get"]
+    for i, (name, big, shift, mask, sign, floats, kind, scale, offset, raw_float) in \
+            enumerate(fields):
+        env[f"N{i}"], env[f"S{i}"], env[f"O{i}"] = name, scale, offset
+        body += [f"v = get(N{i})" if default is None else f"v = get(N{i}, {default!r})",
+                 f"if not isinstance(v, num): raise Miss(N{i})"]
+        body += _raw_lines(kind, raw_float, i)
         if floats is not None:
-            bits = floats[1].unpack(floats[0].pack(raw))[0]
-        elif (raw < -sign or raw > mask - sign) if sign else (raw < 0 or raw > mask):
-            raise LayoutMiss(name)
+            env[f"FP{i}"], env[f"FU{i}"] = floats[0].pack, floats[1].unpack
+            body.append(f"bits = FU{i}(FP{i}(r))[0]")
         else:
-            bits = raw & mask
-        if big:
-            be |= bits << shift
-        else:
-            le |= bits << shift
-    return le, be
+            lo, hi = (-sign, mask - sign) if sign else (0, mask)
+            body += [f"if r < {lo} or r > {hi}: raise Miss(N{i})", f"bits = r & {mask}"]
+        body.append(f"{'be' if big else 'le'} |= bits << {shift}")
+    body.append("return le, be")
+    return _compile("pack", "values, le, be", body, env)  # type: ignore[no-any-return]
+
+
+def _compile_unpack(fields: tuple[_Field, ...]) -> Callable[[int, int, dict[str, Any]], None]:
+    """``unpack(le, be, out)``: each field's physical value from the payload integers into
+    ``out``, in field order (cantools' key order)."""
+    env: dict[str, Any] = {}
+    body = ["pass"]
+    for i, (name, big, shift, mask, sign, floats, kind, scale, offset, _) in enumerate(fields):
+        env[f"N{i}"], env[f"S{i}"], env[f"O{i}"] = name, scale, offset
+        body.append(f"raw = ({'be' if big else 'le'} >> {shift}) & {mask}")
+        if floats is not None:
+            env[f"FP{i}"], env[f"FU{i}"] = floats[1].pack, floats[0].unpack
+            body.append(f"raw = FU{i}(FP{i}(raw))[0]")
+        elif sign:
+            body.append(f"if raw & {sign}: raw -= {sign << 1}")
+        body.append(f"out[N{i}] = " + ("raw" if kind == _IDENTITY else f"raw * S{i} + O{i}"))
+    return _compile("unpack", "le, be, out", body, env)  # type: ignore[no-any-return]
 
 
 class BitLayout:
@@ -159,7 +210,7 @@ class BitLayout:
     counter, set afterwards); their bits are computed once here.
     """
 
-    __slots__ = ("_big", "_const", "_fields", "_length", "_root", "_zero", "name")
+    __slots__ = ("_big", "_const", "_length", "_pack_root", "_root", "_zero", "name")
 
     def __init__(self, root: _Node, length: int, name: str,
                  zero: frozenset[str] = frozenset()) -> None:
@@ -168,8 +219,10 @@ class BitLayout:
         self.name = name
         self._big = _has_big(root)
         self._zero = zero
-        self._fields = tuple(f for f in root.fields if f[0] not in zero)
-        self._const = _pack(tuple(f for f in root.fields if f[0] in zero), {}, 0, 0, 0)
+        own = tuple(f for f in root.fields if f[0] not in zero)
+        fixed = tuple(f for f in root.fields if f[0] in zero)
+        self._pack_root: _Pack = _cached("pack", own, 0, lambda: _compile_pack(own, 0))
+        self._const = _cached("pack", fixed, 0, lambda: _compile_pack(fixed, 0))({}, 0, 0)
 
     @classmethod
     def of(cls, msg: DbcMessage, zero: frozenset[str] = frozenset()) -> BitLayout | None:
@@ -185,11 +238,11 @@ class BitLayout:
         """``values`` (physical) → payload. Top-level signals missing from ``values`` are 0
         (as when the caller adds them as 0); multiplexed ones must be given."""
         try:
-            le, be = _pack(self._fields, values, 0, *self._const)
+            le, be = self._pack_root(values, *self._const)
             node = self._root
             while node.muxes:
                 node = self._select(node, values)
-                le, be = _pack(node.fields, values, None, le, be)
+                le, be = node.pack(values, le, be)
         except (TypeError, ValueError, OverflowError, ZeroDivisionError, struct.error) as exc:
             raise LayoutMiss(str(exc)) from None
         n = self._length
@@ -220,13 +273,7 @@ class BitLayout:
         out: dict[str, Any] = {}
         node: _Node | None = self._root
         while node is not None:
-            for name, big, shift, mask, sign, floats, kind, scale, offset, _ in node.fields:
-                raw: Any = ((be if big else le) >> shift) & mask
-                if floats is not None:
-                    raw = floats[0].unpack(floats[1].pack(raw))[0]
-                elif raw & sign:
-                    raw -= sign << 1
-                out[name] = raw if kind == _IDENTITY else raw * scale + offset
+            node.unpack(le, be, out)
             if not node.muxes:
                 break
             if len(node.muxes) != 1:

@@ -242,14 +242,16 @@ class ControllerLoop:
             self.k_active += 1
         self.meas.fresh = fresh
 
-    def poll_cycle(self, skipped: int = 0) -> float | None:
+    def poll_cycle(self, skipped: int = 0, drain: bool = True) -> float | None:
         """One realtime cycle without waiting: the ``skipped`` grid periods before it
-        (:meth:`catch_up`), drain every pending frame, then :meth:`cycle`.
+        (:meth:`catch_up`), drain every pending frame (unless ``drain`` is False: the caller
+        has just drained the bus), then :meth:`cycle`.
 
         Returns the receive timestamp (wall-clock s) of the SENSOR_POS frame used, or None."""
         self.catch_up(skipped)
-        for msg in self.io.drain():
-            self.on_frame(msg)
+        if drain:
+            for msg in self.io.drain():
+                self.on_frame(msg)
         used = self._pos_ts if self._fresh else None
         self.cycle()
         return used
@@ -338,10 +340,13 @@ class ControllerLoop:
         while not stop and (n_cycles is None or self.cycles < n_cycles):
             lateness = timer.wait(wake)
             t0 = perf()
-            if lateness < 0.0:  # woken by the sensor pair: lateness from its arrival
+            woken = lateness < 0.0
+            if woken:  # by the sensor pair: lateness from its arrival
                 self.woken_by_sensor += 1
                 lateness = max(0.0, self._woke_wall_s - self._aux_ts)
-            rx_wall = self.poll_cycle(timer.last_skipped)
+            # woken: the bus was drained to its last frame microseconds ago (and no period was
+            # skipped); another read would only learn that nothing is pending
+            rx_wall = self.poll_cycle(timer.last_skipped, drain=not woken)
             if lock is not None and rx_wall is not None:
                 arrival = rx_wall - (time.time() - time.monotonic())
                 timer.shift(lock.correction(timer.next_deadline_s - self.ts_s, arrival))

@@ -4,8 +4,9 @@ On ``udp_multicast`` a process receives its own frames; :class:`FrameIO` drops e
 frame whose ID is one this process transmits (``own_ids``) before anything else sees it, so
 each frame is logged exactly once (when sent). There a kernel socket filter drops them first
 (:func:`~ehpss_hil.bus.drop_own_frames`: no read, no decoding), and the drain reads without a
-``select()`` per frame (:func:`~ehpss_hil.bus.frame_reader`). Every other frame is logged when
-received, then handed to the loop, which classifies only the IDs it consumes.
+``select()`` per frame (:func:`~ehpss_hil.bus.frame_reader`) and frames go out without
+python-can's per-frame packing (:func:`~ehpss_hil.bus.frame_writer`). Every other frame is
+logged when received, then handed to the loop, which classifies only the IDs it consumes.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from typing import Any, Protocol
 
 import can
 
-from ..bus import drop_own_frames, frame_reader
+from ..bus import drop_own_frames, frame_reader, frame_writer
 from ..codec import FrameCodec
 from ..config import BusConfig, CanIds, LogConfig
 from ..errors import ConfigError, FrameError
@@ -90,24 +91,45 @@ class FrameIO:
         #: True when the kernel drops the echoes of own frames (udp_multicast)
         self.own_filtered_in_kernel = drop_own_frames(bus, self.own_ids)
         self._read = frame_reader(bus)
+        self._write = frame_writer(bus)
         self.sent: dict[str, int] = {n: 0 for n in own_names}
         self.tx_errors = 0
         self.received = 0
 
     def send(self, name: str, values: dict[str, Any]) -> can.Message | None:
         """Encode, send and log one frame; returns it, or None when encode/send failed."""
+        msg = self._encode(name, values)
+        return msg if msg is not None and self._emit(name, msg) else None
+
+    def send_together(self, *frames: tuple[str, dict[str, Any]]) -> int:
+        """Encode every frame first, then send them back to back (in order), so that they leave
+        as close together as the bus allows (the emulator's sensor pair: the controller's cycle
+        waits for the second); returns how many were sent."""
+        msgs = [(name, self._encode(name, values)) for name, values in frames]
+        return sum(1 for name, msg in msgs if msg is not None and self._emit(name, msg))
+
+    def _encode(self, name: str, values: dict[str, Any]) -> can.Message | None:
         try:
-            msg = self.codec.encode(name, values, timestamp_s=time.time())
-            self.bus.send(msg)
-        except (FrameError, can.CanError, OSError) as exc:
-            self.tx_errors += 1
-            if self.tx_errors == 1 or self.tx_errors % 1000 == 0:
-                log.warning("%s not sent (%d transmit errors): %s", name, self.tx_errors, exc)
+            return self.codec.encode(name, values, timestamp_s=time.time())
+        except FrameError as exc:
+            self._tx_error(name, exc)
             return None
+
+    def _emit(self, name: str, msg: can.Message) -> bool:
+        try:
+            self._write(msg)
+        except (can.CanError, OSError) as exc:
+            self._tx_error(name, exc)
+            return False
         self.sent[name] = self.sent.get(name, 0) + 1
         if self.logger is not None:
             self.logger.log(msg)
-        return msg
+        return True
+
+    def _tx_error(self, name: str, exc: Exception) -> None:
+        self.tx_errors += 1
+        if self.tx_errors == 1 or self.tx_errors % 1000 == 0:
+            log.warning("%s not sent (%d transmit errors): %s", name, self.tx_errors, exc)
 
     def idle(self) -> None:
         """The loop is done with its cycle and about to sleep: the log writer may run now
