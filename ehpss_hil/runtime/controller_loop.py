@@ -35,7 +35,7 @@ from .lifecycle import Lifecycle, State
 from .phaselock import PhaseLock
 from .signals import StopFlag
 from .stats import LoopStats
-from .status_frames import StatusReporter
+from .status_frames import FrameSchedule, StatusReporter
 from .watchdog import SensorWatchdog
 
 log = logging.getLogger("ehpss_hil.controller")
@@ -87,9 +87,9 @@ class ControllerLoop:
         self._id_pos = self.codec.can_id("SENSOR_POS")
         self._id_aux = self.codec.can_id("SENSOR_AUX")
         self._id_setpoint = self.codec.can_id("SETPOINT")
-        self._status_every = max(1, round(opts.rate_hz / opts.status_rate_hz))
-        self._hb_every = max(1, round(opts.rate_hz / opts.heartbeat_rate_hz))
-        self._stats_every = max(1, round(opts.rate_hz / opts.stats_rate_hz))
+        self.schedule = FrameSchedule(round(opts.rate_hz / opts.status_rate_hz),
+                                      round(opts.rate_hz / opts.stats_rate_hz),
+                                      round(opts.rate_hz / opts.heartbeat_rate_hz))
         self._log_every = round(opts.stats_interval_s * opts.rate_hz)
         self._interval_compute_max_s = 0.0
         self.cycles = 0
@@ -108,9 +108,7 @@ class ControllerLoop:
         self._override_m: float | None = None
         self._compute_max_s = 0.0
         self.reporter = StatusReporter(io)
-        self._stats_due = False
-        self._hb_due = False
-        self._periodic_cycle = 0  # self.cycles at the last _periodic
+        self._logged_cycle = 0  # self.cycles at the last _periodic
         self._rx_ids = frozenset((self._id_pos, self._id_aux, self._id_setpoint))
         self._lockstep = False
         self._last_pos_counter = 0  # counter of the newest usable SENSOR_POS (lockstep gaps)
@@ -282,33 +280,22 @@ class ControllerLoop:
 
     # ---- status frames ----------------------------------------------------------------------
     def _periodic(self) -> None:
-        """At most one status frame per cycle, so that no cycle carries two or three of them:
-        CTRL_STATUS when due, else a CTRL_STATS or heartbeat that fell due (when they coincide
-        with CTRL_STATUS they go out one and two cycles later), else the next CTRL_INDEX of the
-        snapshot. (A frame sent every cycle does not take the slot.) A frame falls due when
-        :attr:`cycles` reaches a multiple of its period, also when :meth:`catch_up` jumped it."""
-        c, prev = self.cycles, self._periodic_cycle
-        self._periodic_cycle = c
-        self._stats_due = self._stats_due or c // self._stats_every > prev // self._stats_every
-        self._hb_due = self._hb_due or c // self._hb_every > prev // self._hb_every
-        status_now = c // self._status_every > prev // self._status_every
-        busy = False
-        if status_now:
+        """The periodic frames due in this cycle (:class:`FrameSchedule`: at most one of
+        CTRL_STATUS, CTRL_STATS, heartbeat, CTRL_INDEX) and the counter line of the log."""
+        c = self.cycles
+        due = self.schedule.next(c, bool(self.reporter.pending))
+        if due.status:
             self.send_status()
-            busy = self._status_every > 1
-        if self._stats_due and not busy:
+        if due.stats:
             self.io.send("CTRL_STATS", {
                 "Overruns": self.overruns & 0xFFFF, "RejectedFrames": self.codec.rejected & 0xFFFF,
                 "CycleTimeMax": min(self._compute_max_s, 0.065535)})
             self._compute_max_s = 0.0
-            self._stats_due = False
-            busy = self._stats_every > 1
-        if self._hb_due and not busy:
+        if due.heartbeat:
             self.io.send("HEARTBEAT_CTRL", {"NmtState": self.life.nmt_state})
-            self._hb_due = False
-            busy = self._hb_every > 1
-        if self.reporter.pending and not busy and not status_now:
+        if due.ctrl_index:
             self.reporter.send_next_index()
+        prev, self._logged_cycle = self._logged_cycle, c
         if self._log_every and c // self._log_every > prev // self._log_every:
             self._log_counters()
 
