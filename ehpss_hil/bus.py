@@ -122,19 +122,27 @@ def set_receive_buffer(bus: can.BusABC, size_bytes: int) -> int:
     return granted
 
 
-def frame_reader(bus: can.BusABC) -> Callable[[], can.Message | None]:
+def frame_reader(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callable[
+        [], can.Message | None]:
     """One pending frame or None, never waiting: ``bus.recv(0.0)``, or on ``udp_multicast`` the
-    same read without its ``select()`` system call (:class:`~ehpss_hil.bus_udp.UdpReader`)."""
+    same read without its ``select()`` system call (:class:`~ehpss_hil.bus_udp.UdpReader`),
+    with the templates of ``shapes`` (frames like those to come) built now, not on arrival."""
     if UdpReader.supports(bus):
-        return UdpReader(bus).read
+        reader = UdpReader(bus)
+        reader.prepare(shapes)
+        return reader.read
     return partial(bus.recv, 0.0)
 
 
-def frame_writer(bus: can.BusABC) -> Callable[[can.Message], None]:
+def frame_writer(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callable[
+        [can.Message], None]:
     """Send one frame: ``bus.send``, or on ``udp_multicast`` the same datagram built from a
-    per-frame-shape template (:class:`~ehpss_hil.bus_udp.UdpWriter`)."""
+    per-frame-shape template (:class:`~ehpss_hil.bus_udp.UdpWriter`; the templates of
+    ``shapes`` built now, not on the first send)."""
     if UdpWriter.supports(bus):
-        return UdpWriter(bus).write
+        writer = UdpWriter(bus)
+        writer.prepare(shapes)
+        return writer.write
     return bus.send
 
 

@@ -95,6 +95,12 @@ class UdpReader:
             return None
         return msg
 
+    def prepare(self, shapes: Iterable[can.Message]) -> None:
+        """Learn the templates of ``shapes`` now (a template costs a few ``pack_message`` calls:
+        at start-up rather than in a cycle's first frames)."""
+        for msg in shapes:
+            self._parser.learn(msg)
+
 
 class DatagramParser:
     """python-can's ``unpack_message(data, replace={"timestamp": ts}, check=True)``, with the
@@ -131,11 +137,13 @@ class DatagramParser:
             msg = unpack_message(data, replace={"timestamp": timestamp_s}, check=True)
         except Exception as exc:
             raise can.CanOperationError("could not unpack received message") from exc
-        if self.shapes < self.MAX_SHAPES:
-            self._learn(msg)
+        self.learn(msg)
         return msg
 
-    def _learn(self, msg: can.Message) -> None:
+    def learn(self, msg: can.Message) -> None:
+        """Add ``msg``'s shape (a plain data frame; up to :attr:`MAX_SHAPES` shapes)."""
+        if self.shapes >= self.MAX_SHAPES:
+            return
         if (msg.is_fd or msg.is_remote_frame or msg.is_error_frame or msg.channel is not None
                 or msg.bitrate_switch or msg.error_state_indicator or msg.dlc != len(msg.data)):
             return
@@ -204,15 +212,24 @@ class UdpWriter:
         return (isinstance(bus, UdpMulticastBus) and mc is not None and hasattr(mc, "_socket")
                 and hasattr(mc, "_send_destination") and hasattr(mc, "_last_send_timeout"))
 
+    def prepare(self, shapes: Iterable[can.Message]) -> None:
+        """Build the templates of ``shapes`` now rather than on their first send."""
+        for msg in shapes:
+            self._templates.setdefault(self._shape(msg), template(msg))
+
+    @staticmethod
+    def _shape(msg: can.Message) -> _Shape:
+        return (msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame, msg.is_error_frame,
+                msg.channel, msg.dlc, len(msg.data), msg.is_fd, msg.bitrate_switch,
+                msg.error_state_indicator)
+
     def write(self, msg: can.Message) -> None:
         """Send ``msg`` as ``bus.send(msg)`` would (same datagram, same errors)."""
         if self._mc._last_send_timeout is not None or type(msg.timestamp) is not float:
             self._bus.send(msg)
             return
         data = msg.data
-        shape: _Shape = (msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame,
-                         msg.is_error_frame, msg.channel, msg.dlc, len(data), msg.is_fd,
-                         msg.bitrate_switch, msg.error_state_indicator)
+        shape = self._shape(msg)
         try:
             tpl = self._templates[shape]
         except KeyError:

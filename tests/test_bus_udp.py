@@ -144,6 +144,11 @@ def test_parser_gives_what_unpack_message_gives() -> None:
                 assert tuple(getattr(got, k) for k in _FIELDS) == want, (f, bytes(dg).hex())
     assert parser.shapes <= DatagramParser.MAX_SHAPES
     assert fast > 500  # most frames went the template way
+    ready = DatagramParser()  # a shape learnt ahead (start-up) serves the first datagram
+    ready.learn(can.Message(arbitration_id=0x110, dlc=8, data=bytes(8)))
+    first = pack_message(can.Message(arbitration_id=0x110, dlc=8, data=b"abcdefgh", timestamp=2.0))
+    got = ready.parse(first, 3.5)
+    assert ready.shapes == 1 and tuple(getattr(got, k) for k in _FIELDS) == _unpacked(first, 3.5)
     full = DatagramParser()
     for i in range(200):
         full.parse(pack_message(can.Message(arbitration_id=i, data=b"x")), 1.0)

@@ -90,8 +90,12 @@ class FrameIO:
         self.own_ids = frozenset(codec.can_id(n) for n in own_names)
         #: True when the kernel drops the echoes of own frames (udp_multicast)
         self.own_filtered_in_kernel = drop_own_frames(bus, self.own_ids)
-        self._read = frame_reader(bus)
-        self._write = frame_writer(bus)
+        # every DBC frame's datagram template built now, not in the first cycles (udp_multicast)
+        shapes = {n: can.Message(arbitration_id=codec.can_id(n), is_extended_id=False,
+                                 dlc=codec.message(n).length, data=bytes(codec.message(n).length))
+                  for n in codec.names}
+        self._read = frame_reader(bus, (m for n, m in shapes.items() if n not in own_names))
+        self._write = frame_writer(bus, (shapes[n] for n in own_names))
         self.sent: dict[str, int] = {n: 0 for n in own_names}
         self.tx_errors = 0
         self.received = 0
