@@ -3,7 +3,8 @@
 Answers every SENSOR_POS/SENSOR_AUX pair with one VALVE_CMD (a deterministic P law on the
 received position), sends one VALVE_CMD with a corrupted CRC after the 10th answer, prints
 ``ready`` once its bus is open and a JSON line of counters at the end. Ends after ``--pairs``
-answers or when the bus has been quiet for ``--idle`` seconds.
+answers or when the bus has been quiet for ``--idle`` seconds after its first frame (before it,
+the peer's start-up may take up to ``--startup`` seconds on a loaded host).
 
 Must run where udp_multicast stays on this host (hop limit 0, inside a private namespace).
 """
@@ -26,6 +27,7 @@ def main() -> int:
     p = argparse.ArgumentParser()
     p.add_argument("--pairs", type=int, default=10**9)
     p.add_argument("--idle", type=float, default=3.0)
+    p.add_argument("--startup", type=float, default=30.0)
     p.add_argument("--no-bad", action="store_true")
     a = p.parse_args()
     codec = FrameCodec()
@@ -35,7 +37,9 @@ def main() -> int:
     pos = None
     print("ready", flush=True)
     try:
-        while answered < a.pairs and (msg := bus.recv(a.idle)) is not None:
+        wait_s = a.startup
+        while answered < a.pairs and (msg := bus.recv(wait_s)) is not None:
+            wait_s = a.idle
             if msg.arbitration_id == own:
                 continue  # our own frame, looped back by the multicast socket
             d = codec.classify(msg)
