@@ -57,9 +57,11 @@ def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, 
     sc.write_text(_SCENARIO.format(seconds=seconds, ts=1.0 / rate))
     ctrl_args, emu_args = _VARIANTS[variant]
     d = out / variant
+    before = hostref.cpu_times()
     res = execute(RunPlan(scenario_path=sc, mode="mmac", out_dir=d, bus_logger=False,
                           extra_controller_args=ctrl_args, extra_emulator_args=emu_args,
                           auto_recover=True, watchdog_cycles=10, truth=False))
+    steal = hostref.steal_fraction(before, hostref.cpu_times())
     check_exit_codes(res)
     c = json.loads((d / "controller-summary.json").read_text())
     e = json.loads((d / "emulator-summary.json").read_text())
@@ -74,7 +76,7 @@ def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, 
             "woken_by_sensor": c.get("woken_by_sensor", 0),
             "skipped_periods": c.get("skipped_periods", 0),
             "emulator_overruns": e["stats"]["overruns"],
-            "emulator_lateness_s": e["stats"]["lateness_s"]}
+            "emulator_lateness_s": e["stats"]["lateness_s"], "host_steal_fraction": steal}
 
 
 def _us(d: dict[str, float]) -> str:
@@ -115,6 +117,10 @@ def _print(rows: list[dict[str, Any]]) -> None:
               f"{r['emulator_overruns']}; rejected frames {r['rejected_frames']}; watchdog trips "
               f"{r['watchdog_trips']} (incl. the one at the end); controller peak RSS {rss:.1f} MiB "
               f"(≤ 100 MB: {'PASS' if rss * 2**20 <= 100e6 else 'FAIL'})")
+        steal = r.get("host_steal_fraction")
+        if steal is not None:
+            print(f"{r['variant']:<7} host steal time during the run: {100 * steal:.1f} % of the "
+                  "time this VM wanted a CPU (the hypervisor ran another guest)")
 
 
 def run(args: argparse.Namespace) -> int:
