@@ -43,6 +43,9 @@ SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 _TIMESPEC = struct.Struct("@ll")
 _F64 = struct.Struct(">d")  # msgpack float 64
 _UDP_HEADER = 8  # a UDP socket filter sees the UDP header first
+#: how every python-can datagram starts: fixmap(11), the key "timestamp", the float64 tag
+_HEAD = b"\x8b" + msgpack.packb("timestamp") + b"\xcb"
+_AT_MIDDLE = len(_HEAD) + 8  # after the timestamp's 8 bytes
 
 # classic BPF opcodes (linux/filter.h)
 _LD_W, _LD_H, _LD_B = 0x20, 0x28, 0x30  # BPF_LD | BPF_{W,H,B} | BPF_ABS
@@ -157,9 +160,6 @@ class DatagramParser:
             self.shapes += 1
 
 
-_HEAD = b"\x8b" + msgpack.packb("timestamp") + b"\xcb"  # fixmap(11), key, float64 tag
-_AT_MIDDLE = len(_HEAD) + 8
-
 
 def template(msg: can.Message) -> tuple[bytes, bytes, bytes] | None:
     """(head, middle, tail) of ``msg``'s shape: ``pack_message`` of any frame of that shape is
@@ -266,9 +266,8 @@ def _expect(offset: int, data: bytes, fail: str) -> list[tuple[int, int | str, i
 def own_id_program(can_ids: Iterable[int]) -> list[tuple[int, int, int, int]] | None:
     """The BPF program (code, jt, jf, k) dropping python-can datagrams of ``can_ids``, or None
     when python-can's packing is not the layout it relies on (then nothing is filtered)."""
-    ts = b"\x8b" + msgpack.packb("timestamp") + b"\xcb"  # fixmap(11), key, float64 tag
     key = msgpack.packb("arbitration_id")
-    at_key = len(ts) + 8
+    at_key = _AT_MIDDLE
     at_id = at_key + len(key)
     ids = sorted(set(can_ids))
     blocks: list[tuple[list[tuple[int, int | str, int]], str]] = []
@@ -276,7 +275,7 @@ def own_id_program(can_ids: Iterable[int]) -> list[tuple[int, int, int, int]] | 
         enc = msgpack.packb(can_id)
         probe = pack_message(can.Message(arbitration_id=can_id, timestamp=1.5,
                                          is_extended_id=can_id > 0x7FF))
-        if not (probe.startswith(ts) and probe[at_key:at_id] == key
+        if not (probe.startswith(_HEAD) and probe[at_key:at_id] == key
                 and probe[at_id:at_id + len(enc)] == enc):
             return None
         blocks.append((_expect(_UDP_HEADER + at_id, enc, f"next{i}"), f"next{i}"))
@@ -286,7 +285,7 @@ def own_id_program(can_ids: Iterable[int]) -> list[tuple[int, int, int, int]] | 
     # a shorter datagram is accepted (a load beyond the packet would make the kernel drop it)
     code: list[tuple[int, int | str, int]] = [(_LD_LEN, 0, 0),
                                               (_JGE, "accept", _UDP_HEADER + at_id + longest)]
-    code += _expect(_UDP_HEADER, ts, "accept")
+    code += _expect(_UDP_HEADER, _HEAD, "accept")
     code += _expect(_UDP_HEADER + at_key, key, "accept")
     labels: dict[str, int] = {}
     for checks, label in blocks:

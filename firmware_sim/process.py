@@ -147,8 +147,7 @@ class EmulatorProcess:
                 "Stuck": int(y.faults.stuck)}))
         if self.emu.frame_lost(0):  # lost on the way: the counters move on (receiver: a gap)
             self.lost_sensor += 1
-            self.codec.skip("SENSOR_POS")
-            self.codec.skip("SENSOR_AUX")
+            self._skip_sample()
             return False
         self.io.send_together(
             ("SENSOR_POS", self._clip("SENSOR_POS", {
@@ -159,6 +158,11 @@ class EmulatorProcess:
                 "CmdTimeout": int(self.hold.timed_out),
                 "CurrentSaturated": int(y.current_saturated)})))
         return True
+
+    def _skip_sample(self) -> None:
+        """A sensor sample not sent: the sensor frames' E2E counters move on over it."""
+        self.codec.skip("SENSOR_POS")
+        self.codec.skip("SENSOR_AUX")
 
     def _send_faults(self) -> None:
         f = self.emu.faults
@@ -216,8 +220,7 @@ class EmulatorProcess:
         setpoint = self._take_command(newest)
         for _ in range(skipped):
             self.emu.measure()  # draws the sample's noise: the streams stay on the sample grid
-            self.codec.skip("SENSOR_POS")
-            self.codec.skip("SENSOR_AUX")
+            self._skip_sample()
             self.emu.advance(setpoint)
             self._check_faults()
             self.periods += 1
