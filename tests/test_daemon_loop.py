@@ -261,14 +261,15 @@ def test_lockstep_with_emulator_and_mmac() -> None:
 
 def test_skipped_periods_are_stepped_without_frames(rig: Rig) -> None:
     """An overrun that skipped 3 grid periods: the law steps 3 more times without data (fresh
-    False), the reference index moves on by 4, one VALVE_CMD goes out with CycleCount 4 on, and
-    the watchdog does not count the skipped periods."""
+    False) and without sending (command_sent False), the reference index moves on by 4, one
+    VALVE_CMD goes out with CycleCount 4 on, and the watchdog does not count the skipped
+    periods."""
     _activate(rig, 20)
-    seen: list[bool] = []
+    seen: list[tuple[bool, bool]] = []
     orig = rig.ctrl.step
 
     def step(m: Measurement) -> ValveCommand:
-        seen.append(m.fresh)
+        seen.append((m.fresh, m.command_sent))
         return orig(m)
 
     rig.ctrl.step = step  # type: ignore[method-assign]
@@ -285,7 +286,8 @@ def test_skipped_periods_are_stepped_without_frames(rig: Rig) -> None:
             cmds.append(d.values)
     assert len(cmds) == 1 and rig.loop.io.sent["VALVE_CMD"] == sent0 + 1
     assert cmds[0]["CycleCount"] == c0 + 4
-    assert rig.ctrl.steps == steps0 + 4 and seen == [False, False, False, True]
+    # the caught-up steps know their command is not sent (the valve holds the previous one)
+    assert rig.ctrl.steps == steps0 + 4 and seen == [(False, False)] * 3 + [(True, True)]
     assert rig.loop.k_active == k0 + 4 and rig.loop.skipped_periods == 3
     assert rig.loop.life.state is State.ACTIVE and rig.loop.wd.trips == 0
     assert rig.loop.meas.position_m == pytest.approx(5e-4)  # the frame is used after the catch-up

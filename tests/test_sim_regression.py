@@ -68,7 +68,7 @@ def test_case4_disturbance() -> None:
 
 
 @pytest.mark.parametrize("name", ["unseen-loe35", "unseen-drift1p4", "unseen-combined",
-                                  "unseen-noise1pct", "unseen-frameloss2pct"])
+                                  "unseen-noise1pct", "unseen-frameloss2pct", "unseen-blackouts"])
 def test_unseen_faults(name: str) -> None:
     assert metrics(name, "mmac").rms_error_m <= 20 * UM
 

@@ -21,7 +21,7 @@ HELP = "control quality of nrc/smac/mmac-paper/mmac/oracle against the DESIGN §
 
 SHIPPED = ("fault-free", "case1-loe", "case2-drift", "case3-combined", "case4-disturbance")
 UNSEEN = ("unseen-loe35", "unseen-drift1p4", "unseen-combined", "unseen-noise1pct",
-          "unseen-frameloss2pct")
+          "unseen-frameloss2pct", "unseen-blackouts")
 KQ = "kq-loss"
 SPEED_TARGET = 50.0
 

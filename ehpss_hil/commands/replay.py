@@ -205,11 +205,12 @@ class _Replayer:
             self.k += periods
             return
         m = self.prev
-        m.fresh = False
+        m.fresh = m.command_sent = False
         for _ in range(periods):
             m.reference_m = self.override if self.override is not None else self.x_d(self.k)
             self.ctrl.step(m)
             self.k += 1
+        m.command_sent = True
 
     def command(self, logged_a: float, logged_en: bool, number: int, gap: int = 0) -> None:
         self._catch_up(gap)

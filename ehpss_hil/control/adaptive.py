@@ -16,6 +16,8 @@ adaptive model, θ_L with θ_D = 1. Their x̂ integrates θ̂_L·v (no spool sen
 
 from __future__ import annotations
 
+from collections import deque
+
 from ..scenario import Reference
 from .bank import JointBank, ScalarBank
 from .base import Measurement, ValveCommand
@@ -31,6 +33,15 @@ FLOW_HOLD_S = 0.02
 #: the predictors are redone over at most this many sensor samples and after fewer cycles without
 #: data (beyond: dead-reckoned and re-anchored): the 4-bit counter tells up to 15 apart
 RESYNC_SAMPLES = 15
+#: the commands kept: those applied over every sample of the longest span redone (one sample of
+#: transport delay: the command computed at cycle c is applied over [c+1, c+2), DESIGN §9)
+WIRE_COMMANDS = RESYNC_SAMPLES + 2
+#: the kept commands are taken as what the valve applied when the echo of a span's last sample
+#: is the one kept for it within this (A): the DBC's 10 µA steps, the setpoint and echo scalings
+WIRE_MATCH_A = 3e-5
+#: the position sensor may move x̂ across a span within this multiple of the bound that the spool
+#: LVDT at its two ends leaves (:func:`bridge_bound_m`)
+BRIDGE_MARGIN = 1.25
 
 
 class MmacController(LoopBase):
@@ -73,12 +84,16 @@ class MmacController(LoopBase):
         self._seed = True
         self._span = 1  # sensor samples this fresh cycle stands for (when redone on them)
         self._observed = 0  # … of the superseded samples observed before it in this cycle
+        #: the current commanded in each of the last cycles (A), as held by the valve: a cycle whose
+        #: command is not sent repeats the previous one
+        self._wire: deque[float] = deque([0.0] * WIRE_COMMANDS, maxlen=WIRE_COMMANDS)
+        self._y_seen = 0.0  # the position sensor at the last sample seen (m)
 
     def step(self, meas: Measurement) -> ValveCommand:
         """Predict, score both banks, supervise, compensate, PI."""
         if meas.fresh:
             y_v = meas.spool_m
-            gap, resync, v, xh = self._advance(meas)
+            gap, resync, v, xh = self._advance(meas, True)
             if self._seed:  # the first sample since a reset: the plant is where the sensor says
                 self._seed = False
                 xh = self.xhat.x = meas.position_m
@@ -112,34 +127,41 @@ class MmacController(LoopBase):
                 self.xhat.mark()
                 self.flow.mark()
             self._dead += 1
-            v = self.valve.step(self._echo)
+            current = self._wire[-2]  # applied over the last sample: sent 2 cycles ago
+            v = self.valve.step(current)
             self.xhat.integrate(self.k_loe_hat / self.k_q_hat * v)
             if self._flow_on:
-                self.flow.propagate(self._echo)
-        return self._close(meas)
+                self.flow.propagate(current)
+        cmd = self._close(meas)
+        self._wire.append(cmd.current_a if meas.command_sent else self._wire[-1])
+        return cmd
 
     def observe(self, meas: Measurement) -> None:
         """A sample superseded within this cycle: valve model, x̂ and the pressure model step on
         it (its own spool LVDT and current echo), so the next sample is 1 on from it."""
-        _, resync, _, _ = self._advance(meas)
+        _, resync, _, _ = self._advance(meas, False)
         self._observed += meas.samples if resync else 1
         if self._flow_on:
             self.flow.propagate(meas.coil_current_a)
 
-    def _advance(self, meas: Measurement) -> tuple[bool, bool, float, float]:
-        """Valve model and x̂ up to this fresh sample. ``gap``: samples were missed or cycles ran
-        without data since the last one seen (the flow-gain test then takes no evidence for a
-        while); ``resync``: the predictors were redone over every sample since (see
-        :meth:`_resync`). Returns (gap, resync, v, x̂) (v, x̂ in m)."""
+    def _advance(self, meas: Measurement, stepped: bool) -> tuple[bool, bool, float, float]:
+        """Valve model and x̂ up to this fresh sample (``stepped``: the cycle's own sample, not
+        one superseded within it). ``gap``: samples were missed or cycles ran without data since
+        the last one seen (the flow-gain test then takes no evidence for a while); ``resync``:
+        the predictors were redone over every sample since (see :meth:`_resync`). Returns
+        (gap, resync, v, x̂) (v, x̂ in m)."""
         dead, self._dead = self._dead, 0
         gap = dead > 0 or meas.samples > 1
         if gap and self._flow_on:
             self.flow.hold_off(self._flow_hold)
         if self._resync(meas.samples, dead):
-            v, xh = self._predict_span(meas.coil_current_a, meas.spool_m, meas.samples, dead)
-            return gap, True, v, xh
-        self._echo = meas.coil_current_a
-        return gap, False, self.valve.step(self._echo), self.xhat.integrate(meas.spool_m)
+            v, xh = self._predict_span(meas, dead, stepped)
+            out = gap, True, v, xh
+        else:
+            self._echo = meas.coil_current_a
+            out = gap, False, self.valve.step(self._echo), self.xhat.integrate(meas.spool_m)
+        self._y_seen = meas.position_m
+        return out
 
     @staticmethod
     def _resync(samples: int, dead: int) -> bool:
@@ -153,28 +175,42 @@ class MmacController(LoopBase):
             return False
         return samples <= RESYNC_SAMPLES and dead < RESYNC_SAMPLES
 
-    def _predict_span(self, echo_a: float, y_v: float, samples: int,
-                      dead: int) -> tuple[float, float]:
-        """Valve model and x̂ stepped over ``samples`` sensor samples from the last one seen
-        (the dead-reckoned steps of the ``dead`` cycles without data undone). The valve model
-        steps on the last echo for the first period after the last sample seen (that period's
-        current was commanded before it) and on this sample's echo for the others (a late
-        emulator holds one command over the periods it skipped: this one); x̂ integrates the
-        spool it predicts (k̂_LOE·v) for the samples not seen, then this sample's spool LVDT.
-        Returns (v, x̂) (m)."""
+    def _predict_span(self, meas: Measurement, dead: int, stepped: bool) -> tuple[float, float]:
+        """Valve model and x̂ stepped over ``meas.samples`` sensor samples from the last one seen
+        (the dead-reckoned steps of the ``dead`` cycles without data undone). Returns (v, x̂) (m).
+
+        Currents over the samples not seen: :func:`span_currents` (the commands sent, when this
+        sample's echo confirms them). The valve model's spool, times k̂_LOE, is corrected by the
+        spool LVDT at both ends (:func:`bridge_spool`); where the two ends disagree (k_LOE
+        changed) the position sensor places x̂ within the bound they leave
+        (:func:`bridge_bound_m`), while it is trusted."""
         valve, xh, flow = self.valve, self.xhat, self.flow
         if dead:
             valve.rewind()
             xh.rewind()
             flow.rewind()
-        gain, current = self.k_loe_hat / self.k_q_hat, self._echo
-        for _ in range(samples - 1):
-            xh.integrate(gain * valve.step(current))
+        n, echo_a, y_v = meas.samples, meas.coil_current_a, meas.spool_m
+        currents = span_currents(n, self._wire if stepped else None, self._echo, echo_a)
+        gain, x0 = self.k_loe_hat / self.k_q_hat, xh.x
+        e0 = xh.last_spool - gain * valve.v
+        vs = []
+        for c in currents:
+            vs.append(valve.step(c))
             if self._flow_on:  # the pressure model too (its update steps this sample)
-                flow.propagate(current)
-            current = echo_a
+                flow.propagate(c)
         self._echo = echo_a
-        return valve.step(echo_a), xh.integrate(y_v)
+        v = valve.step(echo_a)
+        en = y_v - gain * v
+        for sp in bridge_spool(vs, gain, e0, en):
+            xh.integrate(sp)
+        x_end = xh.integrate(y_v)
+        td = self.k_dft_hat
+        if (n > 1 and not self._seed and not self.pos_sup.guarded and td >= self._failed_below
+                and not self.flow.flow_fault):
+            u = BRIDGE_MARGIN * bridge_bound_m(xh.spool_to_x_m(1.0, n - 1), en - e0)
+            dx = (meas.position_m - self._y_seen) / td
+            xh.x = x0 + min(max(dx, x_end - x0 - u), x_end - x0 + u)
+        return v, xh.x
 
     def _flow_split(self, meas: Measurement, y_v: float, tl: float) -> None:
         """Load-pressure test: is the position-channel change a flow-gain loss (flowgain.py)?
@@ -304,3 +340,42 @@ class JointController(LoopBase):
     def switch_count(self) -> int:
         """Switches of the joint supervisor."""
         return 0 if self.mode == "smac" else self.sup.switches
+
+
+def span_currents(samples: int, wire: deque[float] | None, last_echo_a: float,
+                  echo_a: float) -> list[float]:
+    """The currents (A) applied over the ``samples − 1`` samples not seen before one whose echo
+    is ``echo_a`` (the last one seen had ``last_echo_a``). ``wire``: the commands sent in the
+    cycles before this one (newest last; one sample of transport delay, so the echo of this
+    sample is ``wire[-2]``); they are taken when that echo confirms the valve applied them (the
+    sensor frames were lost, the commands got through). Otherwise, or with no ``wire`` (a sample
+    superseded within a cycle): the last echo for the first period (commanded before that
+    sample) and this echo for the others (a late emulator holds the newest command over the
+    periods it skips)."""
+    if samples < 2:
+        return []
+    if wire is not None and abs(echo_a - wire[-2]) <= WIRE_MATCH_A:
+        return [wire[-m - 2] for m in range(samples - 1, 0, -1)]
+    return [last_echo_a] + [echo_a] * (samples - 2)
+
+
+def bridge_spool(v_m: list[float], gain: float, e_start_m: float, e_end_m: float) -> list[float]:
+    """The spool (m) at the samples not seen between two spool LVDT readings: the model's
+    ``gain·v`` plus its error ``y_v − gain·v`` at the two readings, interpolated linearly over
+    the span (``len(v_m) + 1`` periods). A gain that changed before the span (a k̂_LOE not yet
+    converged) leaves the same error at both ends and is removed whole; one that changed inside
+    it is split as if at the middle, the expectation over where in the span it changed. Without
+    the ends, the model alone left x̂ off by (k_LOE − k̂_LOE)·∫v over the span, and the position
+    bank took that offset for a drift (a 14-sample blackout at the LOE onset of case 3: θ̂_D
+    0.78 for 0.8, 9.5 µm RMS for 0.84)."""
+    n = len(v_m) + 1
+    de = (e_end_m - e_start_m) / n
+    return [gain * v + e_start_m + de * (j + 1) for j, v in enumerate(v_m)]
+
+
+def bridge_bound_m(x_per_spool: float, de_m: float) -> float:
+    """How far (m) x̂ bridged by :func:`bridge_spool` can be from the truth when the spool error
+    changed by ``de_m`` (m) in one step somewhere in the span: the linear interpolation is off
+    by at most half the step over the samples not seen; ``x_per_spool`` is x̂'s change per metre
+    of spool held over them (m/m)."""
+    return 0.5 * x_per_spool * abs(de_m)

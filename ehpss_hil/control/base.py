@@ -24,6 +24,8 @@ class Measurement:
     in the same cycle; 0: unknown, taken as one per cycle). A realtime loop's cycles slip against
     the sensor's sample clock; this keeps the model position on the sample clock (DESIGN §5,
     docs/control.md §3).
+    ``command_sent``: False when this cycle's command will not be sent (a period the loop slept
+    through, stepped only to keep its clock on the grid): the valve keeps the previous one.
     """
 
     position_m: float = 0.0
@@ -33,6 +35,7 @@ class Measurement:
     reference_m: float = 0.0
     fresh: bool = True
     samples: int = 0
+    command_sent: bool = True
 
 
 #: a sensor sample superseded within a cycle, kept for ``observe``: position (m), spool (m),

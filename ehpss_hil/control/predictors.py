@@ -89,6 +89,15 @@ class ModelPosition:
         self._rate = spool_m
         return self.x
 
+    @property
+    def last_spool(self) -> float:
+        """The spool (m) of the last :meth:`integrate` (the sample x̂ stands at)."""
+        return self._rate
+
+    def spool_to_x_m(self, spool_m: float, samples: int) -> float:
+        """x̂'s change (m) from a spool of ``spool_m`` (m) held over ``samples`` periods."""
+        return 2.0 * self._h * samples * spool_m
+
     def anchor(self, position_m: float) -> None:
         """Pull x̂ toward a trusted position estimate ``position_m`` = y_s/θ̂_D (m)."""
         self.x += self._anchor * (position_m - self.x)

@@ -217,10 +217,11 @@ class ControllerLoop:
     def catch_up(self, periods: int) -> None:
         """Grid periods the loop slept through (an overrun skipped them): the controller's clock
         stays on the grid. Each one is a cycle without a sensor frame (``fresh`` False: the
-        predictors advance on the held current echo, the PI integrates, the reference moves on),
-        with no frame sent; :attr:`cycles` and so VALVE_CMD's CycleCount count them, so the
-        reference index and CycleCount keep matching the emulator's sample clock. The watchdog
-        does not count them (only executed cycles judge freshness)."""
+        predictors advance on the commands held, the PI integrates, the reference moves on),
+        with no frame sent (``command_sent`` False: the valve holds the previous command);
+        :attr:`cycles` and so VALVE_CMD's CycleCount count them, so the reference index and
+        CycleCount keep matching the emulator's sample clock. The watchdog does not count them
+        (only executed cycles judge freshness)."""
         if periods <= 0:
             return
         self.skipped_periods += periods
@@ -232,13 +233,13 @@ class ControllerLoop:
         if self.life.state is not State.ACTIVE:
             return
         fresh = self.meas.fresh
-        self.meas.fresh = False
+        self.meas.fresh = self.meas.command_sent = False
         for _ in range(periods):
             self.meas.reference_m = (self._override_m if self._override_m is not None
                                      else self.ref.at(self.k_active))
             self.controller.step(self.meas)
             self.k_active += 1
-        self.meas.fresh = fresh
+        self.meas.fresh, self.meas.command_sent = fresh, True
 
     def poll_cycle(self, skipped: int = 0, drain: bool = True) -> float | None:
         """One realtime cycle without waiting: the ``skipped`` grid periods before it
