@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from ehpss_hil import PROJECT_ROOT
-from ehpss_hil.control.adaptive import bridge_bound_m, bridge_spool
+from ehpss_hil.control.adaptive import bridge_bound_m, bridge_spool, span_currents
 from ehpss_hil.control.base import Measurement
 from ehpss_hil.control.controllers import MODES, make_controller
 from ehpss_hil.control.pi import PiLaw
@@ -215,6 +216,19 @@ def test_bridge_spool_removes_an_error_at_both_ends_and_splits_one_that_changed(
     split = bridge_spool(v, 1.0, 0.0, -4e-4)  # it changed inside: the error grows 1/4 per period
     assert split == pytest.approx([1e-3 - 1e-4, 1.2e-3 - 2e-4, 0.8e-3 - 3e-4], abs=1e-15)
     assert bridge_bound_m(3.3e-3 * 3, -4e-4) == pytest.approx(0.5 * 3.3e-3 * 3 * 4e-4)
+
+
+def test_span_currents_are_the_commands_sent_only_when_the_loop_ran_and_the_echo_agrees() -> None:
+    """Sensor frames lost while this loop ran (a cycle per sample) and the echo is the command sent
+    two cycles back: the commands sent, oldest first. A late emulator (fewer cycles than
+    samples), an echo that disagrees or a superseded sample: the held echoes."""
+    wire = deque([1e-4, 2e-4, 3e-4, 4e-4, 5e-4])  # sent 5 … 1 cycles ago
+    assert span_currents(1, 0, wire, 9e-4, 4e-4) == []
+    assert span_currents(4, 3, wire, 9e-4, 4e-4) == [1e-4, 2e-4, 3e-4]
+    held = [9e-4, 4e-4, 4e-4]
+    assert span_currents(4, 0, wire, 9e-4, 4e-4) == held  # the emulator was late
+    assert span_currents(4, 3, wire, 9e-4, 4.5e-4) == [9e-4, 4.5e-4, 4.5e-4]  # echo disagrees
+    assert span_currents(4, 3, None, 9e-4, 4e-4) == held
 
 
 def test_mmac_through_sensor_blackouts_at_fault_onsets() -> None:

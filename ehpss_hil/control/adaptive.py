@@ -190,7 +190,7 @@ class MmacController(LoopBase):
             xh.rewind()
             flow.rewind()
         n, echo_a, y_v = meas.samples, meas.coil_current_a, meas.spool_m
-        currents = span_currents(n, self._wire if stepped else None, self._echo, echo_a)
+        currents = span_currents(n, dead, self._wire if stepped else None, self._echo, echo_a)
         gain, x0 = self.k_loe_hat / self.k_q_hat, xh.x
         e0 = xh.last_spool - gain * valve.v
         vs = []
@@ -342,19 +342,21 @@ class JointController(LoopBase):
         return 0 if self.mode == "smac" else self.sup.switches
 
 
-def span_currents(samples: int, wire: deque[float] | None, last_echo_a: float,
+def span_currents(samples: int, dead: int, wire: deque[float] | None, last_echo_a: float,
                   echo_a: float) -> list[float]:
     """The currents (A) applied over the ``samples − 1`` samples not seen before one whose echo
-    is ``echo_a`` (the last one seen had ``last_echo_a``). ``wire``: the commands sent in the
-    cycles before this one (newest last; one sample of transport delay, so the echo of this
-    sample is ``wire[-2]``); they are taken when that echo confirms the valve applied them (the
-    sensor frames were lost, the commands got through). Otherwise, or with no ``wire`` (a sample
-    superseded within a cycle): the last echo for the first period (commanded before that
-    sample) and this echo for the others (a late emulator holds the newest command over the
-    periods it skips)."""
+    is ``echo_a`` (the last one seen had ``last_echo_a``; ``dead`` cycles ran without data in
+    between). ``wire``: the commands sent in the cycles before this one (newest last; one sample
+    of transport delay, so the echo of this sample is ``wire[-2]``). They are taken when each
+    sample not seen had a cycle of its own (``dead == samples − 1``) and this echo confirms the
+    valve applied them: the sensor frames were lost, the commands got through. Otherwise (fewer
+    cycles than samples: the emulator was late; or no ``wire``: a sample superseded within a
+    cycle): the last echo for the first period (commanded before that sample) and this echo for
+    the others (a late emulator holds the newest command over the periods it skips)."""
     if samples < 2:
         return []
-    if wire is not None and abs(echo_a - wire[-2]) <= WIRE_MATCH_A:
+    if (wire is not None and dead == samples - 1
+            and abs(echo_a - wire[-2]) <= WIRE_MATCH_A):
         return [wire[-m - 2] for m in range(samples - 1, 0, -1)]
     return [last_echo_a] + [echo_a] * (samples - 2)
 
