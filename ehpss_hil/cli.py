@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from types import ModuleType
 
 from . import __version__, commands
-from .errors import EhpssError
+from .errors import run_console
 
 
 def discover(package: ModuleType) -> list[ModuleType]:
@@ -50,13 +50,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not hasattr(args, "_run"):
         parser.print_help()
         return 2
-    try:
-        return int(args._run(args) or 0)
-    except EhpssError as exc:
-        print(f"ehpss-hil {args.command}: error: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except KeyboardInterrupt:
-        return 130
+    return run_console(f"ehpss-hil {args.command}", lambda: int(args._run(args) or 0))
 
 
 if __name__ == "__main__":

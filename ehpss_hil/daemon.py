@@ -8,7 +8,6 @@ Enable 0, reports STOPPED, flushes the log and returns 0.
 from __future__ import annotations
 
 import importlib
-import json
 import logging
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
@@ -30,6 +29,7 @@ from .runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from .runtime.frameio import FrameIO, open_process_logger, process_codec
 from .runtime.rt import apply_rt_options, freeze_gc
 from .runtime.signals import install_stop_handlers, restore_handlers
+from .runtime.stats import publish_summary
 from .sim.blas import limit_blas_threads
 
 log = logging.getLogger("ehpss_hil.controller")
@@ -154,10 +154,7 @@ def run_daemon(a: DaemonArgs) -> int:
             restore_handlers(previous)
             io.close()
             bus.shutdown()
-    summary = loop.summary()
-    print(format_summary(summary), flush=True)
-    if a.summary_json is not None:
-        a.summary_json.write_text(json.dumps(summary, indent=1))
+    publish_summary(format_summary, loop.summary(), a.summary_json)
     return 0
 
 

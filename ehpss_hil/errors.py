@@ -6,6 +6,9 @@ matching builtin so callers may catch either (the pattern of python-can's ``CanE
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Callable
+
 
 class EhpssError(Exception):
     """Root of all ehpss-hil errors."""
@@ -47,3 +50,15 @@ class ModelError(EhpssError, ArithmeticError):
 
 class ControlTimeoutError(EhpssError, TimeoutError):
     """Sensor or command data went stale for longer than the configured watchdog allows."""
+
+
+def run_console(prog: str, fn: Callable[[], int]) -> int:
+    """Run a console command's body: an :class:`EhpssError` becomes one line on stderr
+    (``<prog>: error: …``) and its class's exit code; Ctrl-C exits 130."""
+    try:
+        return fn()
+    except EhpssError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        return 130

@@ -10,7 +10,6 @@ Exit codes: 0 (normal end, SIGTERM/SIGINT), 1 (lockstep peer stopped answering, 
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 from collections.abc import Sequence
@@ -19,11 +18,12 @@ from pathlib import Path
 
 from ehpss_hil.bus import open_bus
 from ehpss_hil.config import EmulatorConfig, apply_overrides, load_emulator_config
-from ehpss_hil.errors import ConfigError, EhpssError
+from ehpss_hil.errors import ConfigError, run_console
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.runtime.frameio import FrameIO, open_process_logger, process_codec
 from ehpss_hil.runtime.rt import apply_rt_options, freeze_gc
 from ehpss_hil.runtime.signals import install_stop_handlers, restore_handlers
+from ehpss_hil.runtime.stats import publish_summary
 from ehpss_hil.scenario import Scenario, load_scenario
 from ehpss_hil.sim.blas import limit_blas_threads
 
@@ -130,10 +130,7 @@ def run(args: argparse.Namespace) -> int:
         restore_handlers(previous)
         io.close()
         bus.shutdown()
-    summary = proc.summary()
-    print(format_summary(summary), flush=True)
-    if args.summary_json is not None:
-        args.summary_json.write_text(json.dumps(summary, indent=1))
+    publish_summary(format_summary, proc.summary(), args.summary_json)
     return 0 if ok else 1
 
 
@@ -142,13 +139,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
                         format="firmware-sim: %(levelname)s: %(message)s")
-    try:
-        return run(args)
-    except EhpssError as exc:
-        print(f"firmware-sim: error: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except KeyboardInterrupt:
-        return 130
+    return run_console("firmware-sim", lambda: run(args))
 
 
 if __name__ == "__main__":

@@ -10,6 +10,7 @@ from typing import Any
 
 import can
 import pytest
+from _virtual import VirtualPair
 
 from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.codec.e2e import protect
@@ -49,14 +50,12 @@ class MiniPI:
         return ControllerStatus(mode=self.mode, index={0: 0.5}, theta={0: 1.0})
 
 
-class Rig:
+class Rig(VirtualPair):
     """Controller loop + a test peer playing the emulator on one virtual channel."""
 
     def __init__(self, name: str, wd: Watchdog | None = None) -> None:
-        self.bus = can.Bus(interface="virtual", channel=name)
-        self.peer = can.Bus(interface="virtual", channel=name)
+        super().__init__(name)
         self.tx = FrameCodec()
-        self.rx = FrameCodec()
         self.ctrl = MiniPI()
         self.loop = ControllerLoop(self.ctrl, FrameIO(self.bus, FrameCodec(), OWN_FRAMES),
                                    Reference(kind="step", amplitude_m=1e-3),
@@ -71,16 +70,7 @@ class Rig:
     def cycle(self) -> dict[str, dict[str, Any]]:
         """One loop cycle; returns the newest decoded frame of each name the loop sent."""
         self.loop.poll_cycle()
-        out: dict[str, dict[str, Any]] = {}
-        while (m := self.peer.recv(0.0)) is not None:
-            d = self.rx.classify(m)
-            if d.name is not None and d.values is not None:
-                out[d.name] = d.values
-        return out
-
-    def close(self) -> None:
-        self.bus.shutdown()
-        self.peer.shutdown()
+        return self.newest()
 
 
 @pytest.fixture
@@ -220,11 +210,7 @@ def test_auto_recovery_after_m_fresh_cycles() -> None:
 def test_shutdown_sends_zero_disabled_and_stopped(rig: Rig) -> None:
     _activate(rig)
     rig.loop.shutdown()
-    got: dict[str, dict[str, Any]] = {}
-    while (m := rig.peer.recv(0.0)) is not None:
-        d = rig.rx.classify(m)
-        if d.name and d.values is not None:
-            got[d.name] = d.values
+    got = rig.newest()
     assert got["VALVE_CMD"]["CurrentSetpoint"] == 0.0 and got["VALVE_CMD"]["Enable"] == 0
     assert got["CTRL_STATUS"]["State"] == int(State.STOPPED)
     assert got["HEARTBEAT_CTRL"]["NmtState"] == 4
@@ -279,11 +265,7 @@ def test_skipped_periods_are_stepped_without_frames(rig: Rig) -> None:
     seen.clear()
     rig.sensors(5e-4)
     rig.loop.poll_cycle(skipped=3)
-    cmds = []
-    while (m := rig.peer.recv(0.0)) is not None:
-        d = rig.rx.classify(m)
-        if d.name == "VALVE_CMD" and d.values is not None:
-            cmds.append(d.values)
+    cmds = rig.values_of("VALVE_CMD")
     assert len(cmds) == 1 and rig.loop.io.sent["VALVE_CMD"] == sent0 + 1
     assert cmds[0]["CycleCount"] == c0 + 4
     # the caught-up steps know their command is not sent (the valve holds the previous one)
@@ -319,8 +301,7 @@ def test_status_frames_one_per_cycle_at_their_rates() -> None:
             r.sensors()
             r.loop.poll_cycle()
             names = []
-            while (m := r.peer.recv(0.0)) is not None:
-                d = r.rx.classify(m)
+            for _, d in r.received():
                 if d.name in periodic and d.values is not None:
                     names.append(d.name)
                     if d.name == "CTRL_INDEX":
@@ -346,12 +327,7 @@ def _lockstep_run(rig: Rig, feed: Any) -> list[dict[str, Any]]:
     feed()
     th.join(timeout=30)
     assert not th.is_alive()
-    cmds = []
-    while (m := rig.peer.recv(0.0)) is not None:
-        d = rig.rx.classify(m)
-        if d.name == "VALVE_CMD" and d.values is not None:
-            cmds.append(d.values)
-    return cmds
+    return rig.values_of("VALVE_CMD")
 
 
 def test_lockstep_answers_a_duplicate_pair_never(rig: Rig) -> None:

@@ -7,6 +7,7 @@ from collections.abc import Iterator
 
 import can
 import pytest
+from _virtual import VirtualPair
 
 from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.codec.e2e import protect
@@ -19,18 +20,16 @@ from firmware_sim.process import OWN_FRAMES, EmulatorOptions, EmulatorProcess
 TIMEOUT_PERIODS = 10  # command_timeout_s 10 ms at 1 kHz
 
 
-class Rig:
+class Rig(VirtualPair):
     """An emulator process and a test peer on one virtual channel."""
 
     def __init__(self, name: str, **opts: object) -> None:
-        self.emu_bus = can.Bus(interface="virtual", channel=name)
-        self.peer = can.Bus(interface="virtual", channel=name)
+        super().__init__(name)
         self.codec = FrameCodec()  # the peer's TX counters
         self.proc = EmulatorProcess(
             PlantEmulation(load_params(), Scenario(name="t", duration_s=10.0)),
-            FrameIO(self.emu_bus, FrameCodec(), OWN_FRAMES),
+            FrameIO(self.bus, FrameCodec(), OWN_FRAMES),
             EmulatorOptions(command_timeout_s=0.010, **opts))  # type: ignore[arg-type]
-        self.rx = FrameCodec()
 
     def cmd(self, current_a: float, enable: int = 1) -> can.Message:
         msg = self.codec.encode("VALVE_CMD", {"CurrentSetpoint": current_a, "Enable": enable})
@@ -40,20 +39,11 @@ class Rig:
     def step(self) -> tuple[float, dict[str, float]]:
         """One period; returns (applied current (A), the SENSOR_AUX values sent)."""
         applied = self.proc.step_period()
-        aux: dict[str, float] = {}
-        while (m := self.peer.recv(0.0)) is not None:
-            d = self.rx.classify(m)
-            if d.name == "SENSOR_AUX" and d.values is not None:
-                aux = d.values
-        return applied, aux
+        return applied, self.newest().get("SENSOR_AUX", {})
 
     @property
     def verdicts(self) -> dict[Verdict, int]:
         return self.proc.codec.counts_by_name.get("VALVE_CMD", {v: 0 for v in Verdict})
-
-    def close(self) -> None:
-        self.emu_bus.shutdown()
-        self.peer.shutdown()
 
 
 @pytest.fixture
@@ -175,9 +165,8 @@ def test_skipped_periods_advance_the_plant_without_frames(rig: Rig) -> None:
     assert rig.proc.emu.k == k0 + 3 and rig.proc.skipped_periods == 2
     assert rig.proc.io.sent["SENSOR_POS"] == sent + 1
     # the receiver sees the two skipped samples as lost: counters moved on by 3 (OK_SOME_LOST)
-    got = {}
-    while (m := rig.peer.recv(0.0)) is not None:
-        d = rig.rx.classify(m)
+    got: dict[str, list[tuple[int, Verdict]]] = {}
+    for m, d in rig.received():
         if d.name in ("SENSOR_POS", "SENSOR_AUX"):
             got.setdefault(d.name, []).append((m.data[1] & 0x0F, d.verdict))
     assert got == {"SENSOR_POS": [(3, Verdict.OK_SOME_LOST)],  # the first pair had counter 0

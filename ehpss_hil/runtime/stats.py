@@ -7,6 +7,9 @@ p50/p99/p99.9/max.
 
 from __future__ import annotations
 
+import json
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -78,3 +81,12 @@ class LoopStats:
                          f"max={d['max'] * 1e6:8.1f} µs")
         lines.append(f"overruns={self.overruns} skipped_periods={self.skipped}")
         return "\n".join(lines)
+
+
+def publish_summary(fmt: Callable[[dict[str, Any]], str], summary: dict[str, Any],
+                    json_path: Path | None) -> None:
+    """A process's exit summary: ``fmt(summary)`` on stdout, and the whole dict as JSON to
+    ``json_path`` when given (what ``run`` and the benches read back)."""
+    print(fmt(summary), flush=True)
+    if json_path is not None:
+        json_path.write_text(json.dumps(summary, indent=1))
