@@ -16,6 +16,7 @@ adaptive model, θ_L with θ_D = 1. Their x̂ integrates θ̂_L·v (no spool sen
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 from ..scenario import Reference
@@ -133,7 +134,8 @@ class MmacController(LoopBase):
             if self._flow_on:
                 self.flow.propagate(current)
         cmd = self._close(meas)
-        self._wire.append(cmd.current_a if meas.command_sent else self._wire[-1])
+        sent = cmd.current_a if math.isfinite(cmd.current_a) else 0.0  # as the loop sends it
+        self._wire.append(sent if meas.command_sent else self._wire[-1])
         return cmd
 
     def observe(self, meas: Measurement) -> None:
