@@ -217,11 +217,10 @@ class ControllerLoop:
     def catch_up(self, periods: int) -> None:
         """Grid periods the loop slept through (an overrun skipped them): the controller's clock
         stays on the grid. Each one is a cycle without a sensor frame (``fresh`` False: the
-        predictors advance on the commands held, the PI integrates, the reference moves on),
-        with no frame sent (``command_sent`` False: the valve holds the previous command);
-        :attr:`cycles` and so VALVE_CMD's CycleCount count them, so the reference index and
-        CycleCount keep matching the emulator's sample clock. The watchdog does not count them
-        (only executed cycles judge freshness)."""
+        predictors advance, the PI integrates, the reference moves on) and without a frame sent
+        (``command_sent`` False: the valve holds the previous command); :attr:`cycles` and so
+        VALVE_CMD's CycleCount count them, so the reference index and CycleCount keep matching
+        the emulator's sample clock. The watchdog does not count them."""
         if periods <= 0:
             return
         self.skipped_periods += periods
