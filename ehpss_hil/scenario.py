@@ -23,11 +23,13 @@ class Reference:
     """Desired position x_d(t) (m).
 
     kinds: ``sine`` (amplitude·sin(ω t)), ``step`` (amplitude from ``start_s``), ``ramp``
-    (``rate_m_s``·(t − start_s), clipped to ±amplitude), ``file`` (CSV ``t_s,x_m``, linear
-    interpolation, held after the end).
+    (``rate_m_s``·(t − start_s), clipped to ±amplitude), ``square`` (±amplitude, period 2π/ω,
+    from ``start_s``: +amplitude for the first half period), ``trapezoid`` (period 2π/ω from
+    ``start_s``: ramps at ±|rate_m_s| between ±amplitude, a triangle when the ramps take the
+    whole half period), ``file`` (CSV ``t_s,x_m``, linear interpolation, held after the end).
     """
 
-    kind: Literal["sine", "step", "ramp", "file"] = "sine"
+    kind: Literal["sine", "step", "ramp", "square", "trapezoid", "file"] = "sine"
     amplitude_m: float = field(default=0.001, metadata=rng(0.0, 0.5))
     omega_rad_s: float = field(default=5.0, metadata=rng(0.0, 2000.0))
     start_s: float = field(default=0.0, metadata=rng(0.0))
@@ -47,6 +49,8 @@ class Reference:
         if self.kind == "ramp":
             x = self.rate_m_s * np.maximum(t_s - self.start_s, 0.0)
             return np.clip(x, -self.amplitude_m, self.amplitude_m)
+        if self.kind in ("square", "trapezoid"):
+            return self._periodic(t_s)
         p = Path(self.path)
         if not p.is_absolute() and base_dir is not None:
             p = base_dir / p
@@ -55,6 +59,22 @@ class Reference:
         except (OSError, ValueError) as exc:
             raise ConfigError(str(p), "reference.path", f"cannot read trajectory CSV: {exc}") from exc
         return np.interp(t_s, data[:, 0], data[:, 1])
+
+    def _periodic(self, t_s: np.ndarray) -> np.ndarray:
+        """Square or trapezoid wave (m), 0 before ``start_s``."""
+        a = self.amplitude_m
+        if self.omega_rad_s <= 0.0 or a <= 0.0:
+            return np.zeros_like(t_s)
+        tt = t_s - self.start_s
+        phase = np.mod(tt * self.omega_rad_s / (2.0 * np.pi), 1.0)
+        if self.kind == "square":
+            x = np.where(phase < 0.5, a, -a)
+        else:  # triangle of unit amplitude (0 → 1 → −1 → 0), scaled to the ramp rate, clipped
+            tri = np.where(phase < 0.25, 4.0 * phase,
+                           np.where(phase < 0.75, 2.0 - 4.0 * phase, 4.0 * phase - 4.0))
+            peak_m = abs(self.rate_m_s) * np.pi / (2.0 * self.omega_rad_s)
+            x = np.clip(peak_m * tri, -a, a)
+        return np.where(tt >= 0.0, x, 0.0)
 
     @property
     def spool_amplitude_m(self) -> float:
@@ -65,7 +85,7 @@ class Reference:
         k_c = 1.031e8 / 3.136e7
         if self.kind == "sine":
             return self.amplitude_m * max(self.omega_rad_s, 1.0) / k_c
-        if self.kind == "ramp":
+        if self.kind in ("ramp", "trapezoid"):
             return abs(self.rate_m_s) / k_c
         return self.amplitude_m * 5.0 / k_c
 

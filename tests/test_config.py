@@ -60,7 +60,7 @@ def test_case_events_persist_until_changed(tmp_path: Path) -> None:
     (("k_loe: 0.2", "k_loe: fast"), "events[2].k_loe", "expected a number"),
     (("duration_s: 2.0", "duration_s: -1"), "duration_s", "> 0.0"),
     (("name: t\n", ""), "name", "missing required key"),
-    (("kind: sine", "kind: square"), "reference.kind", "one of"),
+    (("kind: sine", "kind: sawtooth"), "reference.kind", "one of"),
     (("omega_rad_s: 5.0", "omega_rad_s: .nan"), "reference.omega_rad_s", "finite"),
     (("{t_s: 1.0, k_dft: 0.5}", "{t_s: 0.2, k_dft: 0.5}"), "events[1].t_s", "time order"),
     (("{t_s: 1.0, k_dft: 0.5}", "{t_s: 1.0}"), "events[1]", "at least one"),

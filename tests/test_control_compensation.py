@@ -53,7 +53,7 @@ def _closed_loop(name: str) -> dict[str, np.ndarray]:
 def test_switches_are_bumpless(name: str) -> None:
     d = _closed_loop(name)
     sw = np.flatnonzero((np.diff(d["sp"]) != 0) | (np.diff(d["ps"]) != 0)) + 1
-    assert len(sw) >= 2
+    assert len(sw) >= 1
     dz, du = np.abs(np.diff(d["z"])), np.abs(np.diff(d["u"]))
     normal = np.ones(len(dz), dtype=bool)
     for k in sw:

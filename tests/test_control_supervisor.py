@@ -37,8 +37,25 @@ class FakeBank:
 
 
 def _sup(bank: FakeBank, **kw: float) -> Supervisor:
-    t = replace(ControlTuning(), warmup_s=kw.pop("warmup_s", 0.0), **kw)  # type: ignore[arg-type]
+    t = replace(ControlTuning(), warmup_s=kw.pop("warmup_s", 0.0),  # type: ignore[arg-type]
+                switch_confirm_s=kw.pop("switch_confirm_s", 0.0), **kw)
     return Supervisor(bank, t, TS)
+
+
+def test_a_switch_needs_its_condition_to_hold_for_the_confirmation_time() -> None:
+    """One sample of a better J (a noise spike) never switches; the same candidate better for
+    switch_confirm_s in a row does, and a different candidate restarts the count."""
+    bank = FakeBank([1.0, 0.5, 0.7, 0.7])
+    sup = _sup(bank, switch_confirm_s=0.004)
+    good, other, bad = [1.0, 0.1, 2.0, 2.0], [1.0, 2.0, 0.1, 2.0], [1.0, 2.0, 2.0, 2.0]
+    for seq in ([good, bad] * 5, [good, good, good, other, good, bad]):
+        for j in seq:
+            bank.j = j
+            assert sup.update(1.0) == 0
+    bank.j = good
+    for _ in range(3):
+        assert sup.update(1.0) == 0
+    assert sup.update(1.0) == 1 and sup.switches == 1
 
 
 def test_hysteresis_needs_relative_and_absolute_margin() -> None:

@@ -9,10 +9,12 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 from .. import PROJECT_ROOT
 from ..control.controllers import MODES
 from ..report.metrics import RunMetrics
+from ..scenario import _FAULT_KEYS, load_scenario
 from ..sim.campaign import Job, default_jobs, run_campaign, scenario_paths
 from .common import write_json
 
@@ -23,7 +25,21 @@ SHIPPED = ("fault-free", "case1-loe", "case2-drift", "case3-combined", "case4-di
 UNSEEN = ("unseen-loe35", "unseen-drift1p4", "unseen-combined", "unseen-noise1pct",
           "unseen-frameloss2pct", "unseen-blackouts")
 KQ = "kq-loss"
+#: scenarios/envelope/: steps, waves, fast and large motions, power-on faults, faults while
+#: holding still, a current limit, a quiet run (the "do no harm" family)
+ENVELOPE_DIR = "envelope"
+QUIET = "quiet-20s"
+#: no harm: mmac RMS ≤ NO_HARM_RATIO·nrc + NO_HARM_RMS_M, worst |x − y_m| ≤ nrc's + NO_HARM_PEAK_M
+NO_HARM_RATIO = 1.1
+NO_HARM_RMS_M = 1e-6
+NO_HARM_PEAK_M = 10e-6
+#: fault-free envelope runs: mmac RMS within this of nrc (m); power-on faults: ≤ oracle + this
+FAULT_FREE_RMS_M = 1e-6
+POWER_ON_RMS_M = 5e-6
+QUIET_SWITCHES = 2
 SPEED_TARGET = 50.0
+#: a fault at or before this time (s) counts as present at power-on
+POWER_ON_S = 0.1
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -127,10 +143,68 @@ def _speed(t: Table) -> list[Verdict]:
                     f"{med:.0f}× real time", f"≥ {SPEED_TARGET:.0f}×", med >= SPEED_TARGET)]
 
 
-def verdicts(t: Table) -> list[Verdict]:
-    """Every DESIGN §11 control target evaluated on the campaign table."""
+def _no_harm(t: Table) -> list[Verdict]:
+    """mmac against nrc on every scenario of the table (envelope, shipped, unseen)."""
+    out = []
+    for sc in sorted({s for s, _ in t}):
+        if (sc, "mmac") not in t or (sc, "nrc") not in t:
+            continue
+        mm, nrc = t[sc, "mmac"], t[sc, "nrc"]
+        lim = NO_HARM_RATIO * nrc.rms_error_m + NO_HARM_RMS_M
+        plim = nrc.max_error_m + NO_HARM_PEAK_M
+        out.append(Verdict(f"no harm: {sc} mmac RMS / worst",
+                           f"{_um(mm.rms_error_m)} / {_um(mm.max_error_m)}",
+                           f"≤ {_um(lim)} / {_um(plim)}",
+                           mm.rms_error_m <= lim and mm.max_error_m <= plim))
+    return out
+
+
+def _envelope(t: Table, envelope: dict[str, str]) -> list[Verdict]:
+    """Fault-free envelope runs: mmac ≈ nrc; power-on faults: mmac ≈ oracle; the quiet run."""
+    out = []
+    for sc, kind in sorted(envelope.items()):
+        mm = t[sc, "mmac"]
+        if kind == "fault-free":
+            ref = t[sc, "nrc"].rms_error_m
+            out.append(Verdict(f"fault-free {sc} mmac RMS", _um(mm.rms_error_m),
+                               f"≤ nrc + 1 = {_um(ref + FAULT_FREE_RMS_M)}",
+                               mm.rms_error_m <= ref + FAULT_FREE_RMS_M))
+        elif kind == "power-on":
+            ref = t[sc, "oracle"].rms_error_m
+            out.append(Verdict(f"power-on {sc} mmac RMS", _um(mm.rms_error_m),
+                               f"≤ oracle + 5 = {_um(ref + POWER_ON_RMS_M)}",
+                               mm.rms_error_m <= ref + POWER_ON_RMS_M))
+    if QUIET in envelope:
+        sw = t[QUIET, "mmac"].switches
+        out.append(Verdict(f"{QUIET} mmac switches", str(sw), f"≤ {QUIET_SWITCHES}",
+                           sw <= QUIET_SWITCHES))
+    return out
+
+
+def verdicts(t: Table, envelope: dict[str, str] | None = None) -> list[Verdict]:
+    """Every DESIGN §11 control target evaluated on the campaign table, then the envelope's
+    ("do no harm") targets; ``envelope``: envelope scenario name → ``fault-free``,
+    ``power-on`` or ``other``."""
+    env = envelope or {}
     return (_fault_free(t) + _vs_oracle(t) + _case2(t) + _case4(t) + _others(t)
-            + _recovery(t, SHIPPED[1:] + UNSEEN) + _unseen(t) + _kq(t) + _speed(t))
+            + _recovery(t, SHIPPED[1:] + UNSEEN) + _unseen(t) + _kq(t) + _speed(t)
+            + _envelope(t, env) + _no_harm(t))
+
+
+def envelope_kinds(paths: list[Path]) -> dict[str, str]:
+    """Envelope scenario name → ``fault-free`` (no events), ``power-on`` (a fault at t ≤ warm-up
+    of 0.1 s) or ``other``."""
+    out = {}
+    for p in paths:
+        sc = load_scenario(p)
+        faults = [e for e in sc.events if any(getattr(e, k) is not None for k in _FAULT_KEYS)]
+        if not faults:
+            out[sc.name] = "fault-free"
+        elif faults[0].t_s <= POWER_ON_S:
+            out[sc.name] = "power-on"
+        else:
+            out[sc.name] = "other"
+    return out
 
 
 def format_verdicts(vs: list[Verdict]) -> str:
@@ -155,14 +229,15 @@ def _progress() -> Callable[[int, int], None] | None:
 
 def run(args: argparse.Namespace) -> int:
     sdir = PROJECT_ROOT / "scenarios"
+    env_paths = sorted((sdir / ENVELOPE_DIR).glob("*.yaml"))
     paths = scenario_paths([sdir / f"{n}.yaml" for n in SHIPPED]
-                           + [sdir / "extra" / f"{n}.yaml" for n in (*UNSEEN, KQ)])
+                           + [sdir / "extra" / f"{n}.yaml" for n in (*UNSEEN, KQ)] + env_paths)
     jobs = [Job(p, m) for p in paths for m in MODES]
     t0 = time.perf_counter()
     outcomes = run_campaign(jobs, args.jobs, progress=_progress())
     wall = time.perf_counter() - t0
     table: Table = {(o.metrics.scenario, o.metrics.controller): o.metrics for o in outcomes}
-    vs = verdicts(table)
+    vs = verdicts(table, envelope_kinds(env_paths))
     print(format_verdicts(vs))
     simulated = sum(o.metrics.duration_s for o in outcomes)
     print(f"\n{len(jobs)} runs, {simulated:.0f} s simulated in {wall:.1f} s wall on "

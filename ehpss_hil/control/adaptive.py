@@ -22,6 +22,7 @@ from collections import deque
 from ..scenario import Reference
 from .bank import JointBank, ScalarBank
 from .base import Measurement, ValveCommand
+from .compensation import MIN_THETA_L
 from .controllers import JOINT_SLOT0, POSITION_SLOT0, SMAC_SLOT, SPOOL_SLOT0, LoopBase
 from .estimator import Nlms, per_sample_gain
 from .flowgain import FlowGainMonitor
@@ -43,12 +44,17 @@ WIRE_MATCH_A = 3e-5
 #: the position sensor may move x̂ across a span within this multiple of the bound that the spool
 #: LVDT at its two ends leaves (:func:`bridge_bound_m`)
 BRIDGE_MARGIN = 1.25
+#: after the spool was at its stop the spool channel and the flow-gain test take no evidence for
+#: this long (s): the valve model's stop is placed with k̂_LOE, the plant's with k_LOE, and the
+#: difference dies out with the valve poles (≈ 0.6 ms time constant)
+SPOOL_STOP_HOLD_S = 0.005
 
 
 class MmacController(LoopBase):
     """Corrected MMAC on two channels (spool, position) with bumpless compensation."""
 
     mode = "mmac"
+    warmup_tracks_sensor = False
 
     def _build(self) -> None:
         t, ts = self.tuning, self.ts_s
@@ -65,6 +71,7 @@ class MmacController(LoopBase):
         self._in_flow = False
         self._flow_on = t.flow_gain_test
         self._flow_hold = max(1, round(FLOW_HOLD_S / ts))
+        self._stop_hold = max(1, round(SPOOL_STOP_HOLD_S / ts))
         self._inv_s_spool = 1.0 / self.scale_spool_m
         self._inv_s_pos = 1.0 / self.scale_pos_m
         n_l, n_d = len(t.fixed_k_loe) + 2, len(t.fixed_k_dft) + 2
@@ -78,6 +85,7 @@ class MmacController(LoopBase):
         self.pos_sup.reset()
         self.flow.reset()
         self._in_flow = False
+        self._flow_spool_model = self.spool_sup.active
         self._dead = 0
         #: x̂ starts on the first sensor sample after a reset (θ̂_D = 1 then): a reset on leaving
         #: the fail-safe comes mid-motion, and x̂ from 0 put the position channel in guard at once,
@@ -89,21 +97,34 @@ class MmacController(LoopBase):
         #: command is not sent repeats the previous one
         self._wire: deque[float] = deque([0.0] * WIRE_COMMANDS, maxlen=WIRE_COMMANDS)
         self._y_seen = 0.0  # the position sensor at the last sample seen (m)
+        self._spool_hold = 0  # samples left without spool evidence (the spool was at its stop)
 
     def step(self, meas: Measurement) -> ValveCommand:
         """Predict, score both banks, supervise, compensate, PI."""
         if meas.fresh:
             y_v = meas.spool_m
+            tl_prev = self.k_loe_hat / self.k_q_hat
+            self.valve.stop_m = self.stroke_m / max(tl_prev, MIN_THETA_L)
             gap, resync, v, xh = self._advance(meas, True)
             if self._seed:  # the first sample since a reset: the plant is where the sensor says
                 self._seed = False
                 xh = self.xhat.x = meas.position_m
             self._span, self._observed = self._observed + (meas.samples if resync else 1), 0
             sb, ss = self.spool_bank, self.spool_sup
-            sb.update(y_v, v)
-            ss.update(abs(v) * self._inv_s_spool)
+            lvl = self._stop_level_m
+            if y_v >= lvl or y_v <= -lvl or abs(tl_prev * v) >= lvl:
+                self._spool_hold = self._stop_hold
+                self.flow.hold_off(self._stop_hold)
+            stopped = self._spool_hold > 0
+            if stopped:  # at or just off the stop: not evidence of k_LOE
+                self._spool_hold -= 1
+            else:
+                sb.update(y_v, v)
+                ss.update(abs(v) * self._inv_s_spool)
             pb, ps = self.pos_bank, self.pos_sup
-            if gap and not resync:  # x̂ missed samples or was dead-reckoned
+            if (gap and not resync) or stopped:
+                # x̂ missed samples, was dead-reckoned, or integrated a spool slamming into its
+                # stop (a transient no model of the valve follows exactly)
                 td = self.k_dft_hat
                 if (not self.pos_sup.guarded and td >= self._failed_below
                         and not self.flow.flow_fault):
@@ -222,7 +243,14 @@ class MmacController(LoopBase):
         kept on the sensor so that nothing jumps when the test returns to H_D.
         """
         fl = self.flow
-        prod = fl.product(meas.position_m, y_v, self._span)
+        prod = fl.product(meas.position_m, y_v, self._span, self._spool_hold == 0)
+        spool_model = self.spool_sup.active
+        if spool_model != self._flow_spool_model or self._warm_left > 0:
+            # the pressure prediction scales with k̂_LOE: evidence taken with another (or a not yet
+            # identified) k̂_LOE favours the wrong hypothesis
+            self._flow_spool_model = spool_model
+            fl.restart()
+            fl.hold_off(self._flow_hold)
         fl.update(self._echo, meas.load_pressure_pa, tl, prod)
         if fl.flow_fault:
             self.k_q_hat = prod
@@ -230,11 +258,12 @@ class MmacController(LoopBase):
             self.k_dft_hat = 1.0
             self.xhat.x = meas.position_m / prod
             self._in_flow = True
-        elif self._in_flow:  # back to H_D: the sensor was judged healthy, restart from k_DFT = 1
+        elif self._in_flow:  # back to H_D: the product is the sensor's gain (≈ 1 when it vanished)
             self._in_flow = False
-            self.xhat.x = meas.position_m
-            self.pos_sup.force(0)
-            self.k_dft_hat = self.pos_bank.theta[0]
+            self.xhat.x = meas.position_m / prod if prod >= self._failed_below else meas.position_m
+            self.pos_bank.seed_ria(prod)
+            self.pos_sup.force(self.pos_bank.ria)
+            self.k_dft_hat = self.pos_bank.theta[self.pos_bank.ria]
 
     def _position_guarded(self) -> bool:
         return self.pos_sup.guarded and not self.flow.flow_fault

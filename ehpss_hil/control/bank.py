@@ -109,6 +109,15 @@ class ScalarBank(_IndexBase):
         """|θ_a − θ_b|."""
         return abs(self.theta[a] - self.theta[b])
 
+    def seed_ria(self, theta: float) -> None:
+        """RIA restarts at ``theta`` (clipped to its limits), index memory of the best model."""
+        ria = self.ria_est
+        t = min(max(theta, ria._lo), ria._hi)
+        ria.theta = self.theta[self.ria] = t
+        best = self.mem.index(min(self.mem))
+        self.mem[self.ria] = self.mem[best]
+        self.j[self.ria] = self.j[best]
+
     def reinit_ria(self, source: int) -> None:
         """RIA takes model ``source``'s θ and index memory (Narendra's reinitialization)."""
         self.ria_est.theta = self.theta[source]

@@ -25,6 +25,8 @@ the FRA/RIA slots (``SPOOL_SLOT0 + len(fixed_k_loe)`` …). ``-1`` means "no ban
 
 from __future__ import annotations
 
+import math
+
 from ..errors import ModelError
 from ..physics.faults import FaultState
 from ..physics.params import Params
@@ -34,6 +36,13 @@ from .compensation import compensated_current, sensor_trusted
 from .pi import PiLaw
 from .predictors import ModelPosition, ValvePredictor
 from .tuning import ControlTuning
+
+#: a spool sample is at the stop when the LVDT reads within this fraction of the stroke (the
+#: spool is held there whatever the current: no evidence of k_LOE, and the actuator saturates)
+SPOOL_STOP_FRACTION = 0.98
+#: the actuator is current-saturated when the echo falls short of the command by more than this
+#: (A): a few of the DBC's 0.2 µA echo steps and 10 µA setpoint steps
+ECHO_SHORT_A = 3e-5
 
 SPOOL_SLOT0 = 0
 POSITION_SLOT0 = 4
@@ -46,6 +55,9 @@ class LoopBase:
     """Shared parts: PI, valve predictor, model position, command object, probes."""
 
     mode = "base"
+    #: during the warm-up x̂ is set to the sensor every sample (modes without a position model);
+    #: ``mmac`` seeds x̂ once and identifies the sensor gain from the start instead
+    warmup_tracks_sensor = True
 
     def __init__(self, tuning: ControlTuning, reference: Reference | None) -> None:
         self.tuning = tuning
@@ -65,6 +77,9 @@ class LoopBase:
         self.k_f = params.controller.k_f
         self.pi = PiLaw(params.controller, ts_s)
         self.valve = ValvePredictor(params.plant, ts_s)
+        self.stroke_m = params.plant.spool_stroke_m
+        self.valve.stop_m = self.stroke_m
+        self._stop_level_m = SPOOL_STOP_FRACTION * self.stroke_m
         self.xhat = ModelPosition(params.plant, ts_s, self.tuning.anchor_rate_1_s)
         ref = self.reference
         self.scale_pos_m = ref.amplitude_m if ref.amplitude_m > 0.0 else 1e-3
@@ -90,6 +105,7 @@ class LoopBase:
         self.xhat.reset()
         self._echo = 0.0
         self._y_s = 0.0
+        self._sent = self._sent_prev = 0.0  # the currents commanded in the last two cycles (A)
         self.k_loe_hat = 1.0
         self.k_dft_hat = 1.0
         self.k_q_hat = 1.0
@@ -102,10 +118,29 @@ class LoopBase:
         """Mode-specific reset."""
 
     # ---- the cycle -------------------------------------------------------------------------
-    def _finish(self, reference_m: float, feedback: float) -> ValveCommand:
-        self._cmd.current_a = compensated_current(self.pi.step(reference_m, feedback),
-                                                  self.k_loe_hat)
+    def _finish(self, meas: Measurement, feedback: float) -> ValveCommand:
+        self.pi.saturated = self._saturation(meas)
+        i = compensated_current(self.pi.step(meas.reference_m, feedback), self.k_loe_hat)
+        self._cmd.current_a = i
+        self._sent_prev, self._sent = self._sent, (i if math.isfinite(i) else 0.0)
         return self._cmd
+
+    def _saturation(self, meas: Measurement) -> int:
+        """+1/−1 when the actuator is saturated upwards/downwards, judged on this sample: the
+        spool LVDT at the stop, or a current echo short of the command it answers (the one sent
+        two cycles ago: one sample of transport delay) by more than :data:`ECHO_SHORT_A`. A
+        sample without data keeps the previous judgement."""
+        if not meas.fresh:
+            return self.pi.saturated
+        y_v = meas.spool_m
+        if y_v >= self._stop_level_m:
+            return 1
+        if y_v <= -self._stop_level_m:
+            return -1
+        sent = self._sent_prev
+        if abs(sent) - abs(meas.coil_current_a) > ECHO_SHORT_A:
+            return 1 if sent > 0.0 else -1
+        return 0
 
     def _close(self, meas: Measurement) -> ValveCommand:
         """Common tail: trust decision, anchoring, feedback, PI, compensation.
@@ -124,7 +159,7 @@ class LoopBase:
             self._warm_left -= 1
         if trusted:
             y = meas.position_m / td
-            if warm:  # start-up: the system starts healthy; x̂ is the sensor (no model yet)
+            if warm and self.warmup_tracks_sensor:  # x̂ is the sensor (no model yet)
                 xh.x = y / kq
             else:
                 xh.anchor(y / kq)
@@ -132,9 +167,9 @@ class LoopBase:
             if b < 1.0:
                 b = self._blend = min(1.0, b + self._blend_step)
                 y = model_x + b * (y - model_x)
-            return self._finish(meas.reference_m, self.k_f * y)
+            return self._finish(meas, self.k_f * y)
         self._blend = 0.0 if meas.fresh else self._blend
-        return self._finish(meas.reference_m, self.k_f * model_x)
+        return self._finish(meas, self.k_f * model_x)
 
     def _position_guarded(self) -> bool:
         return False
@@ -187,7 +222,7 @@ class NrcController(LoopBase):
 
     def step(self, meas: Measurement) -> ValveCommand:
         """PI on ``K_f·y_s``."""
-        return self._finish(meas.reference_m, self.k_f * meas.position_m)
+        return self._finish(meas, self.k_f * meas.position_m)
 
 
 class OracleController(LoopBase):
@@ -201,6 +236,7 @@ class OracleController(LoopBase):
         self.k_loe_hat = faults.k_loe * faults.k_q
         self.k_q_hat = faults.k_q
         self.k_dft_hat = faults.k_dft
+        self.valve.stop_m = self.stroke_m / faults.k_loe
 
     def step(self, meas: Measurement) -> ValveCommand:
         """Predict, integrate the (measured) spool into x̂, compensate with the truth."""

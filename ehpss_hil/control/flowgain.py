@@ -61,6 +61,7 @@ class FlowGainMonitor:
         "_prev",
         "_sff",
         "_sfy",
+        "_stale",
         "_syy",
         "_theta_ref",
         "_vs",
@@ -107,6 +108,7 @@ class FlowGainMonitor:
         self._i = self._n = 0
         self._int = self._prev = 0.0
         self._hold = 0
+        self._stale = 0  # updates since the product estimate last had an excited increment
         self.restart()
 
     def restart(self) -> None:
@@ -128,12 +130,13 @@ class FlowGainMonitor:
         """Back to the model state at the last :meth:`mark`."""
         self.s = self._mark
 
-    def product(self, position_m: float, spool_m: float, samples: int = 1) -> float:
+    def product(self, position_m: float, spool_m: float, samples: int = 1,
+                excited: bool = True) -> float:
         """Offset-free estimate of k_DFT·k_Q: NLMS on M-sample increments of the position against
         ``K_c·∫y_v``, updated only while the increments are excited (a k_Q change leaves x̂ with a
         level offset; increments have none). ``samples``: sensor samples since the previous call
         (the spool taken linear over those not seen), so that both sides of an increment span
-        the same time."""
+        the same time. ``excited`` False (the spool at its stop): the increment is not used."""
         self._int += self._h * samples * (spool_m + self._prev)
         self._prev = spool_m
         i = self._i
@@ -142,7 +145,9 @@ class FlowGainMonitor:
         self._ys[i], self._vs[i] = position_m, self._int
         self._i = (i + 1) % self._m
         self._n += 1
-        if self._n > self._m and abs(phi) > self._floor:
+        self._stale += 1
+        if self._n > self._m and abs(phi) > self._floor and excited:
+            self._stale = 0
             t = self.theta_prod
             t += self._g * (y - t * phi) * phi / (self._c2 + phi * phi)
             self.theta_prod = min(max(t, 0.0), 2.5)
@@ -164,6 +169,8 @@ class FlowGainMonitor:
         self.propagate(current_a)
         if self._hold > 0:  # no evidence now (hold_off): the decision stands
             self._hold -= 1
+            return self.k_q
+        if self._stale > self._m:  # θ_pos is stale (no excited increment): nothing to test
             return self.k_q
         if not self.flow_fault and abs(theta_pos - 1.0) < self._min_dev:
             # no deviation: H_D whatever the evidence; start the window afresh when it appears

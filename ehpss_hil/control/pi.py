@@ -21,7 +21,7 @@ class PiLaw:
     """Eq 39 PI with state ``z`` (sensor units·s). :meth:`step` returns the PI output
     ``u = K_a·(K_p·e + K_i·z)`` (A, before fault compensation) and advances ``z``."""
 
-    __slots__ = ("_ka", "_ki", "_kp", "_r_prev", "_ts_ki", "k_f", "u", "z")
+    __slots__ = ("_ka", "_ki", "_kp", "_r_prev", "_ts_ki", "k_f", "saturated", "u", "z")
 
     def __init__(self, gains: ControllerGains, ts_s: float) -> None:
         self.k_f = gains.k_f
@@ -32,23 +32,31 @@ class PiLaw:
         self.z = 0.0
         self.u = 0.0
         self._r_prev = 0.0
+        #: +1/−1 while the actuator is saturated upwards/downwards (set by the caller), else 0
+        self.saturated = 0
 
     def reset(self) -> None:
         """Integrator and output back to zero."""
         self.z = 0.0
         self.u = 0.0
         self._r_prev = 0.0
+        self.saturated = 0
 
     def step(self, reference_m: float, feedback: float) -> float:
         """One sample: ``reference_m`` = x_d (m), ``feedback`` = y_f (sensor units, K_f·m).
 
         Returns the PI output current (A) before compensation; z is never reset or jumped, so a
         change of the feedback path or of the compensation gain is bumpless in z.
+
+        Anti-windup (conditional integration): while :attr:`saturated` is ±1, z does not
+        integrate an error that pushes further in that direction, so the loop comes off a
+        current limit or the spool stop without an integrator overshoot.
         """
         r = 0.5 * (reference_m + self._r_prev)
         self._r_prev = reference_m
         e = self.k_f * r - feedback
         u = self._ka * (self._kp * e + self._ki * self.z)
-        self.z += self._ts_ki * e
+        if self.saturated * e <= 0.0:
+            self.z += self._ts_ki * e
         self.u = u
         return u

@@ -19,7 +19,7 @@ class ValvePredictor:
     the spool LVDT then reads ``k_LOE·v``.
     """
 
-    __slots__ = ("_a00", "_a01", "_a10", "_a11", "_b0", "_b1", "_mark", "v", "vel")
+    __slots__ = ("_a00", "_a01", "_a10", "_a11", "_b0", "_b1", "_mark", "stop_m", "v", "vel")
 
     def __init__(self, plant: PlantParams, ts_s: float) -> None:
         a, b = valve_matrices(plant)
@@ -30,6 +30,8 @@ class ValvePredictor:
         self.vel = 0.0
         self.v = 0.0
         self._mark = (0.0, 0.0)
+        #: where the commanded spool stops (m): the stroke over k̂_LOE, set by the controller
+        self.stop_m = float("inf")
 
     def reset(self) -> None:
         """At rest."""
@@ -46,11 +48,18 @@ class ValvePredictor:
         self.vel, self.v = self._mark
 
     def step(self, current_a: float) -> float:
-        """Advance with ``current_a`` (A) held over the last sample; returns v (m)."""
+        """Advance with ``current_a`` (A) held over the last sample; returns v (m), held on the
+        stop ±:attr:`stop_m` like the plant's spool (outward velocity lost there)."""
         vel, v = self.vel, self.v
-        self.vel = self._a00 * vel + self._a01 * v + self._b0 * current_a
-        self.v = self._a10 * vel + self._a11 * v + self._b1 * current_a
-        return self.v
+        vel, v = (self._a00 * vel + self._a01 * v + self._b0 * current_a,
+                  self._a10 * vel + self._a11 * v + self._b1 * current_a)
+        stop = self.stop_m
+        if v > stop or v < -stop:
+            v = stop if v > 0.0 else -stop
+            if vel * v > 0.0:
+                vel = 0.0
+        self.vel, self.v = vel, v
+        return v
 
 
 class ModelPosition:

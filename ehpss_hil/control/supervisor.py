@@ -6,7 +6,9 @@ Switch from the active model to the argmin of J only when all of these hold:
   bank's noise floor (hysteresis relative *and* absolute, so noise alone never switches);
 * the dwell time has passed since the last switch, and the warm-up since reset;
 * the two models' θ differ by more than ``min_theta_separation`` (no chatter between twins);
-* the channel is excited: ``|φ|/S ≥ excitation_floor``.
+* the channel is excited: ``|φ|/S ≥ excitation_floor``;
+* all of the above held for ``switch_confirm_s`` in a row with the same best model (one noisy
+  sample makes a large instantaneous ε², never a lasting one).
 
 On a switch to a fixed model the RIA is reinitialized to it (θ and index memory).
 
@@ -44,6 +46,8 @@ class Supervisor:
     """Hysteresis/dwell/warm-up/separation/excitation switching plus a no-model-fits guard."""
 
     __slots__ = (
+        "_cand",
+        "_confirm",
         "_dwell",
         "_eps0sq",
         "_floor",
@@ -54,6 +58,7 @@ class Supervisor:
         "_last",
         "_release",
         "_sep",
+        "_streak",
         "_sustained",
         "_warm",
         "_win",
@@ -70,6 +75,7 @@ class Supervisor:
         self.bank = bank
         self.initial = initial
         self._dwell = round(tuning.dwell_s / ts_s)
+        self._confirm = max(1, round(tuning.switch_confirm_s / ts_s))
         self._warm = round(tuning.warmup_s / ts_s)
         self._h = tuning.hysteresis
         self._eps0sq = tuning.epsilon0 ** 2
@@ -89,6 +95,8 @@ class Supervisor:
         self.guarded = False
         self._k = 0
         self._last = -(10 ** 9)
+        self._cand = -1
+        self._streak = 0
 
     @property
     def margin(self) -> float:
@@ -112,7 +120,12 @@ class Supervisor:
             best = j.index(jb)
             if (self.bank.separation(best, act) > self._sep
                     and jb < (1.0 - self._h) * j[act] - self.margin):
-                self._switch(best)
+                self._streak = self._streak + 1 if best == self._cand else 1
+                self._cand = best
+                if self._streak >= self._confirm:
+                    self._switch(best)
+                return self.active
+        self._streak = 0
         return self.active
 
     def force(self, model: int) -> None:
@@ -121,6 +134,8 @@ class Supervisor:
             self._switch(model)
 
     def _switch(self, best: int) -> None:
+        self._streak = 0
+        self._cand = -1
         self.active = best
         self._last = self._k
         self.switches += 1

@@ -23,6 +23,10 @@ class PlantParams:
     valve_gain_m_per_a_s2: float = field(default=9.739e7, metadata=rng(0.0, lo_open=True))
     load_mass_kg: float = field(default=20.0, metadata=rng(0.0, lo_open=True))
     piston_area_m2: float = field(default=2.206e-4, metadata=rng(0.0, lo_open=True))
+    #: mechanical stroke of the spool, ±spool_stroke_m (m): the actual spool k_LOE·x_v stops
+    #: there and the flow saturates. The spool LVDT's range (the DBC's Spool signal, ±10 mm)
+    #: covers it: a reading at the stroke is the real spool, held at its stop.
+    spool_stroke_m: float = field(default=0.01, metadata=rng(0.0, 0.01, lo_open=True))
 
     @property
     def velocity_gain_1_s(self) -> float:

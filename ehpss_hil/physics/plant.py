@@ -10,7 +10,7 @@ import numpy as np
 
 from .discretize import Matrix, ZohCache
 from .faults import FaultState
-from .model import ACC, POS, SPOOL, load_pressure_pa, plant_matrices
+from .model import ACC, POS, SPOOL, SPOOL_VEL, load_pressure_pa, plant_matrices
 from .params import Params
 
 
@@ -25,22 +25,31 @@ class PlantStepper:
         self.params = params
         self.ts_s = ts_s
         self._zoh = ZohCache(self._continuous, ts_s)
+        #: the piston [ẍ, ẋ, x] driven by a held spool x_v, for samples the spool spends on its stop
+        self._zoh_stop = ZohCache(self._continuous_piston, ts_s)
         self.state = np.zeros(5)
         self._ad: Matrix
         self._bd: Matrix
         self._key: Hashable = None
         self.faults = FaultState()
+        self._stroke_m = params.plant.spool_stroke_m
         self._select(self.faults)
 
     def _continuous(self, key: Hashable) -> tuple[Matrix, Matrix]:
         k_loe, k_q = typing.cast(tuple[float, float], key)
         return plant_matrices(self.params.plant, k_loe, k_q)
 
+    def _continuous_piston(self, key: Hashable) -> tuple[Matrix, Matrix]:
+        a, _ = self._continuous(key)
+        return a[:SPOOL_VEL, :SPOOL_VEL], a[:SPOOL_VEL, SPOOL:SPOOL + 1]
+
     def _select(self, faults: FaultState) -> None:
         key = faults.dynamics_key
         if key != self._key:
             self._ad, bd = self._zoh.get(key)
             self._bd = bd[:, 0].copy()
+            self._ad_stop, bd = self._zoh_stop.get(key)
+            self._bd_stop = bd[:, 0].copy()
             self._key = key
 
     def reset(self) -> None:
@@ -54,10 +63,23 @@ class PlantStepper:
         self._select(faults)
 
     def step(self, current_a: float) -> float:
-        """Advance one sample with ``current_a`` held; returns the applied (saturated) current (A)."""
+        """Advance one sample with ``current_a`` held; returns the applied (saturated) current (A).
+
+        The spool stops at its stroke (an inelastic stop): when the free step would carry the
+        actual spool ``k_LOE·x_v`` past ±``spool_stroke_m``, the spool ends the sample on the
+        stop at rest and the piston is stepped with the spool held there over the whole sample
+        (the valve is fast against Ts: it reaches the stop early in the sample)."""
         lim = self.faults.current_limit_a
         applied = min(max(current_a, -lim), lim)
-        self.state = self._ad @ self.state + self._bd * applied
+        st = self._ad @ self.state + self._bd * applied
+        stop = self._stroke_m / self.faults.k_loe
+        xv = st[SPOOL]
+        if xv > stop or xv < -stop:
+            held = stop if xv > 0.0 else -stop
+            st[:SPOOL_VEL] = self._ad_stop @ self.state[:SPOOL_VEL] + self._bd_stop * held
+            st[SPOOL_VEL] = 0.0
+            st[SPOOL] = held
+        self.state = st
         return applied
 
     @property

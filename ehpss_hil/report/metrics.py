@@ -62,6 +62,8 @@ class RunMetrics:
     speed: float = 0.0
     #: simulated duration (s)
     duration_s: float = 0.0
+    #: worst |x − y_m| over the whole run (m); not part of the JSON row
+    max_error_m: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
         """The DESIGN §10 JSON row."""
@@ -125,4 +127,4 @@ def compute_metrics(r: SimResult) -> RunMetrics:
         rms_error_m=float(np.sqrt(np.mean(r.error_m ** 2))),
         pre_fault_max_m=float(e[:first].max()) if first > 0 else 0.0,
         switches=int(np.count_nonzero(marks)), events=events, speed=r.speed,
-        duration_s=r.duration_s)
+        duration_s=r.duration_s, max_error_m=float(e.max()) if n else 0.0)
