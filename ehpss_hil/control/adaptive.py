@@ -26,6 +26,7 @@ from .compensation import MIN_THETA_L
 from .controllers import JOINT_SLOT0, POSITION_SLOT0, SMAC_SLOT, SPOOL_SLOT0, LoopBase
 from .estimator import Nlms, per_sample_gain
 from .flowgain import FlowGainMonitor
+from .monitor import HarmMonitor
 from .supervisor import Supervisor
 from .tuning import ControlTuning
 
@@ -48,6 +49,8 @@ BRIDGE_MARGIN = 1.25
 #: this long (s): the valve model's stop is placed with k̂_LOE, the plant's with k_LOE, and the
 #: difference dies out with the valve poles (≈ 0.6 ms time constant)
 SPOOL_STOP_HOLD_S = 0.005
+#: an adaptive estimate within this of its clip counts as at its limit (dimensionless)
+AT_LIMIT_MARGIN = 0.01
 
 
 class MmacController(LoopBase):
@@ -68,6 +71,11 @@ class MmacController(LoopBase):
         self.pos_sup = Supervisor(self.pos_bank, t, ts, guard_epsilon=t.position_guard_epsilon)
         self.flow = FlowGainMonitor(self.params.plant, ts, self.scale_spool_m,
                                     t.flow_gain_window_s, t.flow_gain_threshold)
+        fl = self.flow
+        self.monitor = HarmMonitor(fl.min_deviation, fl.increment_window,
+                                   round(t.monitor_confirm_s / ts), round(t.monitor_reengage_s / ts))
+        self._lim_d_hi = t.k_dft_limits[1] - AT_LIMIT_MARGIN
+        self._lim_l_lo = t.k_loe_limits[0] + AT_LIMIT_MARGIN
         self._in_flow = False
         self._flow_on = t.flow_gain_test
         self._flow_hold = max(1, round(FLOW_HOLD_S / ts))
@@ -84,6 +92,7 @@ class MmacController(LoopBase):
         self.spool_sup.reset()
         self.pos_sup.reset()
         self.flow.reset()
+        self.monitor.reset()
         self._in_flow = False
         self._flow_spool_model = self.spool_sup.active
         self._dead = 0
@@ -143,6 +152,7 @@ class MmacController(LoopBase):
             self.k_q_hat = 1.0
             if self._flow_on:
                 self._flow_split(meas, y_v, tl)
+                self._watch(tl)
         else:
             if self._dead == 0:  # the predictors' state at the last sample seen
                 self.valve.mark()
@@ -264,6 +274,28 @@ class MmacController(LoopBase):
             self.pos_bank.seed_ria(prod)
             self.pos_sup.force(self.pos_bank.ria)
             self.k_dft_hat = self.pos_bank.theta[self.pos_bank.ria]
+
+    def _watch(self, tl: float) -> None:
+        """The do-no-harm monitor on this sample; nominal compensation while it says so."""
+        pb, sb = self.pos_bank, self.spool_bank
+        pa, sa = self.pos_sup.active, self.spool_sup.active
+        guarded = self._position_guarded()
+        at_limit = ((pa >= pb.n_fixed and not guarded and self.k_dft_hat >= self._lim_d_hi)
+                    or (sa >= sb.n_fixed and not self.spool_sup.guarded and tl <= self._lim_l_lo))
+        fl = self.flow
+        # the position check only where the sensor is read through θ̂_D: under the guard the loop
+        # runs on x̂ (no model explains the sensor; θ_prod, fitted on the same sensor, neither)
+        fresh = fl.product_fresh and not guarded
+        self.set_nominal(self.monitor.update(self.k_dft_hat * self.k_q_hat, fl.theta_prod,
+                                             fresh, at_limit))
+
+    def fallback_reason(self) -> int:
+        """The monitor's reason while in fallback, else 0."""
+        return int(self.monitor.reason) if self.monitor.fallback else 0
+
+    def fallback_count(self) -> int:
+        """The monitor's fallbacks since start-up."""
+        return self.monitor.fallbacks
 
     def _position_guarded(self) -> bool:
         return self.pos_sup.guarded and not self.flow.flow_fault

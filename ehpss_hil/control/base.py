@@ -76,6 +76,7 @@ class ControllerStatus:
     ``k_loe_hat``/``k_dft_hat``: the estimates used for compensation (dimensionless; in ``mmac``
     ``k_loe_hat`` is the current divisor k̂_LOE·k̂_Q). ``k_q_hat``: the flow-gain attribution.
     ``index``: slot → performance index J; ``theta``: slot → the model's parameter θ.
+    ``fallback``/``fallback_reason``/``fallbacks``: the do-no-harm monitor's state.
     """
 
     mode: str = "nrc"
@@ -86,6 +87,11 @@ class ControllerStatus:
     index: dict[int, float] = field(default_factory=dict)
     theta: dict[int, float] = field(default_factory=dict)
     switches: int = 0
+    #: the do-no-harm monitor holds the loop on nominal compensation (control/monitor.py), why
+    #: (FallbackReason) and how often it did since start-up
+    fallback: bool = False
+    fallback_reason: int = 0
+    fallbacks: int = 0
 
 
 class Controller(Protocol):

@@ -43,6 +43,8 @@ SPOOL_STOP_FRACTION = 0.98
 #: the actuator is current-saturated when the echo falls short of the command by more than this
 #: (A): a few of the DBC's 0.2 µA echo steps and 10 µA setpoint steps
 ECHO_SHORT_A = 3e-5
+#: entering or leaving the nominal fallback moves the compensation divisors over this time (s)
+FALLBACK_RAMP_S = 0.02
 
 SPOOL_SLOT0 = 0
 POSITION_SLOT0 = 4
@@ -92,6 +94,7 @@ class LoopBase:
         self._echo = 0.0
         self._y_s = 0.0
         self._warm_samples = round(self.tuning.warmup_s / ts_s)
+        self._ramp_n = max(1, round(FALLBACK_RAMP_S / ts_s))
         self._build()
         self.reset()
 
@@ -110,6 +113,10 @@ class LoopBase:
         self.k_dft_hat = 1.0
         self.k_q_hat = 1.0
         self.sensor_trusted = True
+        self.nominal = False
+        self._ramp_left = 0
+        self._ramp_from = (1.0, 1.0)
+        self._applied_loe = self._applied_dft = 1.0
         self._blend = 1.0
         self._warm_left = self._warm_samples
         self._reset_mode()
@@ -120,10 +127,28 @@ class LoopBase:
     # ---- the cycle -------------------------------------------------------------------------
     def _finish(self, meas: Measurement, feedback: float) -> ValveCommand:
         self.pi.saturated = self._saturation(meas)
-        i = compensated_current(self.pi.step(meas.reference_m, feedback), self.k_loe_hat)
+        i = compensated_current(self.pi.step(meas.reference_m, feedback), self._applied_loe)
         self._cmd.current_a = i
         self._sent_prev, self._sent = self._sent, (i if math.isfinite(i) else 0.0)
         return self._cmd
+
+    def set_nominal(self, nominal: bool) -> None:
+        """Compensate nominally (k̂ = 1: the plain PI loop on the raw sensor) or with the
+        estimates; the divisors in use move between the two over ``FALLBACK_RAMP_S``."""
+        if nominal != self.nominal:
+            self._ramp_from = (self._applied_loe, self._applied_dft)
+            self._ramp_left = self._ramp_n
+            self.nominal = nominal
+
+    def _apply(self) -> None:
+        """The current divisor and the feedback divisor in use this cycle."""
+        tl, td = (1.0, 1.0) if self.nominal else (self.k_loe_hat, self.k_dft_hat)
+        if self._ramp_left > 0:
+            self._ramp_left -= 1
+            f = self._ramp_left / self._ramp_n
+            tl += f * (self._ramp_from[0] - tl)
+            td += f * (self._ramp_from[1] - td)
+        self._applied_loe, self._applied_dft = tl, td
 
     def _saturation(self, meas: Measurement) -> int:
         """+1/−1 when the actuator is saturated upwards/downwards, judged on this sample: the
@@ -150,19 +175,26 @@ class LoopBase:
         ``y_s/θ̂_D``); untrusted: x̂ alone. This makes the return to the sensor bumpless.
         """
         td = self.k_dft_hat
-        trusted = sensor_trusted(td, self._failed_below, self._position_guarded(), meas.fresh)
+        model_trusted = sensor_trusted(td, self._failed_below, self._position_guarded(),
+                                       meas.fresh)
+        # nominal: the estimates are set aside, the guard (no model explains the sensor) is not
+        trusted = (meas.fresh and not self._position_guarded()) if self.nominal else model_trusted
         self.sensor_trusted = trusted
+        self._apply()
         xh, kq = self.xhat, self.k_q_hat
         model_x = kq * xh.x  # x̂ integrates the spool without k_Q: true x ≈ k̂_Q·x̂
         warm = self._warm_left > 0
         if warm:
             self._warm_left -= 1
         if trusted:
-            y = meas.position_m / td
-            if warm and self.warmup_tracks_sensor:  # x̂ is the sensor (no model yet)
-                xh.x = y / kq
-            else:
-                xh.anchor(y / kq)
+            if model_trusted:  # x̂ follows the sensor as the models read it
+                ym = meas.position_m / td
+                if warm and self.warmup_tracks_sensor:  # x̂ is the sensor (no model yet)
+                    xh.x = ym / kq
+                else:
+                    xh.anchor(ym / kq)
+            fd = self._applied_dft
+            y = meas.position_m / fd if fd > 0.0 else meas.position_m
             b = self._blend
             if b < 1.0:
                 b = self._blend = min(1.0, b + self._blend_step)
@@ -204,7 +236,17 @@ class LoopBase:
         return ControllerStatus(mode=self.mode, active_model=active, k_loe_hat=kl, k_dft_hat=kd,
                                 index=dict(zip(self.index_slots, self.index_values(), strict=True)),
                                 theta=dict(zip(self.index_slots, self.theta_values(), strict=True)),
-                                switches=self.switch_count())
+                                switches=self.switch_count(), fallback=self.nominal,
+                                fallback_reason=self.fallback_reason(),
+                                fallbacks=self.fallback_count())
+
+    def fallback_reason(self) -> int:
+        """Why the loop compensates nominally now (:class:`FallbackReason`; 0: it does not)."""
+        return 0
+
+    def fallback_count(self) -> int:
+        """Entries into the nominal fallback since start-up."""
+        return 0
 
     def theta_values(self) -> list[float]:
         """θ of every model in :attr:`index_slots` order."""

@@ -111,6 +111,21 @@ class FlowGainMonitor:
         self._stale = 0  # updates since the product estimate last had an excited increment
         self.restart()
 
+    @property
+    def min_deviation(self) -> float:
+        """The smallest |θ_pos − 1| taken as a deviation to attribute (dimensionless)."""
+        return self._min_dev
+
+    @property
+    def increment_window(self) -> int:
+        """M, the samples an increment spans."""
+        return self._m
+
+    @property
+    def product_fresh(self) -> bool:
+        """θ_prod had an excited increment within the last M updates."""
+        return self._stale <= self._m
+
     def restart(self) -> None:
         """Empty the evidence window (the product moved: the hypotheses changed)."""
         self._sff = self._sfy = self._syy = self._w = 0.0

@@ -50,5 +50,9 @@ class ControlTuning:
     flow_gain_test: bool = True
     flow_gain_threshold: float = field(default=8.0, metadata=rng(0.0, lo_open=True))
     flow_gain_window_s: float = field(default=0.5, metadata=rng(0.0, lo_open=True))
+    #: mmac do-no-harm monitor (control/monitor.py): a rule must fire this long in a row to fall
+    #: back to nominal compensation; the fallback ends after this long without any rule firing (s)
+    monitor_confirm_s: float = field(default=0.003, metadata=rng(0.0, 1.0))
+    monitor_reengage_s: float = field(default=0.05, metadata=rng(0.0, 10.0))
     #: mmac-paper / smac: window of the position-increment regression (samples)
     increment_window: int = field(default=10, metadata=rng(1, 1000))

@@ -64,6 +64,8 @@ class RunMetrics:
     duration_s: float = 0.0
     #: worst |x − y_m| over the whole run (m); not part of the JSON row
     max_error_m: float = 0.0
+    #: time the do-no-harm monitor held the loop on nominal compensation (s); not in the JSON
+    fallback_s: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
         """The DESIGN §10 JSON row."""
@@ -127,4 +129,5 @@ def compute_metrics(r: SimResult) -> RunMetrics:
         rms_error_m=float(np.sqrt(np.mean(r.error_m ** 2))),
         pre_fault_max_m=float(e[:first].max()) if first > 0 else 0.0,
         switches=int(np.count_nonzero(marks)), events=events, speed=r.speed,
-        duration_s=r.duration_s, max_error_m=float(e.max()) if n else 0.0)
+        duration_s=r.duration_s, max_error_m=float(e.max()) if n else 0.0,
+        fallback_s=float(np.count_nonzero(r.fallback)) * ts)

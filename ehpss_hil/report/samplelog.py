@@ -23,7 +23,7 @@ from ..control.base import Measurement
 from ..control.controllers import LoopBase, make_controller
 from ..control.tuning import ControlTuning
 from ..physics.params import Params, load_params
-from ..runtime.status_frames import MODE_CODE
+from ..runtime.status_frames import MODE_CODE, MODE_UNKNOWN
 from ..scenario import Scenario
 
 _T0_S = 1_767_225_600.0  # 2026-01-01T00:00:00Z: a fixed wall-clock origin (reproducible logs)
@@ -70,7 +70,8 @@ class _Bench:
     def status(self, t: float) -> None:
         st = self.ctrl.status()
         self.send(self.tx_ctrl, "CTRL_STATUS", {
-            "State": 2, "Mode": MODE_CODE.get(self.ctrl.mode, 15),
+            "State": 2, "Mode": MODE_CODE.get(self.ctrl.mode, MODE_UNKNOWN),
+            "NominalFallback": int(st.fallback),
             "ActiveSpoolModel": st.active_model.get("spool", -1) & 0xF,
             "ActivePosModel": st.active_model.get("position", -1) & 0xF,
             "KLoeHat": _clip(st.k_loe_hat, 4.095, 0.0), "KDftHat": _clip(st.k_dft_hat, 4.095, 0.0),

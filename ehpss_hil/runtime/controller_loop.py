@@ -288,6 +288,7 @@ class ControllerLoop:
             self.send_status()
         if due.stats:
             self.io.send("CTRL_STATS", {
+                "FallbackReason": self.reporter.fallback_reason & 0xF,
                 "Overruns": self.overruns & 0xFFFF, "RejectedFrames": self.codec.rejected & 0xFFFF,
                 "CycleTimeMax": min(self._compute_max_s, 0.065535)})
             self._compute_max_s = 0.0
@@ -392,6 +393,11 @@ class ControllerLoop:
         self.send_status(all_index=True)
         self.io.send("HEARTBEAT_CTRL", {"NmtState": self.life.nmt_state})
 
+    def _fallbacks(self) -> int:
+        """Entries of the controller's do-no-harm monitor into nominal compensation."""
+        count = getattr(self.controller, "fallback_count", None)
+        return int(count()) if callable(count) else 0
+
     def summary(self) -> dict[str, object]:
         """Counters and loop statistics (JSON-able)."""
         return {"cycles": self.cycles, "skipped_periods": self.skipped_periods,
@@ -399,6 +405,7 @@ class ControllerLoop:
                 "state": self.life.state.name,
                 "failsafe_reason": self.life.reason.name, "watchdog_trips": self.wd.trips,
                 "failsafe_cycles": self.failsafe_cycles, "saturations": self.saturations,
+                "nominal_fallbacks": self._fallbacks(),
                 "frames_sent": dict(self.io.sent), "tx_errors": self.io.tx_errors,
                 "frames_received": self.io.received,
                 "received_by_verdict": {v.name: n for v, n in self.codec.counts.items()},

@@ -18,6 +18,8 @@ from .lifecycle import Lifecycle
 
 #: CTRL_STATUS ``Mode`` values
 MODE_CODE = {"nrc": 0, "smac": 1, "mmac-paper": 2, "mmac": 3, "oracle": 4}
+#: CTRL_STATUS ``Mode`` of a mode not in :data:`MODE_CODE`
+MODE_UNKNOWN = 7
 _F32_MAX = 3.0e38
 
 
@@ -28,6 +30,9 @@ class StatusReporter:
         self.io = io
         #: (slot, J, θ) still to send, the next one last
         self.pending: list[tuple[int, float, float]] = []
+        #: the do-no-harm monitor at the last CTRL_STATUS: reason now (0: none), entries so far
+        self.fallback_reason = 0
+        self.fallbacks = 0
 
     def send(self, controller: Controller, life: Lifecycle, all_index: bool = False) -> None:
         """``controller``'s CTRL_STATUS now; the CTRL_INDEX frames (one per model slot) queued,
@@ -35,11 +40,14 @@ class StatusReporter:
         s = controller.status()
         self.io.send("CTRL_STATUS", {
             "State": int(life.state), "FailsafeReason": int(life.reason),
-            "Mode": MODE_CODE.get(controller.mode, 15),
+            "Mode": MODE_CODE.get(controller.mode, MODE_UNKNOWN),
+            "NominalFallback": int(s.fallback),
             "ActiveSpoolModel": _nibble(s.active_model.get("spool", 0)),
             "ActivePosModel": _nibble(s.active_model.get("position", 0)),
             "KLoeHat": _clip(s.k_loe_hat, 0.0, 4.095), "KDftHat": _clip(s.k_dft_hat, 0.0, 4.095),
             "Switches": min(s.switches, 255)})
+        self.fallback_reason = s.fallback_reason
+        self.fallbacks = s.fallbacks
         self.pending = [(slot, j, s.theta.get(slot, 0.0))
                         for slot, j in reversed(s.index.items()) if 0 <= slot <= 15]
         while all_index and self.pending:

@@ -92,7 +92,8 @@ def _loop(emu: PlantEmulation, ctrl: LoopBase, tr: QuantizeTransport | FramesTra
           rows: list[tuple]) -> None:
     """The per-sample loop (locals bound once: this is the simulator's hot path).
 
-    One row per sample: (x_true, y_s, spool, applied current, probe, faults, fresh, J list).
+    One row per sample: (x_true, y_s, spool, applied current, probe, faults, fresh, J list,
+    nominal fallback).
     """
     meas = Measurement()
     queue: deque[float | None] = deque([0.0] * delay)
@@ -122,14 +123,15 @@ def _loop(emu: PlantEmulation, ctrl: LoopBase, tr: QuantizeTransport | FramesTra
         if arrived is not None:
             held = arrived
         push((s.true_position_m, s.position_m, s.spool_m, advance(held), probe(), s.faults,
-              meas.fresh, index_values()))
+              meas.fresh, index_values(), ctrl.nominal))
 
 
 def _result(sc: Scenario, mode: str, ts: float, x_d: np.ndarray, y_m: np.ndarray,
             rows: list[tuple], slots: tuple[int, ...], wall: float,
             counts: dict[str, int]) -> SimResult:
     n = len(x_d)
-    x, ys, sp, cur, probes, faults, fresh, jrows = (list(c) for c in zip(*rows, strict=True))
+    x, ys, sp, cur, probes, faults, fresh, jrows, nominal = (list(c)
+                                                            for c in zip(*rows, strict=True))
     index = np.full((n, N_SLOTS), np.nan)
     if slots:
         index[:, list(slots)] = np.asarray(jrows, dtype=float)
@@ -147,4 +149,5 @@ def _result(sc: Scenario, mode: str, ts: float, x_d: np.ndarray, y_m: np.ndarray
         active_position=pr[:, 1].astype(np.int64), k_loe_hat=pr[:, 2].copy(),
         k_dft_hat=pr[:, 3].copy(), index=index, true_k_loe=tf[:, 0].copy(),
         true_k_q=tf[:, 1].copy(), true_k_dft=tf[:, 2].copy(),
-        fresh=f(fresh, dtype=bool), wall_s=wall, frame_counts=counts)
+        fresh=f(fresh, dtype=bool), wall_s=wall, frame_counts=counts,
+        fallback=f(nominal, dtype=bool))

@@ -21,7 +21,9 @@ class SimResult:
     position; ``y_s_m`` position sensor as sent by the emulator; ``spool_m`` spool LVDT as sent;
     ``current_a`` current applied over [k, k+1); ``active_spool``/``active_position`` model slots
     (−1: none); ``k_loe_hat``/``k_dft_hat`` estimates in use; ``true_k_loe``/``true_k_q``/
-    ``true_k_dft`` fault values in force; ``fresh`` whether the sensor frame arrived.
+    ``true_k_dft`` fault values in force; ``fresh`` whether the sensor frame arrived;
+    ``fallback`` whether the do-no-harm monitor held the loop on nominal compensation (empty for
+    results that do not record it).
     """
 
     scenario: str
@@ -48,6 +50,7 @@ class SimResult:
     #: CPU time of this process spent in the loop (s): the "one core" cost on a shared machine
     cpu_s: float = 0.0
     frame_counts: dict[str, int] = field(default_factory=dict)
+    fallback: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     @property
     def error_m(self) -> Array:
