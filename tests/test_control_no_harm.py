@@ -68,7 +68,7 @@ def test_flow_gain_loss_mid_motion_falls_back_to_nominal_and_recovers() -> None:
     and the run ends compensating again."""
     res, mm = _run("kq-loss", "mmac")
     assert res.fallback.any() and not res.fallback[-1]
-    onset = int(round(0.5 / res.ts_s))
+    onset = round(0.5 / res.ts_s)
     assert not res.fallback[:onset].any()
     assert 0.0 < mm.fallback_s < 0.2
 
