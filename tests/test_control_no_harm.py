@@ -109,3 +109,30 @@ def test_monitor_failed_sensor_model_against_a_live_sensor_and_estimate_at_limit
     assert _feed(mon, 2, 0.0, 0.02) == [False, False]  # the product agrees: really failed
     assert _feed(mon, 2, 2.5, 2.5, at_limit=True) == [False, True]
     assert mon.reason is FallbackReason.ESTIMATE_AT_LIMIT
+
+
+@pytest.mark.parametrize("amplitude_m", [0.003, 0.05])
+def test_setpoint_override_step_beyond_the_configured_reference(amplitude_m: float) -> None:
+    """The daemon's SETPOINT override steps x_d far beyond the configured 1 mm sine that set the
+    channels' scales: mmac settles where nrc does (the override drove mmac to 29 mm for 3 mm)."""
+    from dataclasses import replace
+
+    from ehpss_hil.control.controllers import make_controller
+    from ehpss_hil.scenario import Reference
+    from ehpss_hil.sim import lockstep
+    from firmware_sim.emulation import PlantEmulation
+
+    sc = load_scenario(PROJECT_ROOT / "scenarios" / "envelope" / "step-1mm.yaml")
+    sc = replace(sc, reference=Reference(kind="step", amplitude_m=amplitude_m, start_s=0.2),
+                 duration_s=2.0)
+    final = {}
+    for mode in ("nrc", "mmac"):
+        ctrl = make_controller(mode, PARAMS, sc.sample_time_s, None, Reference())
+        rows: list[tuple] = []
+        lockstep._loop(PlantEmulation(PARAMS, sc), ctrl, lockstep._transport("quantize"),
+                       sc.reference_samples().tolist(), 1, None, rows)
+        x = np.array([r[0] for r in rows])
+        assert np.abs(x).max() <= 1.02 * amplitude_m
+        final[mode] = x[-1]
+    assert final["mmac"] == pytest.approx(amplitude_m, abs=20 * UM)
+    assert abs(final["mmac"] - final["nrc"]) <= 1 * UM

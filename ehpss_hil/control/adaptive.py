@@ -121,7 +121,10 @@ class MmacController(LoopBase):
             self._span, self._observed = self._observed + (meas.samples if resync else 1), 0
             sb, ss = self.spool_bank, self.spool_sup
             lvl = self._stop_level_m
-            if y_v >= lvl or y_v <= -lvl or abs(tl_prev * v) >= lvl:
+            if (y_v >= lvl or y_v <= -lvl or abs(tl_prev * v) >= lvl
+                    or (gap and not resync)):
+                # the spool at its stop, or a gap the predictors could not redo (the valve model
+                # was dead-reckoned): not evidence until the model's error has died out
                 self._spool_hold = self._stop_hold
                 self.flow.hold_off(self._stop_hold)
             stopped = self._spool_hold > 0
