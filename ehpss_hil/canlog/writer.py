@@ -164,6 +164,11 @@ class CandumpLogger:
         except RuntimeError:  # released meanwhile from another thread (close)
             pass
 
+    def note(self, key: str, value: object) -> None:
+        """Add ``key: value`` to the sidecar (written with the next update, at the latest when
+        the log is closed); for counts the caller keeps (e.g. rejected datagrams)."""
+        self._meta[key] = value
+
     def __call__(self, msg: can.Message) -> None:
         """Same as :meth:`log` (so the logger can be a python-can Notifier listener callable)."""
         self.log(msg)

@@ -18,6 +18,7 @@ from typing import Any
 
 import can
 
+from ..bus import datagram_rejects
 from ..canlog import CandumpLogger
 from ..errors import BusUnavailableError
 
@@ -127,11 +128,15 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr, flush=True)
             received = record(bus, logger, stop.event, args.duration)
         finally:
+            rejects = datagram_rejects(bus)
+            if rejects is not None:
+                logger.note("rejected_datagrams", rejects.as_dict())
             summary = logger.close()
     finally:
         bus.shutdown()
         for s, h in old.items():
             signal.signal(s, h)
     why = f" on {stop.signal_name}" if stop.signal_name else ""
-    print(f"stopped{why}: {received} frames received; {summary}", flush=True)
+    bad = f"; {rejects.total} datagrams rejected ({rejects.text()})" if rejects else ""
+    print(f"stopped{why}: {received} frames received{bad}; {summary}", flush=True)
     return 0

@@ -83,6 +83,13 @@ class LoopStats:
         return "\n".join(lines)
 
 
+def rejects_text(summary: dict[str, Any]) -> str:
+    """``0`` or ``5 (empty 1, not msgpack 4)``: a summary's ``rejected_datagrams`` in words."""
+    r = summary.get("rejected_datagrams") or {}
+    reasons = ", ".join(f"{k} {n}" for k, n in (r.get("by_reason") or {}).items())
+    return f"{r.get('total', 0)}" + (f" ({reasons})" if reasons else "")
+
+
 def publish_summary(fmt: Callable[[dict[str, Any]], str], summary: dict[str, Any],
                     json_path: Path | None) -> None:
     """A process's exit summary: ``fmt(summary)`` on stdout, and the whole dict as JSON to
