@@ -2,7 +2,10 @@
 
 Writes ``FILE`` (rotated by size) and ``FILE.json`` (sidecar). Stops on SIGINT/SIGTERM or after
 ``--duration`` seconds, flushes everything and prints the counts (exit 0). A bus that cannot be
-opened exits 3 with the reason.
+opened exits 3 with the reason, a log that cannot be written (read-only or full folder) exits 2
+with the reason and leaves no file behind. A full disk while logging: lines are dropped and
+counted (sidecar, final line), the logger goes on and exits 0. Datagrams on a udp_multicast
+group that are no frame are counted and skipped.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import can
 
 from ..bus import datagram_rejects
 from ..canlog import CandumpLogger
-from ..errors import BusUnavailableError
+from ..errors import BusUnavailableError, OutputError
 
 NAME = "log"
 HELP = "log every frame of a CAN bus to a candump -L file (+ JSON sidecar), rotated by size"
@@ -121,8 +124,13 @@ def run(args: argparse.Namespace) -> int:
     stop = _StopFlag()
     old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        logger = CandumpLogger(args.output, iface=iface, max_bytes=args.max_bytes,
-                               backups=args.backups, queue_lines=args.queue_lines, sidecar=meta)
+        try:
+            logger = CandumpLogger(args.output, iface=iface, max_bytes=args.max_bytes,
+                                   backups=args.backups, queue_lines=args.queue_lines,
+                                   sidecar=meta)
+        except OSError as exc:
+            raise OutputError(f"{args.output}: cannot write the log: "
+                              f"{exc.strerror or exc}") from exc
         try:
             print(f"logging {args.interface}:{args.channel} -> {args.output} (Ctrl-C to stop)",
                   file=sys.stderr, flush=True)
