@@ -54,6 +54,21 @@ class SmallTmpfs:
         subprocess.run(["umount", str(self.where)], check=False, capture_output=True)
 
 
+def short_scenario(path: Path, duration_s: float = 0.5) -> Path:
+    """Write a short scenario (the paper's sine, a loss of effectiveness at 0.3 s) to ``path``."""
+    path.write_text(f"""\
+name: short
+duration_s: {duration_s}
+sample_time_s: 0.001
+seed: 3
+reference: {{kind: sine, amplitude_m: 0.001, omega_rad_s: 5.0}}
+transport_delay_samples: 1
+events:
+  - {{t_s: 0.3, k_loe: 0.5}}
+""")
+    return path
+
+
 @dataclass
 class ForeignResult:
     """``run --out`` on a folder of foreign files: without and with ``--overwrite``."""
