@@ -8,7 +8,9 @@ Interfaces:
   frame never leaves this host, and the receive buffer is raised to
   ``cfg.receive_buffer_bytes`` (bursts of > 100 frames overflow the default buffer). The socket
   loops multicast back, so **a process receives its own frames**: the loops must drop frames by
-  ID/direction (they only classify the IDs they consume).
+  ID/direction (they only classify the IDs they consume). A datagram on the group that is no
+  frame (anyone on the host may send one) is counted and skipped, never raised
+  (:func:`datagram_rejects`).
 - ``virtual``: in-process tests and the lockstep simulator.
 
 Filters on ``udp_multicast``/``virtual`` are applied by python-can in user space, and
@@ -32,9 +34,10 @@ from typing import Any
 
 import can
 
-from .bus_udp import UdpReader, UdpWriter, attach_own_id_filter
+from .bus_udp import GuardedUdpMulticastBus, UdpReader, UdpWriter, attach_own_id_filter
 from .config import BusConfig
 from .errors import BusUnavailableError
+from .udp_rejects import DatagramRejects
 
 log = logging.getLogger(__name__)
 
@@ -89,8 +92,7 @@ def _open_udp_multicast(cfg: BusConfig) -> can.BusABC:
     if cfg.hop_limit != 0:  # BusConfig validates this too; never send beyond this host
         raise BusUnavailableError("udp_multicast requires hop_limit 0 (frames stay on this host)")
     try:
-        bus = can.Bus(interface="udp_multicast", channel=cfg.channel, port=cfg.port,
-                      hop_limit=0, fd=False)
+        bus = GuardedUdpMulticastBus(channel=cfg.channel, port=cfg.port, hop_limit=0, fd=False)
     except (OSError, can.CanError) as exc:
         raise BusUnavailableError(
             f"udp_multicast:{cfg.channel}:{cfg.port}: cannot open ({exc}); a multicast route is "
@@ -98,6 +100,12 @@ def _open_udp_multicast(cfg: BusConfig) -> can.BusABC:
             "ip route add 224.0.0.0/4 dev lo')") from exc
     set_receive_buffer(bus, cfg.receive_buffer_bytes)
     return bus
+
+
+def datagram_rejects(bus: can.BusABC) -> DatagramRejects | None:
+    """The counter of datagrams skipped as no frame (udp_multicast from :func:`open_bus`), or
+    None on a bus that cannot receive such datagrams."""
+    return bus.rejects if isinstance(bus, GuardedUdpMulticastBus) else None
 
 
 def set_receive_buffer(bus: can.BusABC, size_bytes: int) -> int:

@@ -24,6 +24,11 @@ does not need:
   checks that splicing a timestamp and data into it reproduces ``pack_message`` exactly, and
   then writes ``head + timestamp + middle + data + tail`` to the same socket and destination
   (anything else goes through ``bus.send``).
+
+Anyone on the host (in the namespace) can send a datagram to the group and port. python-can
+raises ``CanOperationError`` for one that is not a frame, which would end every process on the
+bus; here such a datagram is counted in :class:`DatagramRejects` and skipped, on both read paths
+(:class:`UdpReader` and :class:`GuardedUdpMulticastBus`, which ``open_bus`` makes).
 """
 
 from __future__ import annotations
@@ -31,12 +36,16 @@ from __future__ import annotations
 import ctypes
 import socket
 import struct
+import time
 from collections.abc import Iterable
+from typing import Any
 
 import can
 import msgpack
 from can.interfaces.udp_multicast import UdpMulticastBus
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message
+
+from .udp_rejects import MAX_REJECTS_PER_READ, DatagramRejects, reject_reason
 
 SO_ATTACH_FILTER = getattr(socket, "SO_ATTACH_FILTER", 26)
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
@@ -54,7 +63,6 @@ _JEQ, _JGE = 0x15, 0x35  # BPF_JMP | BPF_{JEQ,JGE} | BPF_K
 _RET = 0x06  # BPF_RET | BPF_K
 _ACCEPT, _DROP = 0xFFFFFFFF, 0
 
-
 class UdpReader:
     """Non-blocking reads from a python-can ``UdpMulticastBus`` without ``select()``."""
 
@@ -66,6 +74,9 @@ class UdpReader:
         self._anc = int(mc.received_ancillary_buffer_size)
         self._fd = bus.protocol is can.CanProtocol.CAN_FD
         self._parser = DatagramParser()
+        #: the bus's own counter when it has one (both read paths count in one place)
+        self.rejects = bus.rejects if isinstance(bus, GuardedUdpMulticastBus) else \
+            DatagramRejects()
 
     @staticmethod
     def supports(bus: can.BusABC) -> bool:
@@ -75,14 +86,24 @@ class UdpReader:
                 and getattr(mc, "timestamp_nanosecond", False) and hasattr(mc, "_socket"))
 
     def read(self) -> can.Message | None:
-        """One pending frame, or None when none is pending (never waits)."""
+        """One pending frame, or None when none is pending (never waits). Datagrams that are no
+        frame are counted in :attr:`rejects` and skipped."""
         sock = self._sock
         if sock.gettimeout() is not None:  # a send timeout made recvmsg wait: python-can's path
             return self._bus.recv(0.0)
-        try:
-            data, anc, _flags, _addr = sock.recvmsg(self._max, self._anc, socket.MSG_DONTWAIT)
-        except BlockingIOError:
-            return None
+        for _ in range(MAX_REJECTS_PER_READ):
+            try:
+                data, anc, flags, _addr = sock.recvmsg(self._max, self._anc, socket.MSG_DONTWAIT)
+            except BlockingIOError:
+                return None
+            msg = self._frame(data, anc, flags)
+            if msg is not None:
+                return msg
+        return None
+
+    def _frame(self, data: bytes, anc: list[tuple[int, int, bytes]],
+               flags: int) -> can.Message | None:
+        """The frame in one datagram, or None (counted) when it is none."""
         if len(anc) != 1:
             raise can.CanOperationError("Only requested a single extra field but got a "
                                         "different amount")
@@ -93,8 +114,16 @@ class UdpReader:
         if nanoseconds >= 1e9:
             raise can.CanOperationError(f"Timestamp nanoseconds field was out of range: "
                                         f"{nanoseconds} not less than 1e9")
-        msg = self._parser.parse(data, seconds + nanoseconds * 1.0e-9)
+        if flags & socket.MSG_TRUNC:
+            self.rejects.add("oversize")
+            return None
+        try:
+            msg = self._parser.parse(data, seconds + nanoseconds * 1.0e-9)
+        except can.CanOperationError:
+            self.rejects.add(reject_reason(data, self._max))
+            return None
         if not self._fd and msg.is_fd:
+            self.rejects.add("CAN FD")
             return None
         return msg
 
@@ -159,6 +188,36 @@ class DatagramParser:
             table[middle] = (msg.arbitration_id, msg.is_extended_id, msg.dlc, len(msg.data), tail)
             self.shapes += 1
 
+
+class GuardedUdpMulticastBus(UdpMulticastBus):
+    """python-can's ``UdpMulticastBus`` whose ``recv`` skips and counts (:attr:`rejects`) a
+    datagram that is not a frame instead of raising ``CanOperationError``; socket errors still
+    raise. Frames are unpacked by a :class:`DatagramParser` (the same result as python-can's)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.rejects = DatagramRejects()
+        self._parser = DatagramParser()
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        mc = self._multicast
+        for _ in range(MAX_REJECTS_PER_READ):
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            result = mc.recv(left)
+            if not result:
+                return None, False
+            data, _, timestamp = result
+            try:
+                msg = self._parser.parse(data, timestamp)
+            except can.CanOperationError:
+                self.rejects.add(reject_reason(data, mc.max_buffer))
+                continue
+            if self.protocol is not can.CanProtocol.CAN_FD and msg.is_fd:
+                self.rejects.add("CAN FD")
+                continue
+            return msg, False
+        return None, False
 
 
 def template(msg: can.Message) -> tuple[bytes, bytes, bytes] | None:

@@ -29,7 +29,7 @@ from .runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from .runtime.frameio import FrameIO, open_process_logger, process_codec
 from .runtime.rt import apply_rt_options, freeze_gc
 from .runtime.signals import install_stop_handlers, restore_handlers
-from .runtime.stats import publish_summary
+from .runtime.stats import publish_summary, rejects_text
 from .sim.blas import limit_blas_threads
 
 log = logging.getLogger("ehpss_hil.controller")
@@ -117,6 +117,7 @@ def format_summary(s: dict[str, object]) -> str:
         f"fail-safe cycles {s['failsafe_cycles']}, saturations {s['saturations']}",
         f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
         f"  frames received: {s['frames_received']}; by verdict {s['received_by_verdict']}",
+        f"  datagrams rejected (not a frame): {rejects_text(s)}",
         f"  overruns {st['overruns']}, lateness p50 {lat['p50'] * 1e6:.1f} µs p99 "
         f"{lat['p99'] * 1e6:.1f} µs, compute p99 {cmp_['p99'] * 1e6:.1f} µs, sensor->command "
         f"latency p50 {lcy['p50'] * 1e6:.1f} µs p99 {lcy['p99'] * 1e6:.1f} µs"])
@@ -154,7 +155,8 @@ def run_daemon(a: DaemonArgs) -> int:
             restore_handlers(previous)
             io.close()
             bus.shutdown()
-    publish_summary(format_summary, loop.summary(), a.summary_json)
+    summary = {**loop.summary(), "rejected_datagrams": io.rejected_datagrams()}
+    publish_summary(format_summary, summary, a.summary_json)
     return 0
 
 

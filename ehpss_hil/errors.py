@@ -44,6 +44,22 @@ class BusUnavailableError(EhpssError, OSError):
     exit_code = 3
 
 
+class OutputError(EhpssError, OSError):
+    """An output file or folder cannot be written (read-only, full) or is not ours to replace
+    (a non-empty folder another program wrote)."""
+
+    exit_code = 2
+
+
+class ProcessFailedError(EhpssError):
+    """A child process of ``ehpss-hil run`` ended badly; the exit code is the child's when it
+    has a meaning of its own (2 bad config or output, 3 missing interface), else 1."""
+
+    def __init__(self, message: str, child_exit_code: int | None = None) -> None:
+        super().__init__(message)
+        self.exit_code = child_exit_code if child_exit_code in (2, 3) else 1
+
+
 class ModelError(EhpssError, ArithmeticError):
     """A physical/controller model cannot be built (unstable, singular, bad dimensions)."""
 

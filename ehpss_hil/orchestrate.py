@@ -6,13 +6,18 @@ own log, their stdout/stderr, ``run.json`` (commands, exit codes, timings) and `
 
 On the embedded ``udp_multicast`` bus the processes run inside a private network namespace when
 this process may make one (root + ``unshare``): nothing can leave the host or reach other
-processes. Without it they run in the host namespace (TTL 0 keeps frames on the host), which
-needs a multicast route; :func:`multicast_route_reason` says what to do when there is none.
+processes. Without it they run in the host namespace (TTL 0 keeps frames on the host; a line on
+stderr says so), which needs a multicast route; :func:`multicast_route_reason` says what to do
+when there is none.
+
+The run directory is prepared by :mod:`ehpss_hil.rundir`: a run only removes files a run wrote,
+refuses a non-empty foreign directory unless ``overwrite``, and an unwritable directory is an
+:class:`~ehpss_hil.errors.OutputError` (exit 2). A process that ends during start-up gives its
+own exit code when it means something (2 bad config or output, 3 missing interface).
 """
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import subprocess
@@ -25,9 +30,11 @@ from typing import Any
 import yaml
 
 from . import PROJECT_ROOT, __version__
+from .canlog.sidecar import write_json_atomic
 from .config import DEFAULT_MULTICAST_GROUP
-from .errors import BusUnavailableError, EhpssError
+from .errors import BusUnavailableError, EhpssError, OutputError, ProcessFailedError
 from .netns import PrivateNetns, netns_unavailable_reason
+from .rundir import prepare_run_dir, record_outputs
 from .scenario import Scenario, load_scenario
 from .schema import load_yaml
 
@@ -72,6 +79,9 @@ class RunPlan:
     truth: bool = True
     #: how long the controller may take to appear on the bus (slow VMs need more)
     startup_timeout_s: float = 60.0
+    #: a non-empty directory that is no run directory: replace the files a run writes (by
+    #: exact name) instead of refusing it
+    overwrite: bool = False
 
 
 @dataclass
@@ -180,30 +190,50 @@ def _wait_for_line(path: Path, needle: str, timeout_s: float,
             return
         dead = {n: p.returncode for n, p in procs.items() if p.poll() is not None}
         if dead:
-            raise EhpssError(f"process ended during start-up: {dead} (see {path.parent}/*.out)")
+            name, code = next(iter(dead.items()))
+            raise ProcessFailedError(f"{name} ended during start-up (exit {code}): "
+                                     f"{_last_line(path.parent / f'{name}.out')}", code)
         time.sleep(0.05)
     raise EhpssError(f"start-up timed out: {needle!r} not seen in {path} after {timeout_s:g} s")
+
+
+def _last_line(path: Path) -> str:
+    """The last non-empty line of a process's output (its one-line error), or a pointer to it."""
+    try:
+        lines = [ln for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        lines = []
+    return lines[-1].strip() if lines else f"no output (see {path})"
+
+
+def _namespace(interface: str, quiet: bool) -> PrivateNetns | None:
+    """A private namespace for the embedded bus when one can be made; else None after saying
+    so on stderr (BusUnavailableError when the host cannot route the multicast group)."""
+    if interface != "udp_multicast":
+        return None
+    why_not = netns_unavailable_reason()
+    if why_not is None:
+        return PrivateNetns().start()
+    if not quiet:
+        print(f"ehpss-hil run: no private network namespace ({why_not}): the processes use the "
+              "host network (hop limit 0 keeps frames on this host)", file=sys.stderr, flush=True)
+    if (why := multicast_route_reason()) is not None:
+        raise BusUnavailableError(why)
+    return None
 
 
 def execute(plan: RunPlan) -> RunResult:
     """Run the three processes for the scenario's duration and collect the results."""
     sc = load_scenario(plan.scenario_path)
     out = plan.out_dir
-    out.mkdir(parents=True, exist_ok=True)
-    for stale in out.glob("*.log*"):  # a reused run directory: start-up waits read these files
-        stale.unlink()
-    for stale in out.glob("*.out"):
-        stale.unlink()
-    cmds = _commands(plan, sc, out)
+    prepare_run_dir(out, plan.overwrite)
+    try:
+        cmds = _commands(plan, sc, out)
+    except OSError as exc:
+        raise OutputError(f"{out}: cannot write the run's configs: {exc.strerror or exc}") from exc
     interface = load_yaml(out / "controller.yaml")["bus"]["interface"]
-    netns: PrivateNetns | None = None
-    prefix: list[str] = []
-    if interface == "udp_multicast":
-        if netns_unavailable_reason() is None:
-            netns = PrivateNetns().start()
-            prefix = netns.prefix()
-        elif (why := multicast_route_reason()) is not None:
-            raise BusUnavailableError(why)
+    netns = _namespace(interface, plan.quiet)
+    prefix = netns.prefix() if netns is not None else []
     res = RunResult(out)
     t0 = time.monotonic()
     procs: dict[str, subprocess.Popen[bytes]] = {}
@@ -242,11 +272,17 @@ def _write_run_json(plan: RunPlan, sc: Scenario, cmds: dict[str, list[str]], res
             "lockstep": plan.lockstep, "private_netns": private_netns, "commands": cmds,
             "exit_codes": res.exit_codes, "wall_s": round(res.wall_s, 3),
             "started_unix_s": time.time() - res.wall_s, "pid": os.getpid()}
-    (plan.out_dir / "run.json").write_text(json.dumps(meta, indent=2) + "\n")
+    try:
+        write_json_atomic(plan.out_dir / "run.json", meta)
+    except OSError as exc:
+        raise OutputError(f"{plan.out_dir / 'run.json'}: cannot write: "
+                          f"{exc.strerror or exc}") from exc
+    record_outputs(plan.out_dir)
 
 
 def check_exit_codes(res: RunResult) -> None:
-    """Raise when a process did not end cleanly (exit 0)."""
+    """Raise when a process did not end cleanly (exit 0): :class:`ProcessFailedError` with the
+    processes' exit code when they all share one (3: a missing interface)."""
     bad = {k: v for k, v in res.exit_codes.items() if v != 0}
     if bad:
         tails = []
@@ -255,4 +291,6 @@ def check_exit_codes(res: RunResult) -> None:
             if f.exists():
                 tails.append(f"--- {name}.out ---\n" + "\n".join(
                     f.read_text(errors="replace").splitlines()[-8:]))
-        raise EhpssError(f"processes ended badly: {bad}\n" + "\n".join(tails))
+        codes = set(bad.values())
+        raise ProcessFailedError(f"processes ended badly: {bad}\n" + "\n".join(tails),
+                                 codes.pop() if len(codes) == 1 else None)

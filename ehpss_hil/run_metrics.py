@@ -7,13 +7,17 @@ from pathlib import Path
 from typing import Any
 
 from .commands.report import metrics_row, write_markdown
+from .errors import OutputError
 from .report.logdata import load_log_run, log_metrics
 from .scenario import load_scenario
 
 
-def metrics_from_run(out_dir: Path, plot: bool = False) -> dict[str, Any]:
+def metrics_from_run(out_dir: Path, plot: bool = False,
+                     written: list[Path] | None = None) -> dict[str, Any]:
     """Decode ``out_dir/bus.log`` with the run's scenario; write ``metrics.json`` (a one-row
-    list, DESIGN §10 format) and, with ``plot``, the report figures and ``report/report.md``."""
+    list, DESIGN §10 format) and, with ``plot``, the report figures and ``report/report.md``
+    (each file written is appended to ``written``). A file that cannot be written is an
+    :class:`~ehpss_hil.errors.OutputError`."""
     meta = json.loads((out_dir / "run.json").read_text())
     sc = load_scenario(meta["scenario_path"])
     lr = load_log_run(out_dir / "bus.log", scenario=sc)
@@ -21,10 +25,17 @@ def metrics_from_run(out_dir: Path, plot: bool = False) -> dict[str, Any]:
     row = metrics_row(lr, m)
     row["controller"] = meta["mode"]
     row["scenario"] = sc.name
-    (out_dir / "metrics.json").write_text(json.dumps([row], indent=1, default=str) + "\n")
-    if plot:
-        from .report.logfigures import draw_all
-        rep = out_dir / "report"
-        figs = draw_all(lr, rep / "figures")
-        write_markdown(lr, m, figs, rep)
+    written = written if written is not None else []
+    try:
+        (out_dir / "metrics.json").write_text(json.dumps([row], indent=1, default=str) + "\n")
+        written.append(out_dir / "metrics.json")
+        if plot:
+            from .report.logfigures import draw_all
+            rep = out_dir / "report"
+            figs = draw_all(lr, rep / "figures")
+            written += figs
+            written.append(write_markdown(lr, m, figs, rep))
+    except OSError as exc:
+        (out_dir / "metrics.json").unlink(missing_ok=True)
+        raise OutputError(f"{out_dir}: cannot write the metrics: {exc.strerror or exc}") from exc
     return row

@@ -23,7 +23,7 @@ from ehpss_hil.physics.params import load_params
 from ehpss_hil.runtime.frameio import FrameIO, open_process_logger, process_codec
 from ehpss_hil.runtime.rt import apply_rt_options, freeze_gc
 from ehpss_hil.runtime.signals import install_stop_handlers, restore_handlers
-from ehpss_hil.runtime.stats import publish_summary
+from ehpss_hil.runtime.stats import publish_summary, rejects_text
 from ehpss_hil.scenario import Scenario, load_scenario
 from ehpss_hil.sim.blas import limit_blas_threads
 
@@ -86,6 +86,7 @@ def format_summary(s: dict[str, object]) -> str:
     lines = [f"firmware-sim: periods {s['periods']}",
              f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
              f"  frames received: {s['frames_received']}; by verdict {s['received_by_verdict']}",
+             f"  datagrams rejected (not a frame): {rejects_text(s)}",
              f"  commands accepted {s['commands_accepted']}, command timeouts "
              f"{s['command_timeouts']}, lost sensor/command frames {s['lost_sensor_frames']}/"
              f"{s['lost_command_frames']}, clipped values {s['clipped_values']}",
@@ -130,7 +131,8 @@ def run(args: argparse.Namespace) -> int:
         restore_handlers(previous)
         io.close()
         bus.shutdown()
-    publish_summary(format_summary, proc.summary(), args.summary_json)
+    summary = {**proc.summary(), "rejected_datagrams": io.rejected_datagrams()}
+    publish_summary(format_summary, summary, args.summary_json)
     return 0 if ok else 1
 
 

@@ -207,3 +207,44 @@ def test_kernel_drops_own_ids_and_reader_returns_the_rest() -> None:
     assert [g[0] for g in got] == [0x110, 0x111, 0x160, 0x702, 0x06, 0x86, 0x1FFFF120, 0x333]
     assert all(g[1] == f"{g[0] & 0xFF:02x}" * 8 for g in got[:-1]) and got[-1][1] == ""
     assert all(0.0 <= g[2] < 0.2 for g in got)  # kernel receive timestamps, wall clock
+
+
+_STRAY = textwrap.dedent("""
+    import json, socket, time, can, msgpack
+    from ehpss_hil.bus import open_bus, frame_reader, datagram_rejects
+    from ehpss_hil.config import BusConfig
+    cfg = BusConfig()
+    a, b, c = open_bus(cfg), open_bus(cfg), open_bus(cfg)
+    raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    garbage = [b"", b"hello", msgpack.packb(7), msgpack.packb({"bogus": 1}), bytes(60000),
+               msgpack.packb({"timestamp": 1.0, "arbitration_id": 1, "data": b"x", "is_fd": True,
+                              "dlc": 1})]
+    for i, g in enumerate(garbage):
+        raw.sendto(g, (cfg.channel, cfg.port))
+        a.send(can.Message(arbitration_id=0x200 + i, data=b"", is_extended_id=False))
+    time.sleep(0.2)
+    read = frame_reader(b)
+    fast = []
+    while (m := read()) is not None:
+        fast.append(m.arbitration_id)
+    slow = []
+    while (m := c.recv(0.05)) is not None:
+        slow.append(m.arbitration_id)
+    out = {"fast": fast, "slow": slow, "b": datagram_rejects(b).as_dict(),
+           "c": datagram_rejects(c).as_dict()}
+    a.shutdown(); b.shutdown(); c.shutdown()
+    print(json.dumps(out))
+""")
+
+
+@netns
+def test_stray_datagrams_are_counted_and_skipped_on_both_read_paths() -> None:
+    r = subprocess.run([*netns_prefix(), sys.executable, "-c", _STRAY], cwd=ROOT,
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["fast"] == [0x200 + i for i in range(6)]
+    reasons = {"empty": 1, "not msgpack": 1, "not a frame": 2, "oversize": 1, "CAN FD": 1}
+    assert d["b"] == {"total": 6, "by_reason": dict(sorted(reasons.items()))}
+    # python-can's recv drops DLC-0 frames ("if msg" is the length): only the rejects matter here
+    assert d["c"] == d["b"]

@@ -4,8 +4,10 @@ Fuzzing (crafted frames with a known verdict and random ones through the codec, 
 loop and the emulator), frame loss per direction (lockstep simulator: case 1 mmac RMS against
 lossless; processes: ``ehpss-hil run`` with a watchdog audit), duplicated/reordered/burst sensor
 frames against a controller process, kill -9 of either process (``--trials``), SIGTERM during a
-run, and every config/scenario key made wrong. Process sections need a private network namespace
-(root + ``unshare``) and say so when they cannot run. Exit 1 when any row fails. Implementation:
+run, every config/scenario key made wrong, and hostile surroundings (issue #16: datagrams on the
+bus that are no frame, foreign files in ``run --out``, a full disk under the logs). Process
+sections need a private network namespace (root + ``unshare``) and say so when they cannot run;
+the full-disk row needs root for ``mount``. Exit 1 when any row fails. Implementation:
 :mod:`ehpss_hil.reliability`.
 """
 
@@ -20,7 +22,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ..reliability import badinput, duplicates, fuzz, kills, loss
+from ..reliability import badinput, duplicates, fuzz, hostile, kills, loss, stray
 from ..reliability.procs import skip_reason
 from ..reliability.table import (
     Row,
@@ -29,6 +31,7 @@ from ..reliability.table import (
     dup_rows,
     format_table,
     fuzz_rows,
+    hostile_rows,
     kill_rows,
     loss_rows,
     term_rows,
@@ -36,7 +39,8 @@ from ..reliability.table import (
 from .common import finite_json, write_json
 
 NAME = "faults"
-HELP = "reliability suite: fuzzing, frame loss, duplicates, kill -9, SIGTERM, bad configs"
+HELP = ("reliability suite: fuzzing, frame loss, duplicates, kill -9, SIGTERM, bad configs, "
+        "stray datagrams, foreign files in --out, full disk")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -92,6 +96,19 @@ def _process_sections(a: argparse.Namespace, out: Path, rng: random.Random,
     rows += bad_rows(bad, frames, s)
     raw.update(process_loss=pl, duplicates=dups, kills=ks, sigterm=ts, bad_inputs=bad,
                bad_input_bus_frames=frames)
+    _hostile_section(q, out, rows, s, raw)
+
+
+def _hostile_section(q: bool, out: Path, rows: list[Row], s: Summary,
+                     raw: dict[str, Any]) -> None:
+    _say("stray datagrams, foreign files in --out, full disk ...")
+    st = stray.stray_trial(out / "stray", rounds=2 if q else 10, duration_s=1.5 if q else 4.0)
+    fo = hostile.foreign_files_trial(out / "hostile", hostile.short_scenario(out / "short.yaml"))
+    disk = None
+    if hostile.tmpfs_unavailable_reason() is None:
+        disk = hostile.disk_full_trial(out / "disk", seconds=3.0 if q else 6.0)
+    rows += hostile_rows(st, fo, disk, s)
+    raw.update(stray=st, foreign_files=fo, disk_full=disk)
 
 
 def run(args: argparse.Namespace) -> int:

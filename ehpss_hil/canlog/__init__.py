@@ -5,7 +5,7 @@ Log lines are exactly what ``candump -L`` writes (``(sec.usec) iface ID#DATA``),
 (versions, DBC hash, config/scenario, counts, rotation files) lives in ``<log>.json`` beside it.
 """
 
-from .reader import decode_log, log_files, read_log, read_sidecar
+from .reader import BadLines, decode_log, log_files, read_log, read_sidecar
 from .writer import CandumpLogger, format_line
 
-__all__ = ["CandumpLogger", "decode_log", "format_line", "log_files", "read_log", "read_sidecar"]
+__all__ = ["BadLines", "CandumpLogger", "decode_log", "format_line", "log_files", "read_log", "read_sidecar"]

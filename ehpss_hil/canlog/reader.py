@@ -1,11 +1,19 @@
-"""Read candump ``-L`` logs back: frames (python-can's reader), DBC-decoded arrays, the sidecar."""
+"""Read candump ``-L`` logs back: frames, DBC-decoded arrays, the sidecar.
+
+Lines are parsed as python-can's :class:`can.io.CanutilsLogReader` parses them (same messages),
+but a line that is not a whole frame line — garbage, or a last line without its newline (a
+process killed while writing, a disk that filled up) — is skipped and counted in
+:class:`BadLines` instead of ending the read with a ValueError.
+"""
 
 from __future__ import annotations
 
 import json
 import math
 import os
+import re
 from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +23,59 @@ import numpy as np
 from ..codec import FrameCodec, Verdict
 from ..errors import EhpssError
 from .sidecar import sidecar_path
+from .writer import CAN_ERR_BUSERROR, CAN_ERR_FLAG
+
+#: ``(sec.usec) iface ID#DATA`` | ``ID#R[dlc]`` | ``ID##<flags>DATA`` (candump -L), optional R/T
+_LINE = re.compile(r"\((\d+\.\d+)\) (\S+) ([0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})#"
+                   r"(R\d?|#[0-9A-Fa-f](?:[0-9A-Fa-f]{2}){0,64}|(?:[0-9A-Fa-f]{2}){0,8})"
+                   r"(?: [RrTt])?")
+
+
+@dataclass
+class BadLines:
+    """Lines of a log that are no frame line: skipped, counted, the first few kept for the
+    message (``file:line: text``)."""
+
+    count: int = 0
+    examples: list[str] = field(default_factory=list)
+
+    def add(self, path: Path, number: int, line: str) -> None:
+        """Count one bad line (number ``number`` of ``path``)."""
+        self.count += 1
+        if len(self.examples) < 3:
+            self.examples.append(f"{path.name}:{number}: {line.rstrip()[:60]!r}")
+
+    def text(self) -> str:
+        """``2 bad lines skipped (bus.log:7: '(16…')``, or empty when there were none."""
+        if not self.count:
+            return ""
+        return f"{self.count} bad line(s) skipped ({'; '.join(self.examples)})"
+
+
+def parse_line(line: str) -> can.Message | None:
+    """The frame of one ``candump -L`` line (with its newline), or None when it is none."""
+    if not line.endswith("\n"):
+        return None  # a cut last line could still match, with fewer data bytes
+    m = _LINE.fullmatch(line.rstrip("\r\n"))
+    if m is None:
+        return None
+    ts, chan, ident, body = m.group(1), m.group(2), m.group(3), m.group(4)
+    can_id = int(ident, 16)
+    if can_id & CAN_ERR_FLAG and can_id & CAN_ERR_BUSERROR:
+        return can.Message(timestamp=float(ts), is_error_frame=True)
+    fd = body.startswith("#")
+    flags = int(body[1], 16) if fd else 0
+    data = body[2:] if fd else body
+    remote = data[:1] in ("R", "r")
+    try:
+        return can.Message(timestamp=float(ts), arbitration_id=can_id & 0x1FFFFFFF,
+                           is_extended_id=len(ident) > 3, is_remote_frame=remote, is_fd=fd,
+                           bitrate_switch=bool(flags & 1), error_state_indicator=bool(flags & 2),
+                           dlc=int(data[1:] or 0) if remote else len(data) // 2,
+                           data=None if remote else bytes.fromhex(data),
+                           channel=int(chan) if chan.isdigit() else chan, check=True)
+    except ValueError:
+        return None
 
 
 class LogError(EhpssError, OSError):
@@ -53,15 +114,25 @@ def log_files(path: str | os.PathLike[str]) -> list[Path]:
     return [q for _, q in sorted(numbered, reverse=True)] + ([p] if p.exists() else [])
 
 
-def read_log(path: str | os.PathLike[str], rotated: bool = True) -> Iterator[can.Message]:
-    """Frames of a candump ``-L`` log via :class:`can.io.CanutilsLogReader` (timestamps in s).
+def read_log(path: str | os.PathLike[str], rotated: bool = True,
+             bad: BadLines | None = None) -> Iterator[can.Message]:
+    """Frames of a candump ``-L`` log (timestamps in s), as python-can's reader gives them.
 
-    With ``rotated`` the whole rotation set is read, oldest file first.
+    With ``rotated`` the whole rotation set is read, oldest file first. Lines that are no frame
+    are skipped and counted in ``bad``.
     """
     files = log_files(path) if rotated else [Path(path)]
+    bad = bad if bad is not None else BadLines()
     for f in files:
-        with can.CanutilsLogReader(f) as reader:
-            yield from reader
+        with open(f, encoding="ascii", errors="replace", newline="") as fh:
+            for number, line in enumerate(fh, start=1):
+                if not line.strip():
+                    continue
+                msg = parse_line(line)
+                if msg is None:
+                    bad.add(f, number, line)
+                    continue
+                yield msg
 
 
 def read_sidecar(path: str | os.PathLike[str]) -> dict[str, Any] | None:
@@ -75,7 +146,8 @@ def read_sidecar(path: str | os.PathLike[str]) -> dict[str, Any] | None:
 
 
 def decode_log(path: str | os.PathLike[str], codec: FrameCodec | None = None,
-               rotated: bool = True) -> dict[str, dict[str, np.ndarray]]:
+               rotated: bool = True,
+               bad: BadLines | None = None) -> dict[str, dict[str, np.ndarray]]:
     """Decode a log with the DBC into per-frame-name arrays, in file order.
 
     Each frame name maps to ``{"t_s": timestamps (s), <signal>: physical values (SI), …}``.
@@ -83,11 +155,11 @@ def decode_log(path: str | os.PathLike[str], codec: FrameCodec | None = None,
     drop as WRONG_SEQUENCE (after lost frames the data itself is intact); REPEATED frames and
     bad CRC/DLC/range are left out. ``codec.counts_by_name`` holds every verdict, so rejected
     frames are counted, not hidden. A multiplexed frame (CTRL_INDEX) has one array per signal
-    with NaN where a row did not carry it.
+    with NaN where a row did not carry it. Lines that are no frame are counted in ``bad``.
     """
     codec = codec if codec is not None else FrameCodec()
     rows: dict[str, list[tuple[float, dict[str, Any]]]] = {}
-    for msg in read_log(path, rotated):
+    for msg in read_log(path, rotated, bad):
         d = codec.classify(msg)
         if d.name is None:
             continue

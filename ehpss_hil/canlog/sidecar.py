@@ -2,7 +2,8 @@
 
 Keys: ``format``, ``log``, ``iface``, ``versions`` (ehpss-hil, python-can, cantools, python),
 ``dbc`` (path, sha256), ``start_time_utc``/``start_time_s``, ``clock`` (what ``msg.timestamp``
-is), ``rotation``, ``status`` (open/closed), ``counts`` (written, dropped, discarded_by_rotation),
+is), ``rotation``, ``status`` (open/closed), ``counts`` (written, dropped, discarded_by_rotation, and
+when lines were dropped ``dropped_by_reason``: queue full, after close, disk full, write error),
 ``files`` (oldest first: name, lines, bytes, first/last timestamp), ``error``, plus every key the
 caller passed (``config``, ``scenario``, ``process``, …).
 """
@@ -110,10 +111,44 @@ def build_sidecar(log_path: Path, iface: str, caller: dict[str, Any] | None, max
     return meta
 
 
-def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
-    """Write ``data`` to ``path`` via a temporary file and ``os.replace`` (never half a file)."""
+#: room (bytes) a sidecar keeps for its own later updates (trailing spaces, valid JSON)
+SIDECAR_RESERVE_BYTES = 4096
+
+
+def write_json_atomic(path: Path, data: dict[str, Any], reserve_bytes: int = 0) -> None:
+    """Write ``data`` to ``path`` via a temporary file and ``os.replace`` (never half a file).
+
+    ``reserve_bytes`` > 0: the file is padded with trailing spaces to a whole number of 4 KiB
+    blocks at least this much longer than the JSON, and when the temporary file cannot be
+    written (a full disk) the JSON is written over the existing file inside the space it already
+    holds (no new block needed). A failed write leaves no temporary file and raises OSError.
+    """
+    raw = (json.dumps(data, indent=2, sort_keys=False, default=str) + "\n").encode()
+    if reserve_bytes > 0:
+        size = -(-(len(raw) + reserve_bytes) // 4096) * 4096
+        raw = raw[:-1] + b" " * (size - len(raw)) + b"\n"
     tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(data, fh, indent=2, sort_keys=False, default=str)
-        fh.write("\n")
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(raw)
+        os.replace(tmp, path)
+    except OSError:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        if reserve_bytes <= 0 or not _write_in_place(path, raw.rstrip() + b"\n"):
+            raise
+
+
+def _write_in_place(path: Path, raw: bytes) -> bool:
+    """Overwrite ``path`` with ``raw`` padded to its current size; False when it does not fit."""
+    try:
+        size = path.stat().st_size
+        if len(raw) > size:
+            return False
+        with open(path, "r+b") as fh:
+            fh.write(raw[:-1] + b" " * (size - len(raw)) + b"\n")
+    except OSError:
+        return False
+    return True

@@ -5,6 +5,12 @@ formatting, writing and rotating happen in one writer thread. When the queue is 
 counted as dropped (never blocked on, never silently lost): the count is in the sidecar and in the
 :class:`LogSummary` that :meth:`CandumpLogger.close` returns.
 
+A full disk does not stop the caller either. The writer leaves ``disk_reserve_bytes`` free on the
+file system (for the sidecar and the files a process writes when it ends) and drops lines beyond
+that; a write that fails anyway (ENOSPC, EIO) is cut back to the last complete line, so a reader
+never sees half a line. Both are counted by reason, warned about once and then every 10 s with
+the running count, and the logger closes cleanly (the sidecar keeps room for its own updates).
+
 Line format (can-utils ``lib.c``, ``candump -L``): ``(%010u.%06u) IFACE ID#DATA`` with a 3-digit
 (standard) or 8-digit (extended) upper-case hex ID, upper-case hex data, ``ID#R[dlc]`` for remote
 frames and ``ID##<flags>DATA`` for CAN FD. No comments and no header: every file of a rotation set
@@ -20,6 +26,7 @@ queued lines while the loop sleeps, and its poll rarely fires.
 from __future__ import annotations
 
 import atexit
+import errno
 import logging
 import os
 import threading
@@ -31,7 +38,14 @@ from typing import Any
 
 import can
 
-from .sidecar import FileRecord, build_sidecar, sidecar_path, write_json_atomic
+from .diskspace import DISK_RESERVE_BYTES, DiskRoom, LineDrops
+from .sidecar import (
+    SIDECAR_RESERVE_BYTES,
+    FileRecord,
+    build_sidecar,
+    sidecar_path,
+    write_json_atomic,
+)
 
 _log = logging.getLogger(__name__)
 
@@ -69,8 +83,9 @@ def format_line(item: _Item, iface: str) -> str:
 @dataclass
 class LogSummary:
     """What a closed logger did. ``dropped`` counts queue overflows, lines logged after close and
-    lines lost to write errors; ``discarded`` counts lines in rotated files deleted beyond
-    ``backups``. ``files``: oldest first. ``error``: the last write error, if any."""
+    lines not written for lack of disk space or a write error, ``dropped_by_reason`` each of them;
+    ``discarded`` counts lines in rotated files deleted beyond ``backups``. ``files``: oldest
+    first. ``error``: the last write error, if any."""
 
     path: str
     written: int
@@ -78,9 +93,12 @@ class LogSummary:
     discarded: int
     files: list[str] = field(default_factory=list)
     error: str | None = None
+    dropped_by_reason: dict[str, int] = field(default_factory=dict)
 
     def __str__(self) -> str:
         s = f"{self.path}: {self.written} frames written, {self.dropped} dropped"
+        if self.dropped_by_reason:
+            s += " (" + ", ".join(f"{k} {n}" for k, n in self.dropped_by_reason.items()) + ")"
         if self.discarded:
             s += f", {self.discarded} discarded by rotation"
         if self.error:
@@ -97,14 +115,19 @@ class CandumpLogger:
     ``sidecar``: caller metadata for ``<path>.json`` (e.g. ``config``, ``scenario``, ``dbc``
     (path, hashed here), ``clock`` (a description of where ``msg.timestamp`` comes from)).
 
-    Opening truncates ``path`` and removes stale ``path.N`` files of an earlier run.
+    ``disk_reserve_bytes``: free space left on the file system (see the module docstring).
+
+    Opening truncates ``path`` and removes stale ``path.N`` files of an earlier run; it raises
+    OSError when the log or its sidecar cannot be written (a read-only or full folder), leaving
+    no file it created behind.
     :meth:`log` may be called from any thread; :meth:`close` is idempotent and safe to call from
     a signal handler of the owning process (it also runs at interpreter exit).
     """
 
     def __init__(self, path: str | os.PathLike[str], iface: str = "can0",
                  max_bytes: int = 256 * 2**20, backups: int = 5, queue_lines: int = 200_000,
-                 sidecar: dict[str, Any] | None = None) -> None:
+                 sidecar: dict[str, Any] | None = None,
+                 disk_reserve_bytes: int = DISK_RESERVE_BYTES) -> None:
         if not iface or any(c.isspace() for c in iface):
             raise ValueError(f"iface must be a non-empty name without spaces, got {iface!r}")
         if max_bytes < 4 * MAX_LINE_BYTES:
@@ -118,7 +141,8 @@ class CandumpLogger:
         self.queue_lines = int(queue_lines)
         self._queue: deque[_Item] = deque()
         self._written = 0
-        self._dropped = 0
+        self._overflow = 0  # queue full
+        self._late = 0  # logged after close
         self._discarded = 0
         self._error: str | None = None
         self._drop_lock = threading.Lock()
@@ -131,10 +155,19 @@ class CandumpLogger:
         self._records: list[FileRecord] = [FileRecord()]  # [0] = current file, [i] = path.i
         self._remove_stale_backups()
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = open(self.path, "wb")
+        self._room = DiskRoom(self.path.parent, disk_reserve_bytes)
+        self._drops = LineDrops(self.path)
+        existed = self.path.exists()
+        self._fh = open(self.path, "wb", buffering=0)  # unbuffered: a failed write is known now
         self._file_open = True
         self._meta = build_sidecar(self.path, iface, sidecar, max_bytes, backups, queue_lines)
-        self._write_sidecar("open")
+        try:
+            self._write_sidecar("open", strict=True)
+        except OSError:
+            self._fh.close()
+            if not existed:
+                self.path.unlink(missing_ok=True)
+            raise
         self._thread = threading.Thread(target=self._run, name=f"candump:{self.path.name}",
                                         daemon=True)
         self._thread.start()
@@ -145,7 +178,10 @@ class CandumpLogger:
         """Queue one frame (timestamp: ``msg.timestamp``, s). Never blocks; counts overflow."""
         if self._closed or len(self._queue) >= self.queue_lines:
             with self._drop_lock:
-                self._dropped += 1
+                if self._closed:
+                    self._late += 1
+                else:
+                    self._overflow += 1
             return
         self._queue.append((msg.timestamp or 0.0, msg.arbitration_id, msg.is_extended_id,
                             msg.is_remote_frame, msg.is_error_frame, msg.is_fd,
@@ -164,6 +200,11 @@ class CandumpLogger:
         except RuntimeError:  # released meanwhile from another thread (close)
             pass
 
+    def note(self, key: str, value: object) -> None:
+        """Add ``key: value`` to the sidecar (written with the next update, at the latest when
+        the log is closed); for counts the caller keeps (e.g. rejected datagrams)."""
+        self._meta[key] = value
+
     def __call__(self, msg: can.Message) -> None:
         """Same as :meth:`log` (so the logger can be a python-can Notifier listener callable)."""
         self.log(msg)
@@ -175,8 +216,13 @@ class CandumpLogger:
 
     @property
     def dropped(self) -> int:
-        """Frames not written: queue full, logged after close, or lost to a write error."""
-        return self._dropped
+        """Frames not written: queue full, logged after close, no disk space or a write error."""
+        return self._overflow + self._late + self._drops.total
+
+    def dropped_by_reason(self) -> dict[str, int]:
+        """:attr:`dropped` by reason (reasons with a count only)."""
+        out = {"queue full": self._overflow, "after close": self._late, **self._drops.by_reason}
+        return {k: n for k, n in out.items() if n}
 
     @property
     def closed(self) -> bool:
@@ -214,20 +260,54 @@ class CandumpLogger:
         self._flush_chunk(chunk, batch[start:])
 
     def _flush_chunk(self, chunk: list[bytes], items: list[_Item]) -> None:
+        """Write whole lines: beyond the disk reserve none, after a failed write those that
+        were written completely (the file is cut back to its last newline)."""
         if not chunk:
             return
         data = b"".join(chunk)
-        try:
-            self._fh.write(data)
-            self._fh.flush()
-        except (OSError, ValueError) as exc:
-            self._error = str(exc)
-            with self._drop_lock:
-                self._dropped += len(chunk)
+        if not self._room.fits(len(data)):
+            kept = f"{self._room.reserve_bytes // 1024} KiB kept free"
+            self._error = f"disk full: {kept}"
+            self._drops.add("disk full", len(chunk), kept)
             return
+        done, exc = self._write_all(data)
+        keep = done if exc is None else data.rfind(b"\n", 0, done) + 1
         rec = self._records[0]
-        rec.add(len(chunk), len(data), items[0][0], items[-1][0])
-        self._written += len(chunk)
+        if keep < done:
+            self._cut(rec.bytes + keep)
+        lines = len(chunk) if exc is None else data.count(b"\n", 0, keep)
+        if lines:
+            rec.add(lines, keep, items[0][0], items[lines - 1][0])
+            self._written += lines
+        if exc is None:
+            self._drops.resumed()
+            return
+        self._error = str(exc)
+        full = isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT)
+        self._drops.add("disk full" if full else "write error", len(chunk) - lines, str(exc))
+
+    def _write_all(self, data: bytes) -> tuple[int, Exception | None]:
+        """Write ``data`` to the (unbuffered) file; (bytes written, the error that stopped it)."""
+        view = memoryview(data)
+        done = 0
+        try:
+            while done < len(data):
+                n = self._fh.write(view[done:])
+                if not n:
+                    raise OSError(errno.ENOSPC, "short write")
+                done += n
+        except (OSError, ValueError) as exc:
+            return done, exc
+        return done, None
+
+    def _cut(self, size: int) -> None:
+        """Truncate the current file to ``size`` bytes (its last complete line) and write on
+        from there."""
+        try:
+            os.ftruncate(self._fh.fileno(), size)
+            self._fh.seek(size)
+        except (OSError, ValueError) as exc:
+            self._error = f"cannot cut back a partial line: {exc}"
 
     def _rotate(self) -> None:
         """``path`` → ``path.1`` → … → ``path.<backups>``; the oldest beyond that is deleted."""
@@ -238,10 +318,13 @@ class CandumpLogger:
                 if src.exists():
                     os.replace(src, self._numbered(i + 1))
             os.replace(self.path, self._numbered(1))
-            self._fh = open(self.path, "wb")
+            self._fh = open(self.path, "wb", buffering=0)
         except OSError as exc:
             self._error = f"rotation failed: {exc}"
-            self._fh = open(self.path, "ab")
+            try:
+                self._fh = open(self.path, "ab", buffering=0)
+            except OSError:
+                pass  # writes to the closed file fail and are counted
             return
         self._records.insert(0, FileRecord())
         while len(self._records) > self.backups + 1:
@@ -278,11 +361,12 @@ class CandumpLogger:
             leftover = len(self._queue)
             self._queue.clear()
             with self._drop_lock:
-                self._dropped += leftover
+                self._late += leftover
             self._close_file()
-            summary = LogSummary(str(self.path), self._written, self._dropped, self._discarded,
+            summary = LogSummary(str(self.path), self._written, self.dropped, self._discarded,
                                  [str(self._file_name(i)) for i in
-                                  range(len(self._records) - 1, -1, -1)], self._error)
+                                  range(len(self._records) - 1, -1, -1)], self._error,
+                                 self.dropped_by_reason())
             self._write_sidecar("closed")
             self._summary = summary
             atexit.unregister(self.close)
@@ -295,28 +379,35 @@ class CandumpLogger:
             return
         self._file_open = False
         try:
-            self._fh.flush()
             os.fsync(self._fh.fileno())
         except (OSError, ValueError) as exc:
             self._error = self._error or str(exc)
-        finally:
+        try:
             self._fh.close()
+        except OSError as exc:
+            self._error = self._error or str(exc)
 
     def _file_name(self, i: int) -> Path:
         return self.path if i == 0 else self._numbered(i)
 
-    def _write_sidecar(self, status: str) -> None:
+    def _write_sidecar(self, status: str, strict: bool = False) -> None:
+        """Write the sidecar (keeping room for its later updates); an error is raised when
+        ``strict``, else recorded in :attr:`LogSummary.error`."""
         self._meta["status"] = status
-        self._meta["counts"] = {"written": self._written, "dropped": self._dropped,
+        self._meta["counts"] = {"written": self._written, "dropped": self.dropped,
                                 "discarded_by_rotation": self._discarded}
+        if self.dropped:
+            self._meta["counts"]["dropped_by_reason"] = self.dropped_by_reason()
         self._meta["files"] = [rec.as_dict(self._file_name(i).name) for i, rec in
                                reversed(list(enumerate(self._records)))]
         self._meta["error"] = self._error
         if status == "closed":
             self._meta["end_time_s"] = time.time()
         try:
-            write_json_atomic(sidecar_path(self.path), self._meta)
+            write_json_atomic(sidecar_path(self.path), self._meta, SIDECAR_RESERVE_BYTES)
         except OSError as exc:
+            if strict:
+                raise
             self._error = self._error or f"sidecar: {exc}"
 
     def __enter__(self) -> CandumpLogger:

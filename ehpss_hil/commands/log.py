@@ -2,7 +2,10 @@
 
 Writes ``FILE`` (rotated by size) and ``FILE.json`` (sidecar). Stops on SIGINT/SIGTERM or after
 ``--duration`` seconds, flushes everything and prints the counts (exit 0). A bus that cannot be
-opened exits 3 with the reason.
+opened exits 3 with the reason, a log that cannot be written (read-only or full folder) exits 2
+with the reason and leaves no file behind. A full disk while logging: lines are dropped and
+counted (sidecar, final line), the logger goes on and exits 0. Datagrams on a udp_multicast
+group that are no frame are counted and skipped.
 """
 
 from __future__ import annotations
@@ -18,8 +21,9 @@ from typing import Any
 
 import can
 
+from ..bus import datagram_rejects
 from ..canlog import CandumpLogger
-from ..errors import BusUnavailableError
+from ..errors import BusUnavailableError, OutputError
 
 NAME = "log"
 HELP = "log every frame of a CAN bus to a candump -L file (+ JSON sidecar), rotated by size"
@@ -120,18 +124,27 @@ def run(args: argparse.Namespace) -> int:
     stop = _StopFlag()
     old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        logger = CandumpLogger(args.output, iface=iface, max_bytes=args.max_bytes,
-                               backups=args.backups, queue_lines=args.queue_lines, sidecar=meta)
+        try:
+            logger = CandumpLogger(args.output, iface=iface, max_bytes=args.max_bytes,
+                                   backups=args.backups, queue_lines=args.queue_lines,
+                                   sidecar=meta)
+        except OSError as exc:
+            raise OutputError(f"{args.output}: cannot write the log: "
+                              f"{exc.strerror or exc}") from exc
         try:
             print(f"logging {args.interface}:{args.channel} -> {args.output} (Ctrl-C to stop)",
                   file=sys.stderr, flush=True)
             received = record(bus, logger, stop.event, args.duration)
         finally:
+            rejects = datagram_rejects(bus)
+            if rejects is not None:
+                logger.note("rejected_datagrams", rejects.as_dict())
             summary = logger.close()
     finally:
         bus.shutdown()
         for s, h in old.items():
             signal.signal(s, h)
     why = f" on {stop.signal_name}" if stop.signal_name else ""
-    print(f"stopped{why}: {received} frames received; {summary}", flush=True)
+    bad = f"; {rejects.total} datagrams rejected ({rejects.text()})" if rejects else ""
+    print(f"stopped{why}: {received} frames received{bad}; {summary}", flush=True)
     return 0

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..canlog import read_log, read_sidecar
+from ..canlog import BadLines, read_log, read_sidecar
 from ..canlog.reader import resolve_log
 from ..codec import FrameCodec, SampleCount
 from ..config import load_controller_config
@@ -82,6 +82,8 @@ class ReplayResult:
     divergent: int = 0
     max_abs_diff_a: float = 0.0
     first: list[Divergence] = field(default_factory=list)
+    #: log lines that are no frame (skipped)
+    bad_lines: BadLines = field(default_factory=BadLines)
 
     @property
     def identical(self) -> bool:
@@ -104,7 +106,7 @@ def _logged_mode(log: Path) -> str | None:
     codec = FrameCodec()
     mode = None
     status_id = codec.can_id("CTRL_STATUS")
-    for msg in read_log(log):
+    for msg in read_log(log, bad=BadLines()):  # counted by the replay itself
         if msg.arbitration_id == status_id:
             d = codec.classify(msg)
             if d.values is not None and d.verdict.usable:
@@ -254,7 +256,7 @@ def replay_log(path: str | Path, mode: str | None = None, config: Path | None = 
     log = resolve_log(path)
     setup = resolve_setup(log, mode, config, scenario)
     r = _Replayer(setup, keep)
-    for number, msg in enumerate(read_log(log), start=1):
+    for number, msg in enumerate(read_log(log, bad=r.res.bad_lines), start=1):
         r.frame(msg, number)
     if r.res.cycles == 0:
         raise ReplayError(f"{log}: no VALVE_CMD with Enable=1: nothing to compare")
@@ -276,6 +278,8 @@ def run(args: argparse.Namespace) -> int:
     s = res.setup
     print(f"replayed {res.cycles} cycles with mode {s.mode} at Ts = {s.ts_s * 1e3:g} ms "
           f"(config from {s.source})")
+    if res.bad_lines.count:
+        print(f"{res.bad_lines.text()} (not frame lines: a cut last line or garbage)")
     if res.skipped_periods:
         print(f"{res.skipped_periods} periods skipped by the daemon's overruns (CycleCount gaps) "
               "stepped without a frame, as the daemon does")

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
+from ..canlog import read_sidecar
 from ..orchestrate import RunPlan, check_exit_codes, execute
 from ..run_metrics import metrics_from_run
+from ..rundir import RUN_LOGS, record_outputs
 
 NAME = "run"
 HELP = "run a scenario with firmware-sim and the controller as two processes on a real bus"
@@ -19,7 +22,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--interface", choices=("udp_multicast", "socketcan"),
                    help="override the configs' bus.interface")
     p.add_argument("--channel", help="override the configs' bus.channel (vcan0, can0, group)")
-    p.add_argument("--out", type=Path, help="run directory (default out/runs/<scenario>-<mode>)")
+    p.add_argument("--out", type=Path, help="run directory (default out/runs/<scenario>-<mode>); "
+                   "a non-empty directory that is no run directory is refused")
+    p.add_argument("--overwrite", action="store_true",
+                   help="use a non-empty --out anyway, replacing only the files a run writes")
     p.add_argument("--lockstep", action="store_true",
                    help="emulator advances one period per VALVE_CMD (deterministic)")
     p.add_argument("--plot", action="store_true", help="also draw the report figures")
@@ -40,10 +46,21 @@ def run(args: argparse.Namespace) -> int:
                    interface=args.interface, channel=args.channel, lockstep=args.lockstep,
                    auto_recover=not args.strict_watchdog,
                    watchdog_cycles=args.watchdog_cycles or None,
-                   sensor_age_us=None if args.sensor_age_us < 0 else args.sensor_age_us)
+                   sensor_age_us=None if args.sensor_age_us < 0 else args.sensor_age_us,
+                   overwrite=args.overwrite)
     res = execute(plan)
     check_exit_codes(res)
-    row = metrics_from_run(out, plot=args.plot)
+    written: list[Path] = []
+    try:
+        row = metrics_from_run(out, plot=args.plot, written=written)
+    finally:
+        record_outputs(out, written)
     print(json.dumps(row, indent=1))
+    for log in RUN_LOGS:
+        counts = (read_sidecar(out / log) or {}).get("counts") or {}
+        if counts.get("dropped"):
+            why = ", ".join(f"{k} {n}" for k, n in (counts.get("dropped_by_reason") or {}).items())
+            print(f"warning: {log}: {counts['dropped']} lines not written ({why})",
+                  file=sys.stderr)
     print(f"run directory: {out} (bus.log, metrics.json, run.json)")
     return 0

@@ -8,8 +8,10 @@ from dataclasses import dataclass, field
 from .badinput import BadResult
 from .duplicates import DupResult
 from .fuzz import FuzzTally
+from .hostile import DiskFullResult, ForeignResult
 from .kills import KillResult, TermResult
 from .loss import TARGET_LEVEL, TARGET_RATIO, LossRow
+from .stray import StrayResult
 
 _ABBR = {"OK": "OK", "OK_SOME_LOST": "LOST", "REPEATED": "REP", "WRONG_SEQUENCE": "SEQ",
          "CRC_ERROR": "CRC", "BAD_DLC": "DLC", "UNKNOWN_ID": "UNK", "OUT_OF_RANGE": "RANGE"}
@@ -210,6 +212,37 @@ def bad_rows(results: list[BadResult], bus_frames: int, s: Summary) -> list[Row]
                     "0", bus_frames == 0, trial=False))
     if bus_frames:
         s.failed.append("bad input: frames reached the bus")
+    return rows
+
+
+def hostile_rows(stray: StrayResult, foreign: ForeignResult | None,
+                 disk: DiskFullResult | None, s: Summary) -> list[Row]:
+    """Stray datagrams on the bus, foreign files in ``--out``, a full disk (issue #16); None:
+    the part could not run (no root for ``mount``)."""
+    s.crashes += sum(v not in (0, None) for v in stray.exits.values())
+    counted = ", ".join(f"{k} {v}" for k, v in stray.counted.items())
+    rows = [Row("stray datagrams", f"{stray.sent} sent (empty, text, msgpack int, cut map, "
+                "60 kB)", f"alive {sum(stray.alive.values())}/{len(stray.alive)}; exits "
+                f"{'/'.join(str(v) for v in stray.exits.values())}; counted: {counted}"
+                + (f"; error: {stray.error}" if stray.error else ""),
+                "all alive, exit 0, each counts every one", stray.ok)]
+    if foreign is not None:
+        rows.append(Row("foreign files in --out", f"{len(foreign.refused_lines)} line(s)",
+                        f"refused: exit {foreign.refused_exit}, kept "
+                        f"{foreign.kept_after_refusal}/4; --overwrite: exit "
+                        f"{foreign.overwrite_exit}, kept {foreign.kept_after_run}/4",
+                        "exit 2 + one line, then exit 0; all 4 kept", foreign.ok))
+    if disk is not None:
+        s.crashes += sum(v not in (0, None) for v in disk.exits.values())
+        logs = "; ".join(f"{n} {st.written}/{st.lines} lines, {st.dropped} dropped "
+                         f"({', '.join(st.reasons) or '-'})" for n, st in disk.logs.items())
+        rows.append(Row("disk full (200 kB tmpfs)", "controller + emulator --log",
+                        f"exits {'/'.join(str(v) for v in disk.exits.values())}; sidecar/file "
+                        f"{logs}; warned {disk.warned}, summaries "
+                        f"{sum(disk.summaries.values())}/2, .tmp left {len(disk.tmp_left)}, "
+                        f"replay exit {disk.replay_exit}" + (f"; {disk.error}" if disk.error
+                                                             else ""),
+                        "exit 0, exact counts, whole lines, warned", disk.ok))
     return rows
 
 

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from ..canlog import decode_log, read_sidecar
+from ..canlog import BadLines, decode_log, read_sidecar
 from ..canlog.reader import resolve_log
 from ..codec import FrameCodec, Verdict
 from ..physics.params import Params, load_params
@@ -181,10 +181,11 @@ def load_log_run(path: str | os.PathLike[str], scenario: Scenario | None = None,
     log = resolve_log(path)
     side = read_sidecar(log)
     codec = codec if codec is not None else FrameCodec(_dbc_of(side))
-    frames = decode_log(log, codec)
+    bad = BadLines()
+    frames = decode_log(log, codec, bad=bad)
     verdicts = {n: {v.name: c for v, c in per.items() if c} for n, per in
                 codec.counts_by_name.items()}
-    notes: list[str] = []
+    notes: list[str] = [bad.text()] if bad.count else []
     info = run_info(side, log.parent, scenario, log)
     sc, ref, ts = info.scenario, info.reference, info.ts_s
     if ref is not None and info.sources and info.sources[0] not in ("--scenario", "sidecar"):

@@ -18,7 +18,7 @@ from typing import Any, Protocol
 
 import can
 
-from ..bus import drop_own_frames, frame_reader, frame_writer
+from ..bus import datagram_rejects, drop_own_frames, frame_reader, frame_writer
 from ..codec import FrameCodec
 from ..config import BusConfig, CanIds, LogConfig
 from ..errors import ConfigError, FrameError
@@ -32,6 +32,8 @@ class FrameLogger(Protocol):
     def log(self, msg: can.Message) -> None: ...
 
     def kick(self) -> None: ...
+
+    def note(self, key: str, value: object) -> None: ...
 
     def close(self) -> object: ...
 
@@ -172,8 +174,16 @@ class FrameIO:
             if left <= 0.0:
                 return None
 
+    def rejected_datagrams(self) -> dict[str, Any]:
+        """Datagrams skipped as no frame: ``{"total": n, "by_reason": {...}}`` (zero on buses
+        that cannot carry such datagrams)."""
+        rejects = datagram_rejects(self.bus)
+        return rejects.as_dict() if rejects is not None else {"total": 0, "by_reason": {}}
+
     def close(self) -> None:
-        """Flush/close the log (the bus is closed by its owner)."""
+        """Flush/close the log (the bus is closed by its owner); the log's sidecar gets the
+        count of rejected datagrams."""
         if self.logger is not None:
+            self.logger.note("rejected_datagrams", self.rejected_datagrams())
             self.logger.close()
             self.logger = None

@@ -8,11 +8,15 @@ p50/p99/p99.9/max.
 from __future__ import annotations
 
 import json
+import logging
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+log = logging.getLogger(__name__)
 
 SERIES = ("compute_s", "lateness_s", "latency_s")
 
@@ -83,10 +87,28 @@ class LoopStats:
         return "\n".join(lines)
 
 
+def rejects_text(summary: dict[str, Any]) -> str:
+    """``0`` or ``5 (empty 1, not msgpack 4)``: a summary's ``rejected_datagrams`` in words."""
+    r = summary.get("rejected_datagrams") or {}
+    reasons = ", ".join(f"{k} {n}" for k, n in (r.get("by_reason") or {}).items())
+    return f"{r.get('total', 0)}" + (f" ({reasons})" if reasons else "")
+
+
 def publish_summary(fmt: Callable[[dict[str, Any]], str], summary: dict[str, Any],
                     json_path: Path | None) -> None:
     """A process's exit summary: ``fmt(summary)`` on stdout, and the whole dict as JSON to
-    ``json_path`` when given (what ``run`` and the benches read back)."""
+    ``json_path`` when given (what ``run`` and the benches read back; written whole or not at
+    all: a full or read-only folder gives one warning line, not an error, as control is over)."""
     print(fmt(summary), flush=True)
-    if json_path is not None:
-        json_path.write_text(json.dumps(summary, indent=1))
+    if json_path is None:
+        return
+    tmp = json_path.with_name(json_path.name + ".tmp")
+    try:
+        tmp.write_text(json.dumps(summary, indent=1))
+        os.replace(tmp, json_path)
+    except OSError as exc:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        log.warning("exit summary %s not written: %s", json_path, exc.strerror or exc)
