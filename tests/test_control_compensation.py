@@ -9,7 +9,7 @@ import pytest
 
 from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.control.base import Measurement
-from ehpss_hil.control.compensation import compensated_current, feedback_signal, sensor_trusted
+from ehpss_hil.control.compensation import compensated_current, sensor_trusted
 from ehpss_hil.control.controllers import make_controller
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.scenario import load_scenario
@@ -19,10 +19,8 @@ PARAMS = load_params()
 
 
 def test_compensation_functions() -> None:
-    assert compensated_current(0.01, 0.5) == pytest.approx(0.02)
-    assert compensated_current(0.01, 0.0) == pytest.approx(0.2)  # floor 0.05
-    assert feedback_signal(12.71, 4e-4, 0.8, 1.0, True) == pytest.approx(12.71 * 5e-4)
-    assert feedback_signal(12.71, 4e-4, 0.8, 1e-3, False) == pytest.approx(12.71e-3)
+    assert compensated_current(0.01, 0.5, 0.05) == pytest.approx(0.02)
+    assert compensated_current(0.01, 0.0, 0.05) == pytest.approx(0.2)  # floor 0.05
     assert sensor_trusted(0.5, 0.15, False, True)
     assert not sensor_trusted(0.1, 0.15, False, True)
     assert not sensor_trusted(0.5, 0.15, True, True)

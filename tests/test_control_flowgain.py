@@ -73,3 +73,25 @@ def test_hold_off_takes_no_evidence_and_keeps_the_decision() -> None:
         assert (mon._w, mon.llr, mon.flow_fault) == (w, llr, fault)
     mon.update(1e-4, 0.0, 1.0, 0.5)
     assert mon._w != w
+
+
+def test_flow_gain_monitor_takes_its_constants_from_the_tuning() -> None:
+    """One home per constant: the window, the product's clip and the failed-sensor bound come
+    from ControlTuning (the monitor once had its own 0.1 s window against the tuning's 0.5 s)."""
+    import math
+    from dataclasses import replace
+
+    from ehpss_hil.control.tuning import ControlTuning
+
+    tun = replace(ControlTuning(), flow_gain_window_s=0.2, k_dft_limits=(0.0, 1.3),
+                  flow_gain_min_deviation=0.07)
+    mon = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3, tuning=tun)
+    assert mon._d == math.exp(-TS / 0.2)
+    assert mon.min_deviation == 0.07
+    # a position moving three times as fast as the spool integral says: the product clips at 1.3
+    x = 0.0
+    for k in range(400):
+        spool = 1.52e-3 * math.sin(5e-3 * k * 5)
+        x += 3.0 * TS * PARAMS.plant.velocity_gain_1_s * spool
+        mon.product(x, spool)
+    assert mon.theta_prod == 1.3

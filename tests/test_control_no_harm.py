@@ -85,7 +85,7 @@ def _feed(mon: HarmMonitor, n: int, used: float, prod: float, fresh: bool = True
 
 
 def test_monitor_needs_opposite_settled_deviations_for_confirm_samples() -> None:
-    mon = HarmMonitor(0.05, 10, confirm=3, reengage=5)
+    mon = HarmMonitor(0.05, 10, confirm=3, reengage=5, failed_below=0.15, alive=0.5)
     assert not any(_feed(mon, 20, 0.8, 0.8))  # same direction: consistent
     assert not any(_feed(mon, 20, 1.1, 0.7, fresh=False))  # stale product: no evidence
     mon.reset()
@@ -102,7 +102,7 @@ def test_monitor_needs_opposite_settled_deviations_for_confirm_samples() -> None
 
 
 def test_monitor_failed_sensor_model_against_a_live_sensor_and_estimate_at_limit() -> None:
-    mon = HarmMonitor(0.05, 4, confirm=2, reengage=3)
+    mon = HarmMonitor(0.05, 4, confirm=2, reengage=3, failed_below=0.15, alive=0.5)
     _feed(mon, 4, 1.0, 0.9)  # history settled at 0.9
     assert _feed(mon, 2, 0.0, 0.9) == [False, True]  # "failed" model, sensor follows the spool
     mon.reset()

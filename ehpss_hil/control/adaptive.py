@@ -22,7 +22,6 @@ from collections import deque
 from ..scenario import Reference
 from .bank import JointBank, ScalarBank
 from .base import Measurement, ValveCommand
-from .compensation import MIN_THETA_L
 from .controllers import JOINT_SLOT0, POSITION_SLOT0, SMAC_SLOT, SPOOL_SLOT0, LoopBase
 from .estimator import Nlms, per_sample_gain
 from .flowgain import FlowGainMonitor
@@ -69,11 +68,11 @@ class MmacController(LoopBase):
         self.spool_sup = Supervisor(self.spool_bank, t, ts, guard_epsilon=t.guard_epsilon,
                                     sustained_guard=True)
         self.pos_sup = Supervisor(self.pos_bank, t, ts, guard_epsilon=t.position_guard_epsilon)
-        self.flow = FlowGainMonitor(self.params.plant, ts, self.scale_spool_m,
-                                    t.flow_gain_window_s, t.flow_gain_threshold)
+        self.flow = FlowGainMonitor(self.params.plant, ts, self.scale_spool_m, t)
         fl = self.flow
-        self.monitor = HarmMonitor(fl.min_deviation, fl.increment_window,
-                                   round(t.monitor_confirm_s / ts), round(t.monitor_reengage_s / ts))
+        self.monitor = HarmMonitor(t.flow_gain_min_deviation, t.increment_window,
+                                   round(t.monitor_confirm_s / ts), round(t.monitor_reengage_s / ts),
+                                   t.sensor_failed_below, t.monitor_sensor_alive)
         self._lim_d_hi = t.k_dft_limits[1] - AT_LIMIT_MARGIN
         self._lim_l_lo = t.k_loe_limits[0] + AT_LIMIT_MARGIN
         self._in_flow = False
@@ -113,7 +112,7 @@ class MmacController(LoopBase):
         if meas.fresh:
             y_v = meas.spool_m
             tl_prev = self.k_loe_hat / self.k_q_hat
-            self.valve.stop_m = self.stroke_m / max(tl_prev, MIN_THETA_L)
+            self.valve.stop_m = self.stroke_m / max(tl_prev, self.min_theta_l)
             gap, resync, v, xh = self._advance(meas, True)
             if self._seed:  # the first sample since a reset: the plant is where the sensor says
                 self._seed = False

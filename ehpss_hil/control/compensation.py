@@ -11,24 +11,12 @@ division by θ̂_L changes the current, which is the compensation itself (the ac
 
 from __future__ import annotations
 
-#: smallest θ̂_L the current is divided by (matches the estimator's lower clip)
-MIN_THETA_L = 0.05
-
-
 def sensor_trusted(theta_d: float, failed_below: float, guarded: bool, fresh: bool) -> bool:
     """True when the position sensor may be fed back (not declared failed, explained, fresh)."""
     return fresh and not guarded and theta_d >= failed_below
 
 
-def feedback_signal(  # the plain form; LoopBase._close adds the bumpless blend and x̂ scaling
-k_f: float, position_m: float, theta_d: float, model_position_m: float,
-                    trusted: bool) -> float:
-    """The fed-back position in sensor units (K_f·m)."""
-    if trusted:
-        return k_f * position_m / theta_d
-    return k_f * model_position_m
-
-
-def compensated_current(pi_output_a: float, theta_l: float) -> float:
-    """Coil current (A) that makes the faulty valve produce the healthy valve's spool."""
-    return pi_output_a / (theta_l if theta_l > MIN_THETA_L else MIN_THETA_L)
+def compensated_current(pi_output_a: float, theta_l: float, min_theta_l: float) -> float:
+    """Coil current (A) that makes the faulty valve produce the healthy valve's spool; θ̂_L is
+    taken no smaller than ``min_theta_l`` (the estimator's lower clip, ``k_loe_limits[0]``)."""
+    return pi_output_a / (theta_l if theta_l > min_theta_l else min_theta_l)

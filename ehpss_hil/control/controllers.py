@@ -79,6 +79,7 @@ class LoopBase:
         self.k_f = params.controller.k_f
         self.pi = PiLaw(params.controller, ts_s)
         self.valve = ValvePredictor(params.plant, ts_s)
+        self.min_theta_l = self.tuning.k_loe_limits[0]
         self.stroke_m = params.plant.spool_stroke_m
         self.valve.stop_m = self.stroke_m
         self._stop_level_m = SPOOL_STOP_FRACTION * self.stroke_m
@@ -127,7 +128,8 @@ class LoopBase:
     # ---- the cycle -------------------------------------------------------------------------
     def _finish(self, meas: Measurement, feedback: float) -> ValveCommand:
         self.pi.saturated = self._saturation(meas)
-        i = compensated_current(self.pi.step(meas.reference_m, feedback), self._applied_loe)
+        i = compensated_current(self.pi.step(meas.reference_m, feedback), self._applied_loe,
+                                self.min_theta_l)
         self._cmd.current_a = i
         self._sent_prev, self._sent = self._sent, (i if math.isfinite(i) else 0.0)
         return self._cmd

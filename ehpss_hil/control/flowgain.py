@@ -32,6 +32,8 @@ import math
 from ..physics.discretize import zoh
 from ..physics.model import ACC, SPOOL, SPOOL_VEL, VEL, plant_matrices
 from ..physics.params import PlantParams
+from .estimator import per_sample_gain
+from .tuning import ControlTuning
 
 
 class FlowGainMonitor:
@@ -45,12 +47,15 @@ class FlowGainMonitor:
         "_c",
         "_c2",
         "_d",
+        "_failed_below",
         "_floor",
         "_g",
         "_h",
+        "_hi",
         "_hold",
         "_i",
         "_int",
+        "_lo",
         "_m",
         "_mark",
         "_min_dev",
@@ -74,24 +79,26 @@ class FlowGainMonitor:
         "theta_prod",
     )
 
-    def __init__(self, plant: PlantParams, ts_s: float, scale_m: float, window_s: float = 0.1,
-                 threshold: float = 8.0, min_deviation: float = 0.05,
-                 increment_window: int = 10) -> None:
+    def __init__(self, plant: PlantParams, ts_s: float, scale_m: float,
+                 tuning: ControlTuning | None = None) -> None:
+        t = tuning if tuning is not None else ControlTuning()
         a, b = plant_matrices(plant)
         ad, bd = zoh(a, b, ts_s)
         idx = (ACC, VEL, SPOOL_VEL, SPOOL)
         self._c = tuple((*tuple(float(ad[i, j]) for j in idx), float(bd[i, 0])) for i in idx)
-        self._d = math.exp(-ts_s / window_s)
-        self._on = threshold
-        self._min_dev = min_deviation
-        self._min_evidence = 0.03 / ts_s
+        self._d = math.exp(-ts_s / t.flow_gain_window_s)
+        self._on = t.flow_gain_threshold
+        self._min_dev = t.flow_gain_min_deviation
+        self._min_evidence = t.flow_gain_min_evidence_s / ts_s
+        self._failed_below = t.sensor_failed_below
+        self._lo, self._hi = t.k_dft_limits[0], t.k_dft_limits[1]
         self._pa = plant.load_mass_kg / plant.piston_area_m2
         self._h = 0.5 * ts_s * plant.velocity_gain_1_s
-        self._m = increment_window
-        self._g = 0.2
-        inc = plant.velocity_gain_1_s * scale_m * increment_window * ts_s
-        self._c2 = (0.03 * inc) ** 2
-        self._floor = 0.1 * inc
+        self._m = t.increment_window
+        self._g = per_sample_gain(t.nlms_gain_per_ms, ts_s)
+        inc = plant.velocity_gain_1_s * scale_m * self._m * ts_s
+        self._c2 = (t.nlms_c_fraction * inc) ** 2
+        self._floor = t.flow_gain_excitation * inc
         self.reset()
 
     def reset(self) -> None:
@@ -165,7 +172,7 @@ class FlowGainMonitor:
             self._stale = 0
             t = self.theta_prod
             t += self._g * (y - t * phi) * phi / (self._c2 + phi * phi)
-            self.theta_prod = min(max(t, 0.0), 2.5)
+            self.theta_prod = min(max(t, self._lo), self._hi)
         return self.theta_prod
 
     def propagate(self, current_a: float) -> None:
@@ -217,8 +224,9 @@ class FlowGainMonitor:
 
     def _decide(self, theta: float) -> None:
         """Enter H_Q on strong evidence and a real deviation; leave it on strong counter-evidence
-        (or a product below 0.15: a failed sensor is never a flow-gain loss)."""
-        if theta < 0.15:
+        (or a product below ``sensor_failed_below``: a failed sensor is never a flow-gain
+        loss)."""
+        if theta < self._failed_below:
             self.flow_fault = False
         elif self._w < self._min_evidence:
             return

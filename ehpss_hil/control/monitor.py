@@ -26,11 +26,6 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-#: θ_used below this is the failed-sensor model (the tuning's ``sensor_failed_below``)
-SENSOR_FAILED_BELOW = 0.15
-#: a sensor whose increments follow the spool integral with at least this gain is not failed
-SENSOR_ALIVE = 0.5
-
 
 class FallbackReason(IntEnum):
     """Why the monitor fell back to nominal compensation (DBC CTRL_STATS ``FallbackReason``)."""
@@ -45,7 +40,9 @@ class HarmMonitor:
     nominally (k̂_LOE = k̂_DFT = k̂_Q = 1 in the loop, the raw sensor fed back)."""
 
     __slots__ = (
+        "_alive",
         "_confirm",
+        "_failed_below",
         "_i",
         "_min_dev",
         "_ok",
@@ -59,8 +56,14 @@ class HarmMonitor:
     )
 
     def __init__(self, min_deviation: float, settle_samples: int, confirm: int,
-                 reengage: int) -> None:
+                 reengage: int, failed_below: float, alive: float) -> None:
+        """``min_deviation``: |θ − 1| that counts as a deviation; ``settle_samples``: M;
+        ``confirm``/``reengage``: updates in a row to enter/leave the fallback;
+        ``failed_below``: θ_used of the failed-sensor model; ``alive``: θ_prod of a live
+        sensor (the tuning's ``sensor_failed_below`` and ``monitor_sensor_alive``)."""
         self._min_dev = min_deviation
+        self._failed_below = failed_below
+        self._alive = alive
         self._confirm = max(1, confirm)
         self._reengage = max(1, reengage)
         self._ring = [1.0] * max(1, settle_samples)
@@ -91,7 +94,7 @@ class HarmMonitor:
         du, dp = theta_used - 1.0, theta_prod - 1.0
         if du * dp < 0.0 and abs(du) > self._min_dev and abs(dp) > self._min_dev:
             return FallbackReason.PRODUCT_MISMATCH
-        if theta_used < SENSOR_FAILED_BELOW and theta_prod >= SENSOR_ALIVE:
+        if theta_used < self._failed_below and theta_prod >= self._alive:
             return FallbackReason.PRODUCT_MISMATCH  # "failed" sensor that follows the spool
         return FallbackReason.NONE
 

@@ -50,9 +50,19 @@ class ControlTuning:
     flow_gain_test: bool = True
     flow_gain_threshold: float = field(default=8.0, metadata=rng(0.0, lo_open=True))
     flow_gain_window_s: float = field(default=0.5, metadata=rng(0.0, lo_open=True))
+    #: … the smallest |θ_prod − 1| taken as a deviation to attribute; the evidence the window
+    #: must hold before a decision (s); the increment excitation gate (fraction of the nominal
+    #: M-sample increment K_c·S·M·Ts)
+    flow_gain_min_deviation: float = field(default=0.05, metadata=rng(0.0, 1.0, lo_open=True))
+    flow_gain_min_evidence_s: float = field(default=0.03, metadata=rng(0.0, 10.0))
+    flow_gain_excitation: float = field(default=0.1, metadata=rng(0.0, 1.0))
     #: mmac do-no-harm monitor (control/monitor.py): a rule must fire this long in a row to fall
     #: back to nominal compensation; the fallback ends after this long without any rule firing (s)
     monitor_confirm_s: float = field(default=0.003, metadata=rng(0.0, 1.0))
     monitor_reengage_s: float = field(default=0.05, metadata=rng(0.0, 10.0))
-    #: mmac-paper / smac: window of the position-increment regression (samples)
+    #: the do-no-harm monitor: a sensor whose increments follow the spool integral with at least
+    #: this gain is not failed
+    monitor_sensor_alive: float = field(default=0.5, metadata=rng(0.0, 2.5))
+    #: the position-increment regression (mmac-paper, smac, and mmac's flow-gain product): its
+    #: window (samples)
     increment_window: int = field(default=10, metadata=rng(1, 1000))
