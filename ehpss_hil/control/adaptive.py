@@ -69,7 +69,6 @@ class MmacController(LoopBase):
                                     sustained_guard=True)
         self.pos_sup = Supervisor(self.pos_bank, t, ts, guard_epsilon=t.position_guard_epsilon)
         self.flow = FlowGainMonitor(self.params.plant, ts, self.scale_spool_m, t)
-        fl = self.flow
         self.monitor = HarmMonitor(t.flow_gain_min_deviation, t.increment_window,
                                    round(t.monitor_confirm_s / ts), round(t.monitor_reengage_s / ts),
                                    t.sensor_failed_below, t.monitor_sensor_alive)
