@@ -11,6 +11,7 @@ division by θ̂_L changes the current, which is the compensation itself (the ac
 
 from __future__ import annotations
 
+
 def sensor_trusted(theta_d: float, failed_below: float, guarded: bool, fresh: bool) -> bool:
     """True when the position sensor may be fed back (not declared failed, explained, fresh)."""
     return fresh and not guarded and theta_d >= failed_below
