@@ -69,14 +69,6 @@ def test_tampered_command_is_pinpointed(logs: dict[str, Path], tmp_path: Path) -
     assert res.first[0].logged_a - res.first[0].replayed_a == pytest.approx(1e-3, abs=1e-6)
 
 
-def test_controller_library_missing_is_a_clear_error(logs: dict[str, Path],
-                                                     monkeypatch: pytest.MonkeyPatch) -> None:
-    import sys
-    monkeypatch.setitem(sys.modules, "ehpss_hil.control.controllers", None)
-    with pytest.raises(replay.ReplayError, match="controller library not available"):
-        replay.replay_log(logs["nrc"])
-
-
 def test_skipped_periods_replay_bit_identical(tmp_path: Path) -> None:
     """A realtime-style log with controller overruns (CycleCount gaps): the daemon stepped the
     skipped periods without data; the replay does the same and matches bit for bit."""

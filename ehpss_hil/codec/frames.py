@@ -14,6 +14,7 @@ IDs: the application frames of the DBC sit at 0x110–0x16F for ``id_base = 0x10
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 from enum import IntEnum
 from pathlib import Path
@@ -242,11 +243,13 @@ class FrameCodec:
 
     # ---- receive -----------------------------------------------------------------------
     def classify(self, frame: can.Message) -> Decoded:
-        """Check and decode one received frame; counts its verdict. Never raises."""
+        """Check and decode one received frame; counts its verdict. A payload the codec cannot
+        decode (cantools' DecodeError, a value error of the conversion) is OUT_OF_RANGE; any other
+        exception is a bug and propagates."""
         name: str | None = None
         try:
             decoded = self._classify(frame)
-        except Exception:
+        except (cantools.database.DecodeError, ValueError, struct.error):
             spec = self._by_id.get(frame.arbitration_id)
             name = spec.msg.name if spec else None
             decoded = Decoded(Verdict.OUT_OF_RANGE, name, None, frame.timestamp)

@@ -130,10 +130,8 @@ def resolve_setup(log: Path, mode: str | None, config: Path | None,
 
 
 def _make(setup: ReplaySetup) -> Any:
-    try:
-        from ..control.controllers import make_controller
-    except ImportError as exc:
-        raise ReplayError(f"controller library not available ({exc})") from exc
+    from ..control.controllers import make_controller
+
     return make_controller(setup.mode, setup.params, setup.ts_s, setup.tuning, setup.reference)
 
 

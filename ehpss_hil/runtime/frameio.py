@@ -43,11 +43,7 @@ def open_can_logger(path: str, cfg: LogConfig, bus: BusConfig,
     """A candump logger for ``path`` (None when ``path`` is empty or canlog is unavailable)."""
     if not path:
         return None
-    try:
-        from ..canlog import CandumpLogger  # type: ignore[attr-defined]
-    except ImportError as exc:
-        log.warning("CAN log %s not written: ehpss_hil.canlog unavailable (%s)", path, exc)
-        return None
+    from ..canlog import CandumpLogger
     iface = bus.channel if bus.interface == "socketcan" else "can0"
     logger: FrameLogger = CandumpLogger(path, iface=iface, max_bytes=cfg.max_bytes,
                                         backups=cfg.backups, queue_lines=cfg.queue_lines,
