@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import cast
 
+from .blas import limit_blas_threads
 from .bus import open_bus
 from .config import (
     DAEMON_MODES,
@@ -30,7 +31,6 @@ from .runtime.frameio import FrameIO, open_process_logger, process_codec
 from .runtime.rt import apply_rt_options, freeze_gc
 from .runtime.signals import install_stop_handlers, restore_handlers
 from .runtime.stats import publish_summary, rejects_text
-from .sim.blas import limit_blas_threads
 
 log = logging.getLogger("ehpss_hil.controller")
 

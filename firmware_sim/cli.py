@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
 
+from ehpss_hil.blas import limit_blas_threads
 from ehpss_hil.bus import open_bus
 from ehpss_hil.config import EmulatorConfig, apply_overrides, load_emulator_config
 from ehpss_hil.errors import ConfigError, run_console
@@ -25,7 +26,6 @@ from ehpss_hil.runtime.rt import apply_rt_options, freeze_gc
 from ehpss_hil.runtime.signals import install_stop_handlers, restore_handlers
 from ehpss_hil.runtime.stats import publish_summary, rejects_text
 from ehpss_hil.scenario import Scenario, load_scenario
-from ehpss_hil.sim.blas import limit_blas_threads
 
 from .emulation import PlantEmulation
 from .process import OWN_FRAMES, EmulatorOptions, EmulatorProcess

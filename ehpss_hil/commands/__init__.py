@@ -1,1 +1,31 @@
-"""One module per ``ehpss-hil`` subcommand (discovered by ``ehpss_hil.cli``)."""
+"""One module per ``ehpss-hil`` subcommand, each defining ``NAME``, ``add_arguments(parser)`` and
+``run(args) -> int``. :data:`COMMANDS` names them with their one-line help, so that the CLI
+imports only the module of the command asked for (``ehpss-hil --help`` imports none).
+"""
+
+from __future__ import annotations
+
+#: subcommand → (module in this package, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "bench": ("bench", "benchmarks: codec, control, loop, faults, soak (print figures beside their targets)"),
+    "check-config": ("check_config", "validate controller/emulator/params configs and scenario files"),
+    "controller": (
+        "controller",
+        "run the controller daemon (SIGTERM/SIGINT: zero current, flush log, exit 0)",
+    ),
+    "demo": (
+        "demo",
+        "the bench demo: case 3 (drift, then LOE), NRC vs MMAC on two real processes, metrics, figures",
+    ),
+    "log": ("log", "log every frame of a CAN bus to a candump -L file (+ JSON sidecar), rotated by size"),
+    "replay": (
+        "replay",
+        "feed a log's sensor frames through the controller offline; compare with its VALVE_CMDs",
+    ),
+    "report": (
+        "report",
+        "decode a candump log (+ sidecar) into DESIGN §10 metrics, PNG figures and report.md",
+    ),
+    "run": ("run", "run a scenario with firmware-sim and the controller as two processes on a real bus"),
+    "sim": ("sim", "deterministic lockstep simulation of scenarios with one or more controllers"),
+}

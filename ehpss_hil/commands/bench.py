@@ -7,12 +7,25 @@ Each benchmark is a module in ``ehpss_hil/bench/`` defining ``NAME``, ``HELP``,
 from __future__ import annotations
 
 import argparse
+import importlib
+import pkgutil
+from types import ModuleType
 
 from .. import bench as bench_pkg
-from ..cli import discover
 
 NAME = "bench"
-HELP = "benchmarks: codec, control, loop, faults, soak (print figures beside their targets)"
+
+
+def discover(package: ModuleType) -> list[ModuleType]:
+    """The modules of ``package`` that define ``NAME`` and ``run`` (one per benchmark)."""
+    mods = []
+    for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        mod = importlib.import_module(f"{package.__name__}.{info.name}")
+        if hasattr(mod, "NAME") and hasattr(mod, "run"):
+            mods.append(mod)
+    return mods
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

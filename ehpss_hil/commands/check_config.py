@@ -13,7 +13,6 @@ from ..scenario import Scenario, load_scenario
 from ..schema import load_yaml
 
 NAME = "check-config"
-HELP = "validate controller/emulator/params configs and scenario files"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

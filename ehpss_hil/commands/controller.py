@@ -10,7 +10,6 @@ from pathlib import Path
 from ..daemon import DaemonArgs, run_daemon
 
 NAME = "controller"
-HELP = "run the controller daemon (SIGTERM/SIGINT: zero current, flush log, exit 0)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

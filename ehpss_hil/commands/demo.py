@@ -25,7 +25,6 @@ from ..sim.lockstep import run_scenario
 from . import check_config
 
 NAME = "demo"
-HELP = "the bench demo: case 3 (drift, then LOE), NRC vs MMAC on two real processes, metrics, figures"
 
 MODES = ("nrc", "mmac")
 

@@ -26,7 +26,6 @@ from ..canlog import CandumpLogger
 from ..errors import BusUnavailableError, OutputError
 
 NAME = "log"
-HELP = "log every frame of a CAN bus to a candump -L file (+ JSON sidecar), rotated by size"
 
 _PROJECT_INTERFACES = ("udp_multicast", "socketcan", "virtual")
 _CLOCKS = {

@@ -38,7 +38,6 @@ from ..report.logmeta import run_info
 from ..scenario import Reference, ReferenceBlocks, load_scenario
 
 NAME = "replay"
-HELP = "feed a log's sensor frames through the controller offline; compare with its VALVE_CMDs"
 
 
 class ReplayError(EhpssError, RuntimeError):

@@ -16,7 +16,6 @@ from ..report.logdata import LogMetrics, LogRun, load_log_run, log_metrics
 from ..scenario import load_scenario
 
 NAME = "report"
-HELP = "decode a candump log (+ sidecar) into DESIGN §10 metrics, PNG figures and report.md"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

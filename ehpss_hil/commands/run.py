@@ -13,7 +13,6 @@ from ..run_metrics import metrics_from_run
 from ..rundir import RUN_LOGS, record_outputs
 
 NAME = "run"
-HELP = "run a scenario with firmware-sim and the controller as two processes on a real bus"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -14,7 +14,6 @@ from ..sim.campaign import Job, default_jobs, run_campaign, scenario_paths
 from ..sim.lockstep import TRANSPORTS
 
 NAME = "sim"
-HELP = "deterministic lockstep simulation of scenarios with one or more controllers"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

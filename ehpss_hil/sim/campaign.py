@@ -8,11 +8,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..blas import limit_blas_threads
 from ..control.tuning import ControlTuning
 from ..physics.params import Params, load_params
 from ..report.metrics import RunMetrics, compute_metrics
 from ..scenario import Scenario, load_scenario
-from .blas import limit_blas_threads
 from .lockstep import run_scenario
 from .result import SimResult
 

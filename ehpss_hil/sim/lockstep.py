@@ -21,6 +21,7 @@ import numpy as np
 
 from firmware_sim.emulation import PlantEmulation
 
+from ..blas import limit_blas_threads
 from ..codec.e2e import counter_steps
 from ..codec.frames import FrameCodec
 from ..control.base import Measurement
@@ -31,7 +32,6 @@ from ..physics.faults import FaultState
 from ..physics.params import Params, load_params
 from ..physics.reference import ReferenceModel
 from ..scenario import Scenario
-from .blas import limit_blas_threads
 from .result import N_SLOTS, SimResult
 from .transport import FramesTransport, QuantizeTransport
 

@@ -1,0 +1,48 @@
+"""The CLI's start-up: only the command asked for is imported (``ehpss-hil --help`` loads no
+command module and no numpy), and every entry of the command table is a real command."""
+
+from __future__ import annotations
+
+import importlib
+import subprocess
+import sys
+
+import pytest
+
+from ehpss_hil.commands import COMMANDS
+
+
+@pytest.mark.parametrize("name", sorted(COMMANDS))
+def test_command_table_names_real_modules(name: str) -> None:
+    mod = importlib.import_module(f"ehpss_hil.commands.{COMMANDS[name][0]}")
+    assert mod.NAME == name
+    assert callable(mod.run) and callable(mod.add_arguments)
+
+
+def _loaded_after(code: str) -> set[str]:
+    out = subprocess.run([sys.executable, "-c", code + "\nimport sys\nprint(' '.join(sys.modules))"],
+                         capture_output=True, text=True, check=True, timeout=120)
+    return set(out.stdout.split())
+
+
+def test_top_level_help_imports_no_command_and_no_numpy() -> None:
+    mods = _loaded_after("from ehpss_hil.cli import build_parser\nbuild_parser().format_help()")
+    assert "numpy" not in mods and "scipy" not in mods and "can" not in mods
+    assert not any(m.startswith("ehpss_hil.commands.") for m in mods)
+
+
+def test_the_controller_command_loads_neither_the_simulator_nor_the_emulator() -> None:
+    mods = _loaded_after("from ehpss_hil.cli import build_parser\nbuild_parser('controller')")
+    assert "ehpss_hil.commands.controller" in mods
+    leaked = sorted(m for m in mods if m.startswith(("ehpss_hil.sim", "firmware_sim")))
+    assert not leaked, leaked
+
+
+def test_blas_threads_limited_before_numpy_unless_the_user_chose() -> None:
+    code = ("import os\nos.environ['OMP_NUM_THREADS'] = '3'\nimport firmware_sim\nimport sys\n"
+            "assert 'numpy' not in sys.modules\n"
+            "print(os.environ['OPENBLAS_NUM_THREADS'], os.environ['OMP_NUM_THREADS'])")
+    env = {k: v for k, v in __import__("os").environ.items() if not k.endswith("_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env=env, timeout=120)
+    assert out.stdout.split() == ["1", "3"]
