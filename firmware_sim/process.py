@@ -24,7 +24,7 @@ from typing import Any
 
 import can
 
-from ehpss_hil.codec import FrameCodec
+from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.runtime.deadline import DeadlineTimer
 from ehpss_hil.runtime.frameio import FrameIO
@@ -32,6 +32,7 @@ from ehpss_hil.runtime.signals import StopFlag
 from ehpss_hil.runtime.stats import LoopStats
 
 from .command_hold import CommandHold
+from .commanders import CommanderCheck
 from .emulation import PlantEmulation, SensorSample
 from .inject import parse_inject
 
@@ -39,6 +40,11 @@ log = logging.getLogger("firmware_sim")
 
 #: frames this process transmits (their echoes on udp_multicast are dropped on receive)
 OWN_FRAMES = ("SENSOR_POS", "SENSOR_AUX", "PLANT_TRUTH", "PLANT_FAULTS", "HEARTBEAT_EMU")
+#: a second VALVE_CMD transmitter (commanders.py): frames looked back over, foreign frames in
+#: them that make a conflict, the largest CycleCount step of one controller (a catch-up)
+COMMANDER_WINDOW = 100
+COMMANDER_LIMIT = 10
+COMMANDER_MAX_AHEAD = 2000
 NMT_OPERATIONAL = 5
 NMT_STOPPED = 4
 
@@ -67,6 +73,7 @@ class EmulatorProcess:
         rate_hz = 1.0 / emu.ts_s
         self.hold = CommandHold(max(1, round(opts.command_timeout_s * rate_hz)))
         self._id_cmd = self.codec.can_id("VALVE_CMD")
+        self.commanders = CommanderCheck(COMMANDER_WINDOW, COMMANDER_LIMIT, COMMANDER_MAX_AHEAD)
         self._id_inject = self.codec.can_id("FAULT_INJECT")
         self._hb_every = max(1, round(rate_hz / opts.heartbeat_rate_hz))
         self._faults_every = max(1, round(rate_hz / opts.faults_rate_hz))
@@ -92,9 +99,21 @@ class EmulatorProcess:
         """Classify a consumed frame: VALVE_CMD → (setpoint, enable) or False; else None."""
         if msg.arbitration_id == self._id_cmd:
             d = self.codec.classify(msg)
+            chk, was = self.commanders, self.commanders.conflict
             if d.verdict.usable and d.values is not None:
-                return float(d.values["CurrentSetpoint"]), bool(d.values["Enable"])
-            return False
+                in_order = chk.usable(int(d.values["CycleCount"]))
+                cmd = (float(d.values["CurrentSetpoint"]), bool(d.values["Enable"]))
+            else:
+                if d.verdict in (Verdict.REPEATED, Verdict.WRONG_SEQUENCE):
+                    chk.rejected_sequence()
+                in_order, cmd = False, None
+            if chk.conflict != was:
+                if chk.conflict:
+                    log.error("t=%.4f s: a second VALVE_CMD transmitter (%d foreign frames): "
+                              "valve centred until one commander is left", self.t_s, chk.foreign)
+                else:
+                    log.warning("t=%.4f s: one VALVE_CMD commander again", self.t_s)
+            return cmd if (in_order and cmd is not None and not chk.conflict) else False
         if msg.arbitration_id == self._id_inject:
             self._on_inject(msg)
         return None
@@ -156,7 +175,8 @@ class EmulatorProcess:
                 "LoadPressure": y.load_pressure_pa, "CoilCurrent": y.coil_current_a,
                 "ValveEnabled": int(self.hold.valve_enabled),
                 "CmdTimeout": int(self.hold.timed_out),
-                "CurrentSaturated": int(y.current_saturated)})))
+                "CurrentSaturated": int(y.current_saturated),
+                "CommandConflict": int(self.commanders.conflict)})))
         return True
 
     def _skip_sample(self) -> None:
@@ -203,7 +223,8 @@ class EmulatorProcess:
                 self.lost_cmd += 1
             else:
                 self.hold.accept(*cmd)
-        return self.hold.tick(self.t_s)
+        setpoint = self.hold.tick(self.t_s)
+        return 0.0 if self.commanders.conflict else setpoint
 
     def step_period(self, skipped: int = 0) -> float:
         """One realtime period (no waiting); returns the current applied over it (A).
@@ -302,6 +323,8 @@ class EmulatorProcess:
             "received_by_verdict": {v.name: n for v, n in self.codec.counts.items()},
             "commands_accepted": self.hold.accepted, "command_timeouts": self.hold.timeouts,
             "lost_sensor_frames": self.lost_sensor, "lost_command_frames": self.lost_cmd,
+            "command_conflicts": self.commanders.conflicts,
+            "foreign_commands": self.commanders.foreign,
             "clipped_values": self.clipped, "inject_applied": self.inject_applied,
             "inject_rejected": self.inject_rejected, "inject_ignored": self.inject_ignored,
             "stats": self.stats.summary()}

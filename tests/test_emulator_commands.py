@@ -26,13 +26,16 @@ class Rig(VirtualPair):
     def __init__(self, name: str, **opts: object) -> None:
         super().__init__(name)
         self.codec = FrameCodec()  # the peer's TX counters
+        self.cycle = 0  # the peer's CycleCount, one up per command like a controller's
         self.proc = EmulatorProcess(
             PlantEmulation(load_params(), Scenario(name="t", duration_s=10.0)),
             FrameIO(self.bus, FrameCodec(), OWN_FRAMES),
             EmulatorOptions(command_timeout_s=0.010, **opts))  # type: ignore[arg-type]
 
     def cmd(self, current_a: float, enable: int = 1) -> can.Message:
-        msg = self.codec.encode("VALVE_CMD", {"CurrentSetpoint": current_a, "Enable": enable})
+        self.cycle = (self.cycle + 1) & 0xFFFF
+        msg = self.codec.encode("VALVE_CMD", {"CurrentSetpoint": current_a, "Enable": enable,
+                                              "CycleCount": self.cycle})
         self.peer.send(msg)
         return msg
 
@@ -175,3 +178,47 @@ def test_skipped_periods_advance_the_plant_without_frames(rig: Rig) -> None:
         ref.measure()
         ref.advance(i_a)
     assert rig.proc.emu.plant.position_m == ref.plant.position_m != 0.0
+
+
+def test_a_second_commander_centres_the_valve_until_one_is_left(rig: Rig) -> None:
+    """A rogue node sends well-formed VALVE_CMDs (its own E2E counter, its own CycleCount) between
+    the controller's: the emulator stops obeying either (0 A, CommandConflict 1), counts it, and
+    obeys the controller again once the rogue has been quiet for a whole window."""
+    rogue = FrameCodec()  # a second transmitter: its own TX counters
+    for _ in range(5):  # the controller alone
+        rig.cmd(2e-4)
+        applied, aux = rig.step()
+    assert applied == pytest.approx(2e-4, abs=1e-6) and aux["CommandConflict"] == 0
+    seen = []
+    for k in range(40):
+        rig.cmd(2e-4)
+        rig.peer.send(rogue.encode("VALVE_CMD", {"CurrentSetpoint": 0.5, "Enable": 1,
+                                                 "CycleCount": 40000 + k}))
+        applied, aux = rig.step()
+        seen.append((applied, aux["CommandConflict"]))
+    assert all(a != 0.5 for a, _ in seen)  # the rogue's 0.5 A is never applied
+    assert seen[-1] == (0.0, 1)
+    assert rig.proc.commanders.conflicts == 1 and rig.proc.commanders.foreign >= 10
+    for _ in range(120):  # the rogue is gone: one window later the controller rules again
+        rig.cmd(3e-4)
+        applied, aux = rig.step()
+    assert applied == pytest.approx(3e-4, abs=1e-6) and aux["CommandConflict"] == 0
+    assert rig.proc.summary()["command_conflicts"] == 1
+
+
+def test_commander_check_rules() -> None:
+    from firmware_sim.commanders import CommanderCheck
+
+    chk = CommanderCheck(window=10, limit=3, max_ahead=100)
+    assert all(chk.usable(c) for c in (0, 0, 0))  # a sender that never counts: no evidence
+    assert chk.usable(1) and chk.usable(50) and chk.usable(51)  # in order, a catch-up of 49
+    assert not chk.usable(40) and not chk.usable(51)  # a step back, a repeat
+    assert not chk.conflict and chk.foreign == 2
+    chk.rejected_sequence()  # an E2E counter out of sequence: the third foreign frame
+    assert chk.conflict and chk.conflicts == 1
+    for c in range(52, 62):  # a whole window in order
+        assert chk.usable(c)
+    assert not chk.conflict and chk.foreign == 3
+    assert not chk.usable(62 + 101)  # a jump beyond max_ahead
+    wrap = CommanderCheck(window=10, limit=3, max_ahead=100)
+    assert all(wrap.usable(c) for c in (65534, 65535, 0, 1))  # the 16-bit wrap is in order
