@@ -76,7 +76,7 @@ def resolve_config(a: DaemonArgs) -> ControllerConfig:
 
 def default_factory(mode: str, params: Params, ts_s: float, cfg: ControllerConfig) -> Controller:
     """The project's control laws (``ehpss_hil.control.controllers.make_controller``)."""
-    from .control.controllers import make_controller
+    from .control.registry import make_controller
 
     ctrl = make_controller(mode, params, ts_s, cfg.tuning, reference=cfg.reference)
     return cast(Controller, ctrl)  # every concrete mode implements step()

@@ -27,7 +27,7 @@ from ehpss_hil.runtime.signals import install_stop_handlers, restore_handlers
 from ehpss_hil.runtime.stats import publish_summary, rejects_text
 from ehpss_hil.scenario import Scenario, load_scenario
 
-from .emulation import PlantEmulation
+from ehpss_hil.emulation import PlantEmulation
 from .process import OWN_FRAMES, EmulatorOptions, EmulatorProcess
 
 log = logging.getLogger("firmware_sim")

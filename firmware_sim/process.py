@@ -33,7 +33,7 @@ from ehpss_hil.runtime.stats import LoopStats
 
 from .command_hold import CommandHold
 from .commanders import CommanderCheck
-from .emulation import PlantEmulation, SensorSample
+from ehpss_hil.emulation import PlantEmulation, SensorSample
 from .inject import parse_inject
 
 log = logging.getLogger("firmware_sim")

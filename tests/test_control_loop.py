@@ -11,9 +11,9 @@ import pytest
 from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.control.adaptive import bridge_bound_m, bridge_spool, span_currents
 from ehpss_hil.control.base import Measurement
-from ehpss_hil.control.controllers import MODES, make_controller
 from ehpss_hil.control.pi import PiLaw
 from ehpss_hil.control.predictors import ModelPosition, ValvePredictor
+from ehpss_hil.control.registry import MODES, make_controller
 from ehpss_hil.errors import ModelError
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.physics.params import load_params
@@ -285,3 +285,18 @@ def test_mmac_after_a_reset_mid_motion_starts_from_the_sensor() -> None:
         c.step(m)
         assert not c.pos_sup.guarded and c.sensor_trusted
         assert abs(c.xhat.x - float(res.x_true_m[k])) < 5e-6
+
+
+def test_one_mode_registry() -> None:
+    """The configuration's mode choices, the daemon's and the CTRL_STATUS codes are the
+    registry's (and the DBC's value table names the same codes)."""
+    from typing import get_args
+
+    from ehpss_hil import config
+    from ehpss_hil.codec import FrameCodec
+    from ehpss_hil.control.registry import DAEMON_MODES, MODE_CODE, REGISTRY
+
+    assert get_args(config.Mode) == MODES == tuple(REGISTRY)
+    assert config.DAEMON_MODES == DAEMON_MODES and "oracle" not in DAEMON_MODES
+    choices = FrameCodec().message("CTRL_STATUS").get_signal_by_name("Mode").choices
+    assert {str(choices[c]): c for c in MODE_CODE.values()} == MODE_CODE

@@ -117,10 +117,10 @@ def test_setpoint_override_step_beyond_the_configured_reference(amplitude_m: flo
     channels' scales: mmac settles where nrc does (the override drove mmac to 29 mm for 3 mm)."""
     from dataclasses import replace
 
-    from ehpss_hil.control.controllers import make_controller
+    from ehpss_hil.control.registry import make_controller
+    from ehpss_hil.emulation import PlantEmulation
     from ehpss_hil.scenario import Reference
     from ehpss_hil.sim import lockstep
-    from firmware_sim.emulation import PlantEmulation
 
     sc = load_scenario(PROJECT_ROOT / "scenarios" / "envelope" / "step-1mm.yaml")
     sc = replace(sc, reference=Reference(kind="step", amplitude_m=amplitude_m, start_s=0.2),

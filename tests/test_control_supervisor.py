@@ -8,7 +8,7 @@ import pytest
 
 from ehpss_hil.control.bank import ScalarBank
 from ehpss_hil.control.base import Measurement
-from ehpss_hil.control.controllers import make_controller
+from ehpss_hil.control.registry import make_controller
 from ehpss_hil.control.supervisor import Supervisor
 from ehpss_hil.control.tuning import ControlTuning
 from ehpss_hil.physics.params import load_params

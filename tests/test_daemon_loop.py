@@ -218,8 +218,8 @@ def test_shutdown_sends_zero_disabled_and_stopped(rig: Rig) -> None:
 
 def test_lockstep_with_emulator_and_mmac() -> None:
     """The real control law against the emulator, both in lockstep: one answer per sample."""
-    from ehpss_hil.control.controllers import make_controller
-    from firmware_sim.emulation import PlantEmulation
+    from ehpss_hil.control.registry import make_controller
+    from ehpss_hil.emulation import PlantEmulation
     from firmware_sim.process import OWN_FRAMES as EMU_FRAMES
     from firmware_sim.process import EmulatorOptions, EmulatorProcess
 

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from ehpss_hil.codec import FrameCodec
+from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.runtime.signals import StopFlag
 from ehpss_hil.scenario import Event, Noise, Scenario
 from firmware_sim.command_hold import CommandHold
-from firmware_sim.emulation import PlantEmulation
 from firmware_sim.process import OWN_FRAMES, EmulatorOptions, EmulatorProcess
 
 N = 300

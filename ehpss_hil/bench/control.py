@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .. import PROJECT_ROOT
-from ..control.controllers import MODES
+from ..control.registry import MODES
 from ..report.metrics import RunMetrics
 from ..scenario import _FAULT_KEYS, load_scenario
 from ..sim.campaign import Job, default_jobs, run_campaign, scenario_paths

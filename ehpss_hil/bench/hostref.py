@@ -22,7 +22,7 @@ from typing import Any
 
 from ..codec import FrameCodec
 from ..control.base import Measurement
-from ..control.controllers import make_controller
+from ..control.registry import make_controller
 from ..physics.params import load_params
 from ..runtime.stats import Ring
 from ..scenario import Reference

@@ -7,6 +7,7 @@ import logging
 import sys
 from pathlib import Path
 
+from ..control.registry import DAEMON_MODES
 from ..daemon import DaemonArgs, run_daemon
 
 NAME = "controller"
@@ -17,7 +18,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--interface", choices=("udp_multicast", "socketcan", "virtual"),
                    help="override bus.interface")
     p.add_argument("--channel", help="override bus.channel (vcan0, can0, a 239.x.y.z group)")
-    p.add_argument("--mode", choices=("nrc", "smac", "mmac-paper", "mmac"),
+    p.add_argument("--mode", choices=DAEMON_MODES,
                    help="control law (overrides mode)")
     p.add_argument("--rate", type=float, help="cycle rate (Hz), overrides rate_hz")
     p.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority 1..99 (0 = none)")

@@ -129,7 +129,7 @@ def resolve_setup(log: Path, mode: str | None, config: Path | None,
 
 
 def _make(setup: ReplaySetup) -> Any:
-    from ..control.controllers import make_controller
+    from ..control.registry import make_controller
 
     return make_controller(setup.mode, setup.params, setup.ts_s, setup.tuning, setup.reference)
 

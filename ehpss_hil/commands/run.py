@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from ..canlog import read_sidecar
+from ..control.registry import DAEMON_MODES
 from ..orchestrate import RunPlan, check_exit_codes, execute
 from ..run_metrics import metrics_from_run
 from ..rundir import RUN_LOGS, record_outputs
@@ -17,7 +18,7 @@ NAME = "run"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", type=Path, help="scenario YAML (scenarios/case2-drift.yaml, ...)")
-    p.add_argument("--mode", default="mmac", choices=("nrc", "smac", "mmac-paper", "mmac"))
+    p.add_argument("--mode", default="mmac", choices=DAEMON_MODES)
     p.add_argument("--interface", choices=("udp_multicast", "socketcan"),
                    help="override the configs' bus.interface")
     p.add_argument("--channel", help="override the configs' bus.channel (vcan0, can0, group)")

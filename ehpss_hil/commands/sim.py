@@ -8,7 +8,7 @@ import math
 import time
 from pathlib import Path
 
-from ..control.controllers import MODES
+from ..control.registry import MODES
 from ..report.metrics import RunMetrics
 from ..sim.campaign import Job, default_jobs, run_campaign, scenario_paths
 from ..sim.lockstep import TRANSPORTS

@@ -50,7 +50,6 @@ SPOOL_SLOT0 = 0
 POSITION_SLOT0 = 4
 JOINT_SLOT0 = 9
 SMAC_SLOT = 14
-MODES = ("nrc", "smac", "mmac-paper", "mmac", "oracle")
 
 
 class LoopBase:
@@ -296,24 +295,3 @@ class OracleController(LoopBase):
 def faults_loe(c: LoopBase) -> float:
     """k̂_LOE alone (the current divisor is k̂_LOE·k̂_Q): what the spool LVDT sees."""
     return c.k_loe_hat / c.k_q_hat if c.k_q_hat > 0.0 else c.k_loe_hat
-
-
-def make_controller(mode: str, params: Params, ts_s: float,
-                    tuning: ControlTuning | None = None,
-                    reference: Reference | None = None) -> LoopBase:
-    """Build and configure the controller for ``mode`` (one of :data:`MODES`).
-
-    ``reference`` sets the channels' nominal amplitudes S (default: the 1 mm, 5 rad/s sine).
-    """
-    from .adaptive import JointController, MmacController
-
-    table: dict[str, type[LoopBase]] = {
-        "nrc": NrcController, "oracle": OracleController, "mmac": MmacController,
-        "mmac-paper": JointController, "smac": JointController}
-    cls = table.get(mode)
-    if cls is None:
-        raise ModelError(f"unknown controller mode {mode!r}; choose one of {', '.join(MODES)}")
-    tun = tuning if tuning is not None else ControlTuning()
-    ctrl = cls(tun, reference, mode) if cls is JointController else cls(tun, reference)
-    ctrl.configure(params, ts_s)
-    return ctrl

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import can
 
 from ..codec import FrameCodec, Verdict
-from ..control.controllers import make_controller
+from ..control.registry import make_controller
 from ..physics.params import load_params
 from ..runtime.controller_loop import OWN_FRAMES as CTRL_OWN
 from ..runtime.controller_loop import ControllerLoop, LoopOptions
@@ -181,8 +181,9 @@ def controller_receiver() -> Receiver:
 def emulator_receiver() -> Receiver:
     """The emulator (FAULT_INJECT accepted) on a ``virtual`` bus, one realtime period
     (:meth:`EmulatorProcess.step_period`) per frame; inputs: accepted commands and injections."""
-    from firmware_sim.emulation import PlantEmulation
     from firmware_sim.process import OWN_FRAMES, EmulatorOptions, EmulatorProcess
+
+    from ..emulation import PlantEmulation
 
     sender, bus = _virtual_pair()
     io = FrameIO(bus, FrameCodec(), OWN_FRAMES)

@@ -14,14 +14,14 @@ import os
 from collections import deque
 from pathlib import Path
 
-from firmware_sim.emulation import PlantEmulation, SensorSample
-
 from ..canlog import CandumpLogger
 from ..canlog.sidecar import jsonable
 from ..codec import FrameCodec
 from ..control.base import Measurement
-from ..control.controllers import LoopBase, make_controller
+from ..control.controllers import LoopBase
+from ..control.registry import make_controller
 from ..control.tuning import ControlTuning
+from ..emulation import PlantEmulation, SensorSample
 from ..physics.params import Params, load_params
 from ..runtime.status_frames import MODE_CODE, MODE_UNKNOWN
 from ..scenario import Scenario

@@ -13,12 +13,12 @@ import math
 from typing import NamedTuple
 
 from ..control.base import Controller
+from ..control.registry import MODE_CODE
 from .frameio import FrameIO
 from .lifecycle import Lifecycle
 
 #: CTRL_STATUS ``Mode`` values
-MODE_CODE = {"nrc": 0, "smac": 1, "mmac-paper": 2, "mmac": 3, "oracle": 4}
-#: CTRL_STATUS ``Mode`` of a mode not in :data:`MODE_CODE`
+#: CTRL_STATUS ``Mode`` of a mode not in the registry's :data:`MODE_CODE`
 MODE_UNKNOWN = 7
 _F32_MAX = 3.0e38
 

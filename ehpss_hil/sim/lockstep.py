@@ -19,14 +19,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from firmware_sim.emulation import PlantEmulation
-
 from ..blas import limit_blas_threads
 from ..codec.e2e import counter_steps
 from ..codec.frames import FrameCodec
 from ..control.base import Measurement
-from ..control.controllers import LoopBase, make_controller
+from ..control.controllers import LoopBase
+from ..control.registry import make_controller
 from ..control.tuning import ControlTuning
+from ..emulation import PlantEmulation
 from ..errors import ConfigError
 from ..physics.faults import FaultState
 from ..physics.params import Params, load_params

@@ -1,6 +1,7 @@
 """The emulated EHPSS, independent of any bus or clock: fault schedule, plant, sensors, noise.
 
-One implementation, used by the ``firmware-sim`` process and by the lockstep simulator.
+One implementation, used by the ``firmware-sim`` program, the lockstep simulator, sample logs and
+the reliability trials (it lives here, not in the program, so that none of them imports a program).
 
 Sample convention (index k, period Ts): :meth:`PlantEmulation.measure` gives the sensor sample
 y[k] of the state x[k] with the faults in force at k; :meth:`PlantEmulation.advance` applies a
@@ -14,10 +15,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ehpss_hil.physics.faults import FaultState
-from ehpss_hil.physics.params import Params
-from ehpss_hil.physics.plant import PlantStepper
-from ehpss_hil.scenario import FrameLoss, Scenario
+from .physics.faults import FaultState
+from .physics.params import Params
+from .physics.plant import PlantStepper
+from .scenario import FrameLoss, Scenario
 
 _BLOCK = 4096
 
