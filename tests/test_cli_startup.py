@@ -46,3 +46,13 @@ def test_blas_threads_limited_before_numpy_unless_the_user_chose() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env=env, timeout=120)
     assert out.stdout.split() == ["1", "3"]
+
+
+def test_control_knows_nothing_of_scenarios_configs_frames_or_files() -> None:
+    """The control package imports only downwards: no scenario, config, codec, bus, runtime."""
+    mods = _loaded_after("import ehpss_hil.control.registry")
+    leaked = sorted(m for m in mods if m.startswith(("ehpss_hil.scenario", "ehpss_hil.config",
+                                                     "ehpss_hil.codec", "ehpss_hil.bus",
+                                                     "ehpss_hil.runtime", "ehpss_hil.sim",
+                                                     "can", "cantools")))
+    assert not leaked, leaked

@@ -19,9 +19,8 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from ..scenario import Reference
 from .bank import JointBank, ScalarBank
-from .base import Measurement, ValveCommand
+from .base import Measurement, NominalMotion, ValveCommand
 from .controllers import JOINT_SLOT0, POSITION_SLOT0, SMAC_SLOT, SPOOL_SLOT0, LoopBase
 from .estimator import Nlms, per_sample_gain
 from .flowgain import FlowGainMonitor
@@ -322,7 +321,7 @@ class MmacController(LoopBase):
 class JointController(LoopBase):
     """``mmac-paper`` (joint bank + supervisor) or ``smac`` (one joint adaptive model)."""
 
-    def __init__(self, tuning: ControlTuning, reference: Reference | None, mode: str) -> None:
+    def __init__(self, tuning: ControlTuning, reference: NominalMotion | None, mode: str) -> None:
         super().__init__(tuning, reference)
         self.mode = mode
 

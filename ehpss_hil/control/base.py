@@ -9,6 +9,30 @@ from typing import Protocol
 from ..physics.params import Params
 
 
+class NominalMotion(Protocol):
+    """The motion the loop is configured for, which sets the channels' nominal amplitudes S: a
+    scenario's :class:`~ehpss_hil.scenario.Reference` is one."""
+
+    @property
+    def amplitude_m(self) -> float:
+        """Nominal position amplitude (m)."""
+        ...
+
+    @property
+    def spool_amplitude_m(self) -> float:
+        """Nominal spool amplitude the motion needs (m)."""
+        ...
+
+
+@dataclass(frozen=True)
+class PaperMotion:
+    """The paper's 1 mm, 5 rad/s sine: 1 mm of position, r·ω/K_c ≈ 1.52 mm of spool (K_c of
+    eq 39, 1.031e8/3.136e7 s⁻¹: the same figure :class:`~ehpss_hil.scenario.Reference` gives)."""
+
+    amplitude_m: float = 1e-3
+    spool_amplitude_m: float = 1e-3 * 5.0 / (1.031e8 / 3.136e7)
+
+
 @dataclass(slots=True)
 class Measurement:
     """One cycle's decoded sensor data, SI units.

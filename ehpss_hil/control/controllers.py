@@ -30,8 +30,7 @@ import math
 from ..errors import ModelError
 from ..physics.faults import FaultState
 from ..physics.params import Params
-from ..scenario import Reference
-from .base import ControllerStatus, Measurement, ValveCommand
+from .base import ControllerStatus, Measurement, NominalMotion, PaperMotion, ValveCommand
 from .compensation import compensated_current, sensor_trusted
 from .pi import PiLaw
 from .predictors import ModelPosition, ValvePredictor
@@ -60,9 +59,9 @@ class LoopBase:
     #: ``mmac`` seeds x̂ once and identifies the sensor gain from the start instead
     warmup_tracks_sensor = True
 
-    def __init__(self, tuning: ControlTuning, reference: Reference | None) -> None:
+    def __init__(self, tuning: ControlTuning, reference: NominalMotion | None) -> None:
         self.tuning = tuning
-        self.reference = reference if reference is not None else Reference()
+        self.reference: NominalMotion = reference if reference is not None else PaperMotion()
         self.k_loe_hat = 1.0
         self.k_dft_hat = 1.0
         self.k_q_hat = 1.0

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 from ..errors import ModelError
 from ..physics.params import Params
-from ..scenario import Reference
 from .adaptive import JointController, MmacController
+from .base import NominalMotion
 from .controllers import LoopBase, NrcController, OracleController
 from .tuning import ControlTuning
 
@@ -42,10 +42,11 @@ MODE_CODE = {m: s.code for m, s in REGISTRY.items()}
 
 def make_controller(mode: str, params: Params, ts_s: float,
                     tuning: ControlTuning | None = None,
-                    reference: Reference | None = None) -> LoopBase:
+                    reference: NominalMotion | None = None) -> LoopBase:
     """Build and configure the controller for ``mode`` (one of :data:`MODES`).
 
-    ``reference`` sets the channels' nominal amplitudes S (default: the 1 mm, 5 rad/s sine).
+    ``reference`` (a scenario's Reference, or any :class:`NominalMotion`) sets the channels'
+    nominal amplitudes S (default: the paper's 1 mm, 5 rad/s sine).
     """
     spec = REGISTRY.get(mode)
     if spec is None:
