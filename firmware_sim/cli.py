@@ -19,6 +19,7 @@ from pathlib import Path
 from ehpss_hil.blas import limit_blas_threads
 from ehpss_hil.bus import open_bus
 from ehpss_hil.config import EmulatorConfig, apply_overrides, load_emulator_config
+from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.errors import ConfigError, run_console
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.runtime.frameio import FrameIO, open_process_logger, process_codec
@@ -27,7 +28,6 @@ from ehpss_hil.runtime.signals import install_stop_handlers, restore_handlers
 from ehpss_hil.runtime.stats import publish_summary, rejects_text
 from ehpss_hil.scenario import Scenario, load_scenario
 
-from ehpss_hil.emulation import PlantEmulation
 from .process import OWN_FRAMES, EmulatorOptions, EmulatorProcess
 
 log = logging.getLogger("firmware_sim")

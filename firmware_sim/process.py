@@ -25,6 +25,7 @@ from typing import Any
 import can
 
 from ehpss_hil.codec import FrameCodec, Verdict
+from ehpss_hil.emulation import PlantEmulation, SensorSample
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.runtime.deadline import DeadlineTimer
 from ehpss_hil.runtime.frameio import FrameIO
@@ -33,7 +34,6 @@ from ehpss_hil.runtime.stats import LoopStats
 
 from .command_hold import CommandHold
 from .commanders import CommanderCheck
-from ehpss_hil.emulation import PlantEmulation, SensorSample
 from .inject import parse_inject
 
 log = logging.getLogger("firmware_sim")
