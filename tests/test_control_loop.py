@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from ehpss_hil import PROJECT_ROOT
-from ehpss_hil.control.adaptive import bridge_bound_m, bridge_spool, span_currents
 from ehpss_hil.control.base import Measurement
 from ehpss_hil.control.pi import PiLaw
 from ehpss_hil.control.predictors import ModelPosition, ValvePredictor
 from ehpss_hil.control.registry import MODES, make_controller
+from ehpss_hil.control.sampleclock import bridge_bound_m, bridge_spool, span_currents
 from ehpss_hil.errors import ModelError
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.physics.params import load_params

@@ -17,7 +17,6 @@ adaptive model, θ_L with θ_D = 1. Their x̂ integrates θ̂_L·v (no spool sen
 from __future__ import annotations
 
 import math
-from collections import deque
 
 from .bank import JointBank, ScalarBank
 from .base import Measurement, NominalMotion, ValveCommand
@@ -25,24 +24,13 @@ from .controllers import JOINT_SLOT0, POSITION_SLOT0, SMAC_SLOT, SPOOL_SLOT0, Lo
 from .estimator import Nlms, per_sample_gain
 from .flowgain import FlowGainMonitor
 from .monitor import HarmMonitor
+from .sampleclock import SampleClock
 from .supervisor import Supervisor
 from .tuning import ControlTuning
 
 #: after samples stepped without their data the flow-gain test takes no evidence for this many
 #: samples (≈ 6 time constants of the slowest valve/cylinder pole, −284 s⁻¹, at 1 kHz)
 FLOW_HOLD_S = 0.02
-#: the predictors are redone over at most this many sensor samples and after fewer cycles without
-#: data (beyond: dead-reckoned and re-anchored): the 4-bit counter tells up to 15 apart
-RESYNC_SAMPLES = 15
-#: the commands kept: those applied over every sample of the longest span redone (one sample of
-#: transport delay: the command computed at cycle c is applied over [c+1, c+2), DESIGN §9)
-WIRE_COMMANDS = RESYNC_SAMPLES + 2
-#: the kept commands are taken as what the valve applied when the echo of a span's last sample
-#: is the one kept for it within this (A): the DBC's 10 µA steps, the setpoint and echo scalings
-WIRE_MATCH_A = 3e-5
-#: the position sensor may move x̂ across a span within this multiple of the bound that the spool
-#: LVDT at its two ends leaves (:func:`bridge_bound_m`)
-BRIDGE_MARGIN = 1.25
 #: after the spool was at its stop the spool channel and the flow-gain test take no evidence for
 #: this long (s): the valve model's stop is placed with k̂_LOE, the plant's with k_LOE, and the
 #: difference dies out with the valve poles (≈ 0.6 ms time constant)
@@ -68,6 +56,7 @@ class MmacController(LoopBase):
                                     sustained_guard=True)
         self.pos_sup = Supervisor(self.pos_bank, t, ts, guard_epsilon=t.position_guard_epsilon)
         self.flow = FlowGainMonitor(self.params.plant, ts, self.scale_spool_m, t)
+        self.clock = SampleClock(self.valve, self.xhat, self.flow if t.flow_gain_test else None)
         self.monitor = HarmMonitor(t.flow_gain_min_deviation, t.increment_window,
                                    round(t.monitor_confirm_s / ts), round(t.monitor_reengage_s / ts),
                                    t.sensor_failed_below, t.monitor_sensor_alive)
@@ -92,17 +81,7 @@ class MmacController(LoopBase):
         self.monitor.reset()
         self._in_flow = False
         self._flow_spool_model = self.spool_sup.active
-        self._dead = 0
-        #: x̂ starts on the first sensor sample after a reset (θ̂_D = 1 then): a reset on leaving
-        #: the fail-safe comes mid-motion, and x̂ from 0 put the position channel in guard at once,
-        #: the loop fed back x̂ and drove the plant away (a realtime run: 3 mm)
-        self._seed = True
-        self._span = 1  # sensor samples this fresh cycle stands for (when redone on them)
-        self._observed = 0  # … of the superseded samples observed before it in this cycle
-        #: the current commanded in each of the last cycles (A), as held by the valve: a cycle whose
-        #: command is not sent repeats the previous one
-        self._wire: deque[float] = deque([0.0] * WIRE_COMMANDS, maxlen=WIRE_COMMANDS)
-        self._y_seen = 0.0  # the position sensor at the last sample seen (m)
+        self.clock.reset()
         self._spool_hold = 0  # samples left without spool evidence (the spool was at its stop)
 
     def step(self, meas: Measurement) -> ValveCommand:
@@ -111,11 +90,9 @@ class MmacController(LoopBase):
             y_v = meas.spool_m
             tl_prev = self.k_loe_hat / self.k_q_hat
             self.valve.stop_m = self.stroke_m / max(tl_prev, self.min_theta_l)
-            gap, resync, v, xh = self._advance(meas, True)
-            if self._seed:  # the first sample since a reset: the plant is where the sensor says
-                self._seed = False
-                xh = self.xhat.x = meas.position_m
-            self._span, self._observed = self._observed + (meas.samples if resync else 1), 0
+            gap, resync, v, xh = self.clock.sample(meas, tl_prev, self._bridge_gain())
+            if gap and self._flow_on:
+                self.flow.hold_off(self._flow_hold)
             sb, ss = self.spool_bank, self.spool_sup
             lvl = self._stop_level_m
             if (y_v >= lvl or y_v <= -lvl or abs(tl_prev * v) >= lvl
@@ -154,96 +131,24 @@ class MmacController(LoopBase):
                 self._flow_split(meas, y_v, tl)
                 self._watch(tl)
         else:
-            if self._dead == 0:  # the predictors' state at the last sample seen
-                self.valve.mark()
-                self.xhat.mark()
-                self.flow.mark()
-            self._dead += 1
-            current = self._wire[-2]  # applied over the last sample: sent 2 cycles ago
-            v = self.valve.step(current)
-            self.xhat.integrate(self.k_loe_hat / self.k_q_hat * v)
-            if self._flow_on:
-                self.flow.propagate(current)
+            self.clock.dead_cycle(self.k_loe_hat / self.k_q_hat)
         cmd = self._close(meas)
         sent = cmd.current_a if math.isfinite(cmd.current_a) else 0.0  # as the loop sends it
-        self._wire.append(sent if meas.command_sent else self._wire[-1])
+        self.clock.commanded(sent, meas.command_sent)
         return cmd
 
     def observe(self, meas: Measurement) -> None:
-        """A sample superseded within this cycle: valve model, x̂ and the pressure model step on
-        it (its own spool LVDT and current echo), so the next sample is 1 on from it."""
-        _, resync, _, _ = self._advance(meas, False)
-        self._observed += meas.samples if resync else 1
-        if self._flow_on:
-            self.flow.propagate(meas.coil_current_a)
-
-    def _advance(self, meas: Measurement, stepped: bool) -> tuple[bool, bool, float, float]:
-        """Valve model and x̂ up to this fresh sample (``stepped``: the cycle's own sample, not
-        one superseded within it). ``gap``: samples were missed or cycles ran without data since
-        the last one seen (the flow-gain test then takes no evidence for a while); ``resync``:
-        the predictors were redone over every sample since (see :meth:`_resync`). Returns
-        (gap, resync, v, x̂) (v, x̂ in m)."""
-        dead, self._dead = self._dead, 0
-        gap = dead > 0 or meas.samples > 1
-        if gap and self._flow_on:
+        """A sample superseded within this cycle: the sample clock steps the predictors on it."""
+        if self.clock.observe(meas, self.k_loe_hat / self.k_q_hat).gap and self._flow_on:
             self.flow.hold_off(self._flow_hold)
-        if self._resync(meas.samples, dead):
-            v, xh = self._predict_span(meas, dead, stepped)
-            out = gap, True, v, xh
-        else:
-            self._echo = meas.coil_current_a
-            out = gap, False, self.valve.step(self._echo), self.xhat.integrate(meas.spool_m)
-        self._y_seen = meas.position_m
-        return out
 
-    @staticmethod
-    def _resync(samples: int, dead: int) -> bool:
-        """Should the predictors be redone on the sensor's sample clock? Whenever the sensor
-        samples since the last one seen differ from one, or cycles without data lie between
-        (``dead``), as long as both spans are < 16 (the counter's wrap): a realtime slip, samples
-        superseded within one cycle, lost frames, a stall of either process (over which the
-        emulator holds one command: the echo that ends it). Longer gaps keep the dead-reckoned
-        x̂ and re-anchor it."""
-        if samples <= 0 or (samples == 1 and dead == 0):
-            return False
-        return samples <= RESYNC_SAMPLES and dead < RESYNC_SAMPLES
-
-    def _predict_span(self, meas: Measurement, dead: int, stepped: bool) -> tuple[float, float]:
-        """Valve model and x̂ stepped over ``meas.samples`` sensor samples from the last one seen
-        (the dead-reckoned steps of the ``dead`` cycles without data undone). Returns (v, x̂) (m).
-
-        Currents over the samples not seen: :func:`span_currents` (the commands sent, when this
-        sample's echo confirms them). The valve model's spool, times k̂_LOE, is corrected by the
-        spool LVDT at both ends (:func:`bridge_spool`); where the two ends disagree (k_LOE
-        changed) the position sensor places x̂ within the bound they leave
-        (:func:`bridge_bound_m`), while it is trusted."""
-        valve, xh, flow = self.valve, self.xhat, self.flow
-        if dead:
-            valve.rewind()
-            xh.rewind()
-            flow.rewind()
-        n, echo_a, y_v = meas.samples, meas.coil_current_a, meas.spool_m
-        currents = span_currents(n, dead, self._wire if stepped else None, self._echo, echo_a)
-        gain, x0 = self.k_loe_hat / self.k_q_hat, xh.x
-        e0 = xh.last_spool - gain * valve.v
-        vs = []
-        for c in currents:
-            vs.append(valve.step(c))
-            if self._flow_on:  # the pressure model too (its update steps this sample)
-                flow.propagate(c)
-        self._echo = echo_a
-        v = valve.step(echo_a)
-        en = y_v - gain * v
-        for sp in bridge_spool(vs, gain, e0, en):
-            xh.integrate(sp)
-        x_end = xh.integrate(y_v)
+    def _bridge_gain(self) -> float | None:
+        """θ̂_D when the position sensor may place x̂ across a redone span: trusted (not guarded,
+        not failed) and not under the flow-gain hypothesis; else None."""
         td = self.k_dft_hat
-        if (n > 1 and not self._seed and not self.pos_sup.guarded and td >= self._failed_below
-                and not self.flow.flow_fault):
-            u = BRIDGE_MARGIN * bridge_bound_m(xh.spool_to_x_m(1.0, n - 1), en - e0)
-            dx = (meas.position_m - self._y_seen) / td
-            xh.x = x0 + min(max(dx, x_end - x0 - u), x_end - x0 + u)
-        return v, xh.x
+        if self.pos_sup.guarded or td < self._failed_below or self.flow.flow_fault:
+            return None
+        return td
 
     def _flow_split(self, meas: Measurement, y_v: float, tl: float) -> None:
         """Load-pressure test: is the position-channel change a flow-gain loss (flowgain.py)?
@@ -253,7 +158,7 @@ class MmacController(LoopBase):
         kept on the sensor so that nothing jumps when the test returns to H_D.
         """
         fl = self.flow
-        prod = fl.product(meas.position_m, y_v, self._span, self._spool_hold == 0)
+        prod = fl.product(meas.position_m, y_v, self.clock.span, self._spool_hold == 0)
         spool_model = self.spool_sup.active
         if spool_model != self._flow_spool_model or self._warm_left > 0:
             # the pressure prediction scales with k̂_LOE: evidence taken with another (or a not yet
@@ -261,7 +166,7 @@ class MmacController(LoopBase):
             self._flow_spool_model = spool_model
             fl.restart()
             fl.hold_off(self._flow_hold)
-        fl.update(self._echo, meas.load_pressure_pa, tl, prod)
+        fl.update(self.clock.echo, meas.load_pressure_pa, tl, prod)
         if fl.flow_fault:
             self.k_q_hat = prod
             self.k_loe_hat = tl * prod
@@ -403,44 +308,3 @@ class JointController(LoopBase):
     def switch_count(self) -> int:
         """Switches of the joint supervisor."""
         return 0 if self.mode == "smac" else self.sup.switches
-
-
-def span_currents(samples: int, dead: int, wire: deque[float] | None, last_echo_a: float,
-                  echo_a: float) -> list[float]:
-    """The currents (A) applied over the ``samples − 1`` samples not seen before one whose echo
-    is ``echo_a`` (the last one seen had ``last_echo_a``; ``dead`` cycles ran without data in
-    between). ``wire``: the commands sent in the cycles before this one (newest last; one sample
-    of transport delay, so the echo of this sample is ``wire[-2]``). They are taken when each
-    sample not seen had a cycle of its own (``dead == samples − 1``) and this echo confirms the
-    valve applied them: the sensor frames were lost, the commands got through. Otherwise (fewer
-    cycles than samples: the emulator was late; or no ``wire``: a sample superseded within a
-    cycle): the last echo for the first period (commanded before that sample) and this echo for
-    the others (a late emulator holds the newest command over the periods it skips)."""
-    if samples < 2:
-        return []
-    if (wire is not None and dead == samples - 1
-            and abs(echo_a - wire[-2]) <= WIRE_MATCH_A):
-        return [wire[-m - 2] for m in range(samples - 1, 0, -1)]
-    return [last_echo_a] + [echo_a] * (samples - 2)
-
-
-def bridge_spool(v_m: list[float], gain: float, e_start_m: float, e_end_m: float) -> list[float]:
-    """The spool (m) at the samples not seen between two spool LVDT readings: the model's
-    ``gain·v`` plus its error ``y_v − gain·v`` at the two readings, interpolated linearly over
-    the span (``len(v_m) + 1`` periods). A gain that changed before the span (a k̂_LOE not yet
-    converged) leaves the same error at both ends and is removed whole; one that changed inside
-    it is split as if at the middle, the expectation over where in the span it changed. Without
-    the ends, the model alone left x̂ off by (k_LOE − k̂_LOE)·∫v over the span, and the position
-    bank took that offset for a drift (a 14-sample blackout at the LOE onset of case 3: θ̂_D
-    0.78 for 0.8, 9.5 µm RMS for 0.84)."""
-    n = len(v_m) + 1
-    de = (e_end_m - e_start_m) / n
-    return [gain * v + e_start_m + de * (j + 1) for j, v in enumerate(v_m)]
-
-
-def bridge_bound_m(x_per_spool: float, de_m: float) -> float:
-    """How far (m) x̂ bridged by :func:`bridge_spool` can be from the truth when the spool error
-    changed by ``de_m`` (m) in one step somewhere in the span: the linear interpolation is off
-    by at most half the step over the samples not seen; ``x_per_spool`` is x̂'s change per metre
-    of spool held over them (m/m)."""
-    return 0.5 * x_per_spool * abs(de_m)
