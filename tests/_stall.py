@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import math
 import os
 import signal
 import time
@@ -39,6 +40,7 @@ params: {root}/configs/params.yaml
 dbc: {root}/dbc/ehpss.dbc
 """
 REF_AMPLITUDE_M = 2e-4
+REF_OMEGA_RAD_S = 5.0
 
 
 @dataclass
@@ -83,12 +85,16 @@ class Pair:
         os.kill(p.p.pid, signal.SIGCONT)
         self.stops.append(Stop(who, t0, t1))
 
+    def recoveries(self) -> int:
+        """FAULT → ACTIVE transitions the controller has logged so far."""
+        return self.ctl.text.count("ACTIVE again") if self.ctl is not None else 0
+
     def recovered(self, n: int, limit_s: float = 30.0) -> bool:
         """Wait (at most ``limit_s``) until the controller has logged ``n`` recoveries."""
         assert self.ctl is not None
         end = time.monotonic() + limit_s
         while time.monotonic() < end:
-            if self.ctl.text.count("ACTIVE again") >= n:
+            if self.recoveries() >= n:
                 return True
             time.sleep(0.05)
         return False
@@ -114,7 +120,9 @@ class Pair:
 class Command:
     """One VALVE_CMD of the controller's log with the SENSOR_POS it echoes (wall-clock s)."""
 
+    n: int  # frame number in the log (file order = the controller's order)
     t: float
+    cycle: int
     current_a: float
     enable: bool
     echo_rx_t: float | None  # receive time of the newest SENSOR_POS logged with that counter
@@ -122,6 +130,7 @@ class Command:
 
 @dataclass
 class Status:
+    n: int
     t: float
     state: str
     reason: str
@@ -136,16 +145,16 @@ def controller_log(path: Path) -> tuple[list[Command], list[Status]]:
     last_rx: dict[int, float] = {}
     cmds: list[Command] = []
     stats: list[Status] = []
-    for m in read_log(path):
+    for n, m in enumerate(read_log(path)):
         if m.arbitration_id == pos:
             last_rx[m.data[1] & 0x0F] = m.timestamp
         elif m.arbitration_id == cmd:
             v = codec.message("VALVE_CMD").decode(bytes(m.data), decode_choices=False)
-            cmds.append(Command(m.timestamp, float(v["CurrentSetpoint"]), bool(v["Enable"]),
-                                last_rx.get(int(v["SensorCounterEcho"]))))
+            cmds.append(Command(n, m.timestamp, int(v["CycleCount"]), float(v["CurrentSetpoint"]),
+                                bool(v["Enable"]), last_rx.get(int(v["SensorCounterEcho"]))))
         elif m.arbitration_id == st:
             v = codec.message("CTRL_STATUS").decode(bytes(m.data), decode_choices=False)
-            stats.append(Status(m.timestamp, State(int(v["State"])).name,
+            stats.append(Status(n, m.timestamp, State(int(v["State"])).name,
                                 FailsafeReason(int(v["FailsafeReason"])).name))
     return cmds, stats
 
@@ -157,6 +166,29 @@ def truth(path: Path) -> list[tuple[float, float]]:
     msg = codec.message("PLANT_TRUTH")
     return [(m.timestamp, float(msg.decode(bytes(m.data))["Position"]))  # type: ignore[arg-type]
             for m in read_log(path) if m.arbitration_id == tid]
+
+
+def resumed_at(cmds: list[Command], s: Stop) -> int:
+    """Log frame number from which on the controller's frames come from cycles that started
+    after ``s`` ended: for a controller stop, the first VALVE_CMD after it whose CycleCount
+    jumped (the cycle in flight when it stopped sends its command afterwards, unchanged); for an
+    emulator stop, the first VALVE_CMD sent after SIGCONT."""
+    after = [i for i, c in enumerate(cmds) if c.t > s.t_cont]
+    if not after:
+        return 1 << 62
+    if s.who == "emulator":
+        return cmds[after[0]].n
+    for i in after:
+        if i > 0 and (cmds[i].cycle - cmds[i - 1].cycle) % 65536 != 1:
+            return cmds[i].n
+    return cmds[after[0]].n
+
+
+def x_d(cmds: list[Command], t: float) -> float:
+    """The controller's reference at wall-clock time ``t`` (m): the bench config's sine from
+    its first ACTIVE cycle (its grid stays on the wall clock, skipped periods included)."""
+    t0 = next(c.t for c in cmds if c.enable)
+    return REF_AMPLITUDE_M * math.sin(REF_OMEGA_RAD_S * (t - t0))
 
 
 def figures(pair: Pair, window_s: float) -> list[dict[str, object]]:
