@@ -201,15 +201,18 @@ def figures(pair: Pair, window_s: float) -> list[dict[str, object]]:
         end = pair.stops[i + 1].t_stop if i + 1 < len(pair.stops) else float("inf")
         after = [c for c in cmds if s.t_cont < c.t < end]
         before = [c for c in cmds if c.t < s.t_stop]
-        used = [c for c in after if c.enable]
+        n0 = resumed_at(cmds, s)  # the cycle in flight at the stop sends its command after it
+        used = [c for c in after if c.enable and c.n >= n0]
         ages = [c.t - c.echo_rx_t for c in used[:50] if c.echo_rx_t is not None]
         seq = before[-1:] + after
         jumps = [abs(b.current_a - a.current_a) for a, b in itertools.pairwise(seq)]
         xa = [abs(x) for t, x in xs if s.t_stop < t < end]
+        dev = [abs(x - x_d(cmds, t)) for t, x in xs if s.t_stop < t < end]
         out.append({
             "stop": f"{s.who} {s.t_cont - s.t_stop:.3f} s",
             "statuses_after": [f"{st.state}/{st.reason}" for st in stats
                                if s.t_cont < st.t < end][:3],
+            "in_flight_commands": sum(c.n < n0 for c in after),
             "enabled_commands_after": len(used),
             "stale_rx_used": sum(c.echo_rx_t is not None and c.echo_rx_t < s.t_cont - window_s
                                  for c in used),
@@ -218,6 +221,7 @@ def figures(pair: Pair, window_s: float) -> list[dict[str, object]]:
             "max_abs_current_ma_after": round(1e3 * max((abs(c.current_a) for c in after),
                                                         default=0.0), 3),
             "max_abs_x_true_mm": round(1e3 * max(xa), 4) if xa else None,
+            "max_x_true_minus_x_d_mm": round(1e3 * max(dev), 4) if dev else None,  # bench ref
         })
     return out
 
