@@ -130,6 +130,18 @@ def set_receive_buffer(bus: can.BusABC, size_bytes: int) -> int:
     return granted
 
 
+#: python-can interfaces that stamp a received frame with the kernel's receive time
+#: (``SO_TIMESTAMPNS``, CLOCK_REALTIME: the clock of ``time.time()``); ``virtual`` stamps the
+#: sender's ``time.time()`` at send instead
+_RECEIVE_STAMPED = ("UdpMulticastBus", "SocketcanBus")
+
+
+def stamps_receive_time(bus: can.BusABC) -> bool:
+    """True when ``msg.timestamp`` of a received frame is its receive time on the host's wall
+    clock (udp_multicast, socketcan), so that its age can be told at any later moment."""
+    return type(bus).__name__ in _RECEIVE_STAMPED
+
+
 def frame_reader(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callable[
         [], can.Message | None]:
     """One pending frame or None, never waiting: ``bus.recv(0.0)``, or on ``udp_multicast`` the

@@ -98,6 +98,8 @@ class Watchdog:
     """Fail-safe: no valid sensor frame for ``timeout_cycles`` → ``failsafe`` action, state FAULT.
 
     Leaves FAULT after ``recovery_cycles`` fresh cycles only when ``auto_recover`` is true.
+    Loop starvation (LOOP_OVERRUN): at least ``starvation_late_fraction`` of the last
+    ``starvation_window_cycles`` grid periods late or skipped (docs/runtime.md).
     """
 
     timeout_cycles: int = field(default=3, metadata=rng(1, 10000))
@@ -105,6 +107,8 @@ class Watchdog:
     auto_recover: bool = False
     failsafe: Literal["zero", "hold"] = "zero"
     max_e2e_errors: int = field(default=10, metadata=rng(1, 1_000_000))
+    starvation_window_cycles: int = field(default=200, metadata=rng(10, 1_000_000))
+    starvation_late_fraction: float = field(default=0.25, metadata=rng(0.0, 1.0, lo_open=True))
 
 
 @dataclass(frozen=True)

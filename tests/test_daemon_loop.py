@@ -72,6 +72,11 @@ class Rig(VirtualPair):
         self.loop.poll_cycle()
         return self.newest()
 
+    def cycle_with(self, position_m: float) -> dict[str, Any]:
+        """Sensor frames, then one cycle; returns its VALVE_CMD."""
+        self.sensors(position_m)
+        return self.cycle()["VALVE_CMD"]
+
 
 @pytest.fixture
 def rig(request: pytest.FixtureRequest) -> Iterator[Rig]:
@@ -245,11 +250,20 @@ def test_lockstep_with_emulator_and_mmac() -> None:
         cb.shutdown()
 
 
-def test_skipped_periods_are_stepped_without_frames(rig: Rig) -> None:
-    """An overrun that skipped 3 grid periods: the law steps 3 more times without data (fresh
-    False) and without sending (command_sent False), the reference index moves on by 4, one
-    VALVE_CMD goes out with CycleCount 4 on, and the watchdog does not count the skipped
-    periods."""
+def test_skipped_periods_are_stepped_without_frames() -> None:
+    """An overrun that skipped 3 grid periods (fewer than the watchdog's 10 and than the
+    predictors bridge): the law steps 3 more times without data (fresh False) and without
+    sending (command_sent False), the reference index moves on by 4, one VALVE_CMD goes out with
+    CycleCount 4 on; the watchdog counted them as cycles without data (and the fresh cycle
+    after them ended the streak)."""
+    rig = Rig("skipped", Watchdog(timeout_cycles=10))
+    try:
+        _check_skipped_steps(rig)
+    finally:
+        rig.close()
+
+
+def _check_skipped_steps(rig: Rig) -> None:
     _activate(rig, 20)
     seen: list[tuple[bool, bool]] = []
     orig = rig.ctrl.step
@@ -272,6 +286,7 @@ def test_skipped_periods_are_stepped_without_frames(rig: Rig) -> None:
     assert rig.ctrl.steps == steps0 + 4 and seen == [(False, False)] * 3 + [(True, True)]
     assert rig.loop.k_active == k0 + 4 and rig.loop.skipped_periods == 3
     assert rig.loop.life.state is State.ACTIVE and rig.loop.wd.trips == 0
+    assert rig.loop.wd.lateness.late == 3 and rig.loop.wd.stale_cycles == 0
     assert rig.loop.meas.position_m == pytest.approx(5e-4)  # the frame is used after the catch-up
 
 

@@ -67,6 +67,19 @@ def test_cycles_to_safe_and_watchdog_audit() -> None:
     assert cycles_to_safe(_cycles("FFFFssss")) is None  # never safe
 
 
+def test_watchdog_audit_counts_skipped_periods() -> None:
+    """An overrun's skipped periods (CycleCount gap) are cycles without data: a trip on the fresh
+    cycle after 3 of them (3-cycle watchdog) or after 16 (LOOP_OVERRUN) is real."""
+    for skipped, timeout in ((3, 3), (16, 100)):
+        cyc = _cycles("FFFFzzz")
+        cyc[4].skipped = skipped
+        a = audit_watchdog(cyc, timeout, stopped=False)
+        assert (a.trips, a.spurious) == (1, 0), (skipped, a)
+    cyc = _cycles("FFFFFF")
+    cyc[4].skipped = 2  # fewer than the timeout, then fresh: nothing due
+    assert audit_watchdog(cyc, 3, stopped=False).missed == 0
+
+
 def _controller_log(tmp: Path, fresh: list[bool], enable: list[bool]) -> LogFile:
     tx, rx = FrameCodec(), FrameCodec()
     lines = []

@@ -30,6 +30,7 @@ from ..canlog.reader import resolve_log
 from ..codec import FrameCodec, SampleCount
 from ..config import load_controller_config
 from ..control.base import HeldSample, Measurement, hold_sample, observe_held
+from ..control.sampleclock import RESYNC_SAMPLES
 from ..control.tuning import ControlTuning
 from ..errors import EhpssError
 from ..physics.params import Params, load_params
@@ -198,9 +199,11 @@ class _Replayer:
 
     def _catch_up(self, periods: int) -> None:
         """Periods the daemon skipped (a CycleCount gap): stepped without a frame on the values
-        of the previous command, as ``ControllerLoop.catch_up`` does."""
+        of the previous command, as ``ControllerLoop.catch_up`` does — never more than
+        ``RESYNC_SAMPLES`` (beyond, the daemon went to fail-safe, LOOP_OVERRUN, without
+        stepping; its next commands are Enable 0 and the law is reset after them)."""
         self.res.skipped_periods += periods
-        if self.in_failsafe:
+        if self.in_failsafe or periods > RESYNC_SAMPLES:
             self.k += periods
             return
         m = self.prev

@@ -18,6 +18,7 @@ from pathlib import Path
 import can
 
 from ..codec import FrameCodec, Verdict
+from ..control.sampleclock import RESYNC_SAMPLES
 
 #: one classic-CAN ``candump -L`` line (our logs hold no remote or FD frames)
 _LINE = re.compile(rb"\(\d{10}\.\d{6}\) \S+ ([0-9A-F]{3}|[0-9A-F]{8})#((?:[0-9A-F]{2}){0,8})")
@@ -112,6 +113,8 @@ class Cycle:
     current_a: float
     fresh: bool
     e2e_bad: int
+    #: grid periods skipped before it (the CycleCount gap): cycles without data
+    skipped: int = 0
 
 
 def controller_cycles(log: LogFile, codec: FrameCodec | None = None) -> list[Cycle]:
@@ -120,6 +123,7 @@ def controller_cycles(log: LogFile, codec: FrameCodec | None = None) -> list[Cyc
     pos, aux, cmd = (codec.can_id(n) for n in ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD"))
     out: list[Cycle] = []
     fresh, bad = False, 0
+    last: int | None = None
     for f in log.frames:
         if f[0] in (pos, aux):
             v = _verdict(codec, f)
@@ -127,7 +131,11 @@ def controller_cycles(log: LogFile, codec: FrameCodec | None = None) -> list[Cyc
             bad += v in _E2E_BAD
         elif f[0] == cmd:
             vals = decode_own(codec, "VALVE_CMD", f)
-            out.append(Cycle(bool(vals["Enable"]), float(vals["CurrentSetpoint"]), fresh, bad))
+            cc = int(vals["CycleCount"])
+            skipped = 0 if last is None else (cc - last - 1) % 65536
+            last = cc
+            out.append(Cycle(bool(vals["Enable"]), float(vals["CurrentSetpoint"]), fresh, bad,
+                             skipped))
             fresh, bad = False, 0
     return out
 
@@ -164,14 +172,19 @@ class WatchdogAudit:
 def audit_watchdog(cycles: list[Cycle], timeout_cycles: int, max_e2e_errors: int = 10,
                    stopped: bool = True) -> WatchdogAudit:
     """Every trip must follow a real timeout and every real timeout while active must trip.
+    Periods skipped by an overrun (CycleCount gaps) count as cycles without data; more than
+    ``RESYNC_SAMPLES`` at once is due (LOOP_OVERRUN). Stale frames and starvation cannot be
+    told from the log (they depend on the moment of each drain): such a trip shows as spurious.
     ``stopped``: the last VALVE_CMD is the shutdown command (not a trip)."""
     cyc = cycles[:-1] if stopped and cycles else cycles
     stale = errors = real = spurious = missed = 0
     trips: list[int] = []
     for i, c in enumerate(cyc):
+        stale += c.skipped  # an overrun's skipped periods are cycles without data
+        skip_due = stale >= timeout_cycles or c.skipped > RESYNC_SAMPLES
         stale = 0 if c.fresh else stale + 1
         errors = c.e2e_bad if c.fresh else errors + c.e2e_bad
-        due = stale >= timeout_cycles or errors >= max_e2e_errors
+        due = skip_due or stale >= timeout_cycles or errors >= max_e2e_errors
         active_before = i > 0 and cyc[i - 1].enable
         if not active_before:
             continue

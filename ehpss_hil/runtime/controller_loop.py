@@ -9,8 +9,10 @@ CTRL_STATS at 10 Hz, heartbeat at ``heartbeat_rate_hz``.
 
 Lifecycle: CONFIGURED (0 A, Enable 0, watchdog idle) until the first usable sensor frame, then
 ACTIVE; the reference starts at that cycle. Realtime: a fixed deadline grid; periods skipped by
-an overrun are stepped without data before the next cycle (:meth:`ControllerLoop.catch_up`), so
-the controller's clock stays on the grid. Lockstep: one cycle
+an overrun count for the watchdog as cycles without data and are stepped without data before the
+next cycle (:meth:`ControllerLoop.catch_up`), so the controller's clock stays on the grid; more
+than the predictors bridge (``RESYNC_SAMPLES``) is a fault (LOOP_OVERRUN), never stepped. A sensor
+frame received longer ago than the watchdog window is stale: counted, never used. Lockstep: one cycle
 per received sensor pair (triggered by SENSOR_AUX, which the emulator sends after SENSOR_POS).
 """
 
@@ -28,6 +30,7 @@ import can
 from ..codec import SampleCount, Verdict
 from ..config import Watchdog
 from ..control.base import Controller, HeldSample, Measurement, hold_sample, observe_held
+from ..control.sampleclock import RESYNC_SAMPLES
 from ..scenario import Reference, ReferenceBlocks
 from .deadline import DeadlineTimer, socket_wake
 from .frameio import FrameIO
@@ -79,7 +82,17 @@ class ControllerLoop:
         self.opts = opts
         self.ts_s = 1.0 / opts.rate_hz
         self.ref = ReferenceBlocks(reference, self.ts_s)
-        self.wd = SensorWatchdog(opts.watchdog)
+        self.wd = SensorWatchdog(opts.watchdog, max_skipped=RESYNC_SAMPLES)
+        #: a sensor frame received longer ago than this (s) is stale: the watchdog's window
+        self.stale_after_s = opts.watchdog.timeout_cycles * self.ts_s
+        #: frames are aged (realtime, and only where a frame's timestamp is its receive time;
+        #: on ``virtual`` it is the in-process sender's send time)
+        self.check_age = io.receive_timestamps
+        #: sensor frames dropped as stale
+        self.stale_frames = 0
+        self._stale_in_cycle = 0
+        self._rx_now = 0.0  # wall-clock time (s) the frames being drained are aged against
+        self._late = False  # this cycle started after its deadline
         self.life = Lifecycle()
         self.life.to(State.CONFIGURED)
         self.stats = LoopStats(opts.stats_capacity)
@@ -124,6 +137,8 @@ class ControllerLoop:
     # ---- receive ----------------------------------------------------------------------------
     def _reset_cycle_rx(self) -> None:
         self._fresh = False
+        self._late = False
+        self._stale_in_cycle = 0
         self._aux_fresh = False
         self._e2e_bad = 0
         self._implausible = 0
@@ -133,6 +148,11 @@ class ControllerLoop:
     def on_frame(self, msg: can.Message) -> Verdict | None:
         """Consume one received frame (IDs other than sensors/SETPOINT are only logged); returns
         its verdict (None for IDs not consumed).
+
+        Realtime, on buses that stamp the receive time (:attr:`check_age`: udp_multicast and
+        socketcan, the kernel's ``SO_TIMESTAMPNS`` on the host's wall clock): a usable sensor
+        frame received more than :attr:`stale_after_s` before this drain is stale: classified
+        (its E2E counter moves the sequence on), counted, not used.
 
         Lockstep only: a SENSOR_POS whose counter shows lost sensor samples (OK_SOME_LOST) first
         steps those samples without data (:meth:`catch_up`), as the emulator advanced over them,
@@ -149,10 +169,15 @@ class ControllerLoop:
                     self._e2e_bad += 1
             return d.verdict
         v = d.values
+        if (self.check_age and fid != self._id_setpoint and not self._lockstep
+                and self._rx_now - msg.timestamp > self.stale_after_s):
+            self.stale_frames += 1
+            self._stale_in_cycle += 1
+            return d.verdict
         if fid == self._id_pos:
             counter = msg.data[1] & 0x0F
             if self._lockstep and d.verdict is Verdict.OK_SOME_LOST:
-                self.catch_up((counter - self._last_pos_counter - 1) & 0x0F)
+                self.catch_up((counter - self._last_pos_counter - 1) & 0x0F, overrun=False)
             self._last_pos_counter = counter
             if self._fresh and self._observe is not None:  # a burst: keep the older sample
                 self._superseded.append(hold_sample(self.meas, self._pos_counter))
@@ -179,17 +204,23 @@ class ControllerLoop:
                 self.life.to(State.ACTIVE)
                 log.info("first sensor data: ACTIVE (mode %s)", self.controller.mode)
             return
-        tripped = self.wd.update(self._fresh, self._e2e_bad, self._implausible)
+        if self._stale_in_cycle:
+            log.warning("cycle %d: %d stale sensor frame(s) (received > %.3g ms ago) dropped",
+                        self.cycles, self._stale_in_cycle, self.stale_after_s * 1e3)
+        tripped = self.wd.update(self._fresh, self._e2e_bad, self._implausible, self._late)
         if st is State.ACTIVE and tripped:
-            self.life.to(State.FAULT, self.wd.reason)
-            log.error("cycle %d: watchdog: %s -> FAULT, fail-safe %s", self.cycles,
-                      self.wd.reason.name, self.opts.watchdog.failsafe)
+            self._fault()
         elif st is State.FAULT and not tripped:
             self.controller.reset()
             self._samples.reset()
             self.life.to(State.ACTIVE)
             log.warning("cycle %d: sensor data fresh for %d cycles: ACTIVE again", self.cycles,
                         self.wd.fresh_cycles)
+
+    def _fault(self) -> None:
+        self.life.to(State.FAULT, self.wd.reason)
+        log.error("cycle %d: watchdog: %s -> FAULT, fail-safe %s", self.cycles,
+                  self.wd.reason.name, self.opts.watchdog.failsafe)
 
     def _command(self) -> tuple[float, bool]:
         st = self.life.state
@@ -214,17 +245,28 @@ class ControllerLoop:
                 return self.last_current_a, self.last_enable
         return 0.0, False
 
-    def catch_up(self, periods: int) -> None:
-        """Grid periods the loop slept through (an overrun skipped them): the controller's clock
-        stays on the grid. Each one is a cycle without a sensor frame (``fresh`` False: the
-        predictors advance, the PI integrates, the reference moves on) and without a frame sent
-        (``command_sent`` False: the valve holds the previous command); :attr:`cycles` and so
-        VALVE_CMD's CycleCount count them, so the reference index and CycleCount keep matching
-        the emulator's sample clock. The watchdog does not count them."""
+    def catch_up(self, periods: int, overrun: bool = True) -> None:
+        """Grid periods the loop slept through (``overrun``: the deadline timer skipped them;
+        else lockstep's lost sensor samples): the controller's clock stays on the grid. Each one
+        is a cycle without a sensor frame (``fresh`` False: the predictors advance, the PI
+        integrates, the reference moves on) and without a frame sent (``command_sent`` False:
+        the valve holds the previous command); :attr:`cycles` and so VALVE_CMD's CycleCount count
+        them, so the reference index and CycleCount keep matching the emulator's sample clock.
+
+        Overrun periods count for the watchdog as cycles without data
+        (:meth:`SensorWatchdog.skip`): more than ``RESYNC_SAMPLES`` at once, ``timeout_cycles``
+        at once, or starvation is LOOP_OVERRUN, and then the law is not stepped at all (leaving
+        FAULT resets it). So the law steps here at most ``RESYNC_SAMPLES`` times: lockstep's
+        gaps come from the 4-bit E2E counter."""
         if periods <= 0:
             return
         self.skipped_periods += periods
         self.cycles += periods
+        st = self.life.state
+        if overrun and st in (State.ACTIVE, State.FAULT):
+            tripped = self.wd.skip(periods)
+            if tripped and st is State.ACTIVE:
+                self._fault()
         if self.life.state is State.FAULT:
             self.k_active += periods
             self.failsafe_cycles += periods
@@ -240,17 +282,21 @@ class ControllerLoop:
             self.k_active += 1
         self.meas.fresh, self.meas.command_sent = fresh, True
 
-    def poll_cycle(self, skipped: int = 0, drain: bool = True) -> float | None:
+    def poll_cycle(self, skipped: int = 0, drain: bool = True, late: bool = False
+                   ) -> float | None:
         """One realtime cycle without waiting: the ``skipped`` grid periods before it
         (:meth:`catch_up`), drain every pending frame (unless ``drain`` is False: the caller
-        has just drained the bus), then :meth:`cycle`.
+        has just drained the bus), then :meth:`cycle`. ``late``: the cycle started after its
+        deadline (the watchdog's starvation window).
 
         Returns the receive timestamp (wall-clock s) of the SENSOR_POS frame used, or None."""
         self.catch_up(skipped)
         if drain:
+            self._rx_now = time.time()
             for msg in self.io.drain():
                 self.on_frame(msg)
         used = self._pos_ts if self._fresh else None
+        self._late = late
         self.cycle()
         return used
 
@@ -302,9 +348,10 @@ class ControllerLoop:
 
     def _log_counters(self) -> None:
         """Cheap counters only (no percentiles in the cycle: they would cost an overrun)."""
-        log.info("cycles %d, state %s, overruns %d, rejected frames %d, fail-safe cycles %d, "
-                 "max compute %.0f µs in the last interval", self.cycles, self.life.state.name,
-                 self.overruns, self.codec.rejected, self.failsafe_cycles,
+        log.info("cycles %d, state %s, overruns %d, rejected frames %d, stale frames %d, "
+                 "fail-safe cycles %d, max compute %.0f µs in the last interval", self.cycles,
+                 self.life.state.name, self.overruns, self.codec.rejected, self.stale_frames,
+                 self.failsafe_cycles,
                  self._interval_compute_max_s * 1e6)
         self._interval_compute_max_s = 0.0
 
@@ -323,6 +370,7 @@ class ControllerLoop:
         target = min(self.opts.sensor_age_target_s, 0.5 * self.ts_s)
         lock = PhaseLock(self.ts_s, target) if target > 0.0 else None
         wake = socket_wake(self.io.bus, self._drain_for_wake) if self.opts.wake_on_sensor else None
+        self._drain_backlog()
         timer.start()
         perf = time.perf_counter
         while not stop and (n_cycles is None or self.cycles < n_cycles):
@@ -334,7 +382,7 @@ class ControllerLoop:
                 lateness = max(0.0, self._woke_wall_s - self._aux_ts)
             # woken: the bus was drained to its last frame microseconds ago (and no period was
             # skipped); another read would only learn that nothing is pending
-            rx_wall = self.poll_cycle(timer.last_skipped, drain=not woken)
+            rx_wall = self.poll_cycle(timer.last_skipped, drain=not woken, late=timer.last_late)
             if lock is not None and rx_wall is not None:
                 arrival = rx_wall - (time.time() - time.monotonic())
                 timer.shift(lock.correction(timer.next_deadline_s - self.ts_s, arrival))
@@ -347,10 +395,22 @@ class ControllerLoop:
         self.stats.overruns = timer.overruns
         self.stats.skipped = timer.skipped
 
+    def _drain_backlog(self, batch: int = 1000) -> None:
+        """The frames queued since the bus opened (the emulator sends ~3000/s): classified before
+        the grid starts (the stale ones dropped), not in the first cycle, which they would make
+        several periods late — a LOOP_OVERRUN right at the start."""
+        n = batch
+        while n == batch:
+            self._rx_now = time.time()
+            n = 0
+            for msg in self.io.drain(batch):
+                self.on_frame(msg)
+                n += 1
+
     def _drain_for_wake(self) -> bool:
         """The bus became readable before the deadline: consume what arrived (this cycle's
         drain, done early); True once the cycle has a usable sensor pair."""
-        self._woke_wall_s = time.time()
+        self._woke_wall_s = self._rx_now = time.time()
         for msg in self.io.drain():
             self.on_frame(msg)
         return self._fresh and self._aux_fresh
@@ -401,6 +461,7 @@ class ControllerLoop:
     def summary(self) -> dict[str, object]:
         """Counters and loop statistics (JSON-able)."""
         return {"cycles": self.cycles, "skipped_periods": self.skipped_periods,
+                "stale_frames": self.stale_frames,
                 "woken_by_sensor": self.woken_by_sensor,
                 "state": self.life.state.name,
                 "failsafe_reason": self.life.reason.name, "watchdog_trips": self.wd.trips,

@@ -40,6 +40,8 @@ class DeadlineTimer:
         self.skipped = 0
         #: grid periods skipped by the last :meth:`wait` (0 when it was on time)
         self.last_skipped = 0
+        #: the last :meth:`wait` found its deadline already passed (an overrun)
+        self.last_late = False
         self.cycles = 0
 
     def start(self, now_s: float | None = None) -> None:
@@ -65,7 +67,8 @@ class DeadlineTimer:
         goes on from that deadline, unchanged."""
         now = self._clock()
         self.last_skipped = 0
-        if now > self._next:
+        self.last_late = now > self._next
+        if self.last_late:
             missed = int((now - self._next) // self.period_s)
             self._next += missed * self.period_s
             self.skipped += missed

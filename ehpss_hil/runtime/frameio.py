@@ -18,7 +18,7 @@ from typing import Any, Protocol
 
 import can
 
-from ..bus import datagram_rejects, drop_own_frames, frame_reader, frame_writer
+from ..bus import datagram_rejects, drop_own_frames, frame_reader, frame_writer, stamps_receive_time
 from ..codec import FrameCodec
 from ..config import BusConfig, CanIds, LogConfig
 from ..errors import ConfigError, FrameError
@@ -88,6 +88,8 @@ class FrameIO:
         self.own_ids = frozenset(codec.can_id(n) for n in own_names)
         #: True when the kernel drops the echoes of own frames (udp_multicast)
         self.own_filtered_in_kernel = drop_own_frames(bus, self.own_ids)
+        #: True when a received frame's timestamp is its receive time (wall clock)
+        self.receive_timestamps = stamps_receive_time(bus)
         # every DBC frame's datagram template built now, not in the first cycles (udp_multicast)
         shapes = {n: can.Message(arbitration_id=codec.can_id(n), is_extended_id=False,
                                  dlc=codec.message(n).length, data=bytes(codec.message(n).length))

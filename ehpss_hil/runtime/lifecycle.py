@@ -28,6 +28,8 @@ class FailsafeReason(IntEnum):
     E2E_ERRORS = 2
     PLAUSIBILITY = 3
     OPERATOR = 4
+    #: the loop itself: more periods skipped at once than the predictors bridge, or starved
+    LOOP_OVERRUN = 5
 
 
 #: CiA 301 heartbeat NMT state for each lifecycle state
