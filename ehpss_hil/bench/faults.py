@@ -102,7 +102,7 @@ def _process_sections(a: argparse.Namespace, out: Path, rng: random.Random,
 def _hostile_section(q: bool, out: Path, rows: list[Row], s: Summary,
                      raw: dict[str, Any]) -> None:
     _say("stray datagrams, foreign files in --out, full disk ...")
-    st = stray.stray_trial(out / "stray", rounds=2 if q else 10, duration_s=1.5 if q else 4.0)
+    st = stray.stray_trial(out / "stray", rounds=2 if q else 10)
     fo = hostile.foreign_files_trial(out / "hostile", hostile.short_scenario(out / "short.yaml"))
     disk = None
     if hostile.tmpfs_unavailable_reason() is None:

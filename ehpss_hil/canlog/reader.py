@@ -135,6 +135,35 @@ def read_log(path: str | os.PathLike[str], rotated: bool = True,
                 yield msg
 
 
+def is_candump(path: str | os.PathLike[str]) -> bool:
+    """A candump ``-L`` log by its name: ``*.log`` or a rotated ``*.log.N``."""
+    parts = Path(path).name.split(".")
+    return len(parts) > 1 and (parts[-1] == "log" or (parts[-1].isdigit() and "log" in parts))
+
+
+def read_frames(path: str | os.PathLike[str], bad: BadLines | None = None
+                ) -> Iterator[can.Message]:
+    """The frames of any log python-can reads: candump ``-L`` files (``*.log``, rotation set
+    included) through :func:`read_log`, every other format (``.asc``, ``.blf``, ``.csv``,
+    ``.trc``, …) through :class:`can.LogReader`. A file python-can cannot read, or whose data
+    its reader rejects, is a :class:`LogError` (one line), never a traceback."""
+    if is_candump(path):
+        yield from read_log(path, bad=bad)
+        return
+    p = Path(path)
+    try:
+        reader = can.LogReader(p)
+    except Exception as exc:  # a foreign file: unknown suffix, or a header its reader rejects
+        raise LogError(f"{p}: not a log python-can reads ({type(exc).__name__}: {exc})") from exc
+    try:
+        yield from reader
+    except Exception as exc:  # a foreign file: whatever its reader raises is bad input
+        raise LogError(f"{p}: unreadable {p.suffix or 'log'} data ({type(exc).__name__}: "
+                       f"{exc})") from exc
+    finally:
+        reader.stop()
+
+
 def read_sidecar(path: str | os.PathLike[str]) -> dict[str, Any] | None:
     """The ``<log>.json`` sidecar of a log, or None when there is none (or it is unreadable)."""
     side = sidecar_path(path)

@@ -1,15 +1,19 @@
 """``ehpss-hil replay LOG [--mode M]``: the logged sensor frames through the controller, offline.
 
-The log is read in file order (the logging process's causal order: a daemon logs each received
-frame when it drains it and each VALVE_CMD when it sends it). Per logged VALVE_CMD, from the
-first one with ``Enable = 1`` (the daemon's first ACTIVE cycle, reference sample 0): the newest
-usable SENSOR_POS/SENSOR_AUX values since the previous command form the Measurement (``fresh``
-when a SENSOR_POS arrived), ``x_d`` is the reference at that sample (or a SETPOINT override), the
-controller steps once, and its current — clipped to ±1 A and quantized by the DBC
-(:meth:`FrameCodec.quantize`) — is compared with the logged setpoint. Same configuration →
-bit-identical; otherwise the first divergence is printed (exit 1). A logged ``Enable = 0`` after
-the start is the daemon's fail-safe (FAULT, ``failsafe: zero``): not stepped, the reference runs
-on, and the controller is reset when commands are enabled again (as the daemon does).
+Any log python-can reads: candump ``-L`` (ours, ``candump -L`` of can-utils, rotated sets),
+``.asc``, ``.blf`` and the rest (:func:`~ehpss_hil.canlog.reader.read_frames`). The frames are
+taken in receive-time order and grouped into the daemon's cycles by content: each VALVE_CMD
+closes one, and the sensor frames it used are those up to the SENSOR_POS whose E2E counter it
+echoes (``SensorCounterEcho``); CycleCount gaps are periods the daemon slept through, or, in a
+lockstep log, commands lost on the bus (``--gaps``). Each cycle runs through the same
+:class:`~ehpss_hil.driver.ControllerDriver` as the daemon: superseded samples observed, the
+sample count from the E2E counter, catch-up, fail-safe and the reset after it, the ±1 A clip.
+From the first VALVE_CMD with ``Enable = 1`` (the daemon's first ACTIVE cycle, reference sample
+0) the replayed current, quantized by the DBC (:meth:`FrameCodec.quantize`), is compared with
+the logged setpoint. Same configuration → bit-identical; otherwise the first divergence is
+printed (exit 1). A logged ``Enable = 0`` after the start is the daemon's fail-safe (FAULT,
+``failsafe: zero``): not stepped, the reference runs on, and the controller is reset when
+commands are enabled again. The ``oracle`` mode needs the true faults and is not replayable.
 
 Configuration: ``--config controller.yaml`` (mode, rate, reference, tuning, params), else the
 sidecar (``config``/``scenario``/``reference``, ``rate_hz``, ``mode``), else the defaults; ``--mode``
@@ -20,18 +24,18 @@ told from the log and show as divergences.
 from __future__ import annotations
 
 import argparse
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..canlog import BadLines, read_log, read_sidecar
-from ..canlog.reader import resolve_log
-from ..codec import FrameCodec, SampleCount
+from ..canlog import BadLines, read_sidecar
+from ..canlog.reader import read_frames, resolve_log
+from ..codec import FrameCodec
 from ..config import load_controller_config
-from ..control.base import HeldSample, Measurement, hold_sample, observe_held
+from ..control.registry import DAEMON_MODES, make_controller
 from ..control.sampleclock import RESYNC_SAMPLES
 from ..control.tuning import ControlTuning
+from ..driver import ControllerDriver
 from ..errors import EhpssError
 from ..physics.params import Params, load_params
 from ..report.logdata import MODE_NAMES
@@ -100,13 +104,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", type=Path, default=None,
                    help="scenario YAML for the reference and sample time")
     p.add_argument("--show", type=int, default=5, help="divergences to print (default 5)")
+    p.add_argument("--gaps", choices=("auto", "overrun", "lost"), default="auto",
+                   help="CycleCount gaps are periods the daemon slept through (overrun) or "
+                        "commands lost on the bus (lost); auto: lost for a lockstep log (its "
+                        "sidecar says so), else overrun")
 
 
 def _logged_mode(log: Path) -> str | None:
     codec = FrameCodec()
     mode = None
     status_id = codec.can_id("CTRL_STATUS")
-    for msg in read_log(log, bad=BadLines()):  # counted by the replay itself
+    for msg in read_frames(log, bad=BadLines()):  # counted by the replay itself
         if msg.arbitration_id == status_id:
             d = codec.classify(msg)
             if d.values is not None and d.verdict.usable:
@@ -130,133 +138,174 @@ def resolve_setup(log: Path, mode: str | None, config: Path | None,
 
 
 def _make(setup: ReplaySetup) -> Any:
-    from ..control.registry import make_controller
-
+    if setup.mode not in DAEMON_MODES:
+        raise ReplayError(f"mode {setup.mode!r} is not replayable (it needs the true faults); "
+                          f"choose one of {', '.join(DAEMON_MODES)}")
     return make_controller(setup.mode, setup.params, setup.ts_s, setup.tuning, setup.reference)
 
 
-class _Replayer:
-    """The per-frame state machine of one replay."""
+@dataclass
+class _Rx:
+    """A usable sensor or SETPOINT frame not yet taken by a cycle (SI values)."""
 
-    def __init__(self, setup: ReplaySetup, keep: int) -> None:
+    kind: str  # SENSOR_POS, SENSOR_AUX or SETPOINT
+    t_s: float
+    a: float
+    b: float
+    counter: int = 0
+    override: bool = False
+
+
+class _Replayer:
+    """The daemon's cycles rebuilt from a log, each run through the one controller driver.
+
+    Frames are taken in receive-time order (the order the daemon drained them, whatever order a
+    logger wrote them in). Each VALVE_CMD closes a cycle: the sensor frames it used are those up
+    to the SENSOR_POS whose E2E counter it echoes (``SensorCounterEcho``) — a frame received
+    after the daemon's drain but before its command waits for the next cycle. CycleCount gaps are
+    periods the daemon slept through (realtime logs: stepped without data before the cycle's
+    frames, as ``ControllerLoop.catch_up`` does) or, in a lockstep log (``lost_commands``),
+    commands lost on the bus after cycles that ran on their own sample.
+    """
+
+    def __init__(self, setup: ReplaySetup, keep: int, lost_commands: bool) -> None:
         self.ctrl = _make(setup)
+        self.driver = ControllerDriver(self.ctrl, ReferenceBlocks(setup.reference, setup.ts_s).at)
         self.codec = FrameCodec()
         self.res = ReplayResult(setup)
         self.keep = keep
-        self.meas = Measurement()
-        self.fresh = False
+        self.ts = setup.ts_s
+        self.lost_commands = lost_commands
         self.started = False
         self.in_failsafe = False
-        self.override: float | None = None
-        self.ts = setup.ts_s
-        self.ref = setup.reference
-        self._xd = ReferenceBlocks(self.ref, self.ts)
-        self.k = 0
         self.cycle_count = 0
-        self.prev = Measurement()
-        self._pos_counter = 0  # E2E counter of the newest usable SENSOR_POS
-        self._samples = SampleCount()  # sensor samples between those stepped on (as the daemon)
-        self._superseded: list[HeldSample] = []
-        self._scratch = Measurement()
+        self.pending: list[_Rx] = []
         self._names = {self.codec.can_id(n): n for n in
                        ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD", "SETPOINT")}
 
-    def _snapshot(self) -> None:
-        p, m = self.prev, self.meas
-        p.position_m, p.spool_m = m.position_m, m.spool_m
-        p.coil_current_a, p.load_pressure_pa = m.coil_current_a, m.load_pressure_pa
-
-    def x_d(self, k: int) -> float:
-        """Reference at sample k (m)."""
-        return self._xd.at(k)
-
     def frame(self, msg: Any, number: int) -> None:
+        """One frame, in receive-time order."""
         name = self._names.get(msg.arbitration_id)
         if name is None:
             return
         d = self.codec.classify(msg)
         if d.values is None or not d.verdict.usable:
             return
-        v, m = d.values, self.meas
+        v, t = d.values, float(msg.timestamp)
         if name == "SENSOR_POS":
-            if self.fresh:  # a burst: the daemon keeps the older sample for ``observe``
-                self._superseded.append(hold_sample(m, self._pos_counter))
-            m.position_m, m.spool_m, self.fresh = float(v["Position"]), float(v["Spool"]), True
-            self._pos_counter = msg.data[1] & 0x0F
+            self.pending.append(_Rx(name, t, float(v["Position"]), float(v["Spool"]),
+                                    msg.data[1] & 0x0F))
         elif name == "SENSOR_AUX":
-            m.coil_current_a, m.load_pressure_pa = float(v["CoilCurrent"]), float(v["LoadPressure"])
+            self.pending.append(_Rx(name, t, float(v["CoilCurrent"]), float(v["LoadPressure"])))
         elif name == "SETPOINT":
-            self.override = float(v["Position"]) if v["Override"] else None
+            self.pending.append(_Rx(name, t, float(v["Position"]), 0.0,
+                                    override=bool(v["Override"])))
         elif self.started or v["Enable"]:
             cc = int(v["CycleCount"])
             gap = 0 if not self.started else (cc - self.cycle_count - 1) % 65536
             self.started = True
             self.cycle_count = cc
-            self.command(float(v["CurrentSetpoint"]), bool(v["Enable"]), number, gap)
+            self.command(float(v["CurrentSetpoint"]), bool(v["Enable"]),
+                         int(v["SensorCounterEcho"]), t, number, gap)
         else:  # before the daemon's first ACTIVE cycle (CONFIGURED: nothing is stepped)
-            self.fresh = False
-            self._superseded.clear()
+            self._feed(self._leading_non_position())
+            self.driver.idle_cycle()
 
-    def _catch_up(self, periods: int) -> None:
-        """Periods the daemon skipped (a CycleCount gap): stepped without a frame on the values
-        of the previous command, as ``ControllerLoop.catch_up`` does — never more than
-        ``RESYNC_SAMPLES`` (beyond, the daemon went to fail-safe, LOOP_OVERRUN, without
-        stepping; its next commands are Enable 0 and the law is reset after them)."""
+    # ---- which frames a cycle took ------------------------------------------------------------
+    def _leading_non_position(self) -> int:
+        return next((i for i, r in enumerate(self.pending) if r.kind == "SENSOR_POS"),
+                    len(self.pending))
+
+    def _split(self, echo: int) -> int:
+        """How many pending frames the cycle that echoes ``echo`` took: up to the last pending
+        SENSOR_POS with that counter and the SENSOR_AUX after it, before the next SENSOR_POS;
+        none of the SENSOR_POS frames when none has it (a cycle without a fresh sample)."""
+        last = None
+        for i, r in enumerate(self.pending):
+            if r.kind == "SENSOR_POS" and r.counter == echo:
+                last = i
+        if last is None:
+            return self._leading_non_position()
+        n = last + 1
+        while n < len(self.pending) and self.pending[n].kind != "SENSOR_POS":
+            n += 1
+        return n
+
+    def _before(self, t_s: float) -> int:
+        """How many pending frames were received before ``t_s`` (s)."""
+        return next((i for i, r in enumerate(self.pending) if r.t_s >= t_s), len(self.pending))
+
+    def _feed(self, n: int) -> None:
+        """The first ``n`` pending frames, as the daemon's drain hands them to the driver."""
+        drv = self.driver
+        for r in self.pending[:n]:
+            if r.kind == "SENSOR_POS":
+                drv.position(r.a, r.b, r.counter)
+            elif r.kind == "SENSOR_AUX":
+                drv.aux(r.a, r.b)
+            else:
+                drv.setpoint(r.a if r.override else None)
+        del self.pending[:n]
+
+    # ---- cycles -----------------------------------------------------------------------------
+    def _gap(self, periods: int, t_s: float) -> None:
+        """CycleCount gap before the command at ``t_s`` (see the class docstring)."""
         self.res.skipped_periods += periods
-        if self.in_failsafe or periods > RESYNC_SAMPLES:
-            self.k += periods
+        if self.lost_commands:
+            for i in range(periods):  # the cycle ran on its own sample; its command was lost
+                self._feed(self._before(t_s - (periods - i) * self.ts))
+                if self.in_failsafe:
+                    self.driver.failsafe_cycle()
+                else:
+                    self.driver.step()
             return
-        m = self.prev
-        m.fresh = m.command_sent = False
-        for _ in range(periods):
-            m.reference_m = self.override if self.override is not None else self.x_d(self.k)
-            self.ctrl.step(m)
-            self.k += 1
-        m.command_sent = True
+        if self.in_failsafe or periods > RESYNC_SAMPLES:
+            self.driver.k += periods
+            return
+        self.driver.catch_up(periods)
 
-    def command(self, logged_a: float, logged_en: bool, number: int, gap: int = 0) -> None:
-        self._catch_up(gap)
-        k = self.k
-        self.k += 1
+    def command(self, logged_a: float, logged_en: bool, echo: int, t_s: float, number: int,
+                gap: int = 0) -> None:
+        """A logged VALVE_CMD: the cycle it closes, replayed and compared."""
+        if gap:
+            self._gap(gap, t_s)
+        self._feed(self._split(echo))
+        drv = self.driver
+        k = drv.k
         if not logged_en:  # the daemon's fail-safe (FAULT): no step, the reference runs on
             self.res.failsafe_cycles += 1
             self.in_failsafe = True
-            self.fresh = False
-            self._superseded.clear()
-            self._snapshot()
+            drv.failsafe_cycle()
             return
         if self.in_failsafe:  # FAULT → ACTIVE: the daemon resets the controller
-            self.ctrl.reset()
+            drv.restart()
             self.in_failsafe = False
-            self._samples.reset()
-        observe_held(self.ctrl.observe, self._superseded, self._samples.take, self._scratch)
-        m = self.meas
-        m.reference_m = self.override if self.override is not None else self.x_d(k)
-        m.fresh = self.fresh
-        if self.fresh:
-            m.samples = self._samples.take(self._pos_counter)
-        cmd = self.ctrl.step(m)
-        self._snapshot()
-        cur = cmd.current_a if math.isfinite(cmd.current_a) else 0.0
-        cur = max(-1.0, min(1.0, cur))
+        cur, enable = drv.step()
         q = self.codec.quantize("VALVE_CMD", {"CurrentSetpoint": cur})["CurrentSetpoint"]
-        self.fresh = False
         self.res.cycles += 1
-        if q != logged_a or bool(cmd.enable) != logged_en:
+        if q != logged_a or bool(enable) != logged_en:
             self.res.divergent += 1
             self.res.max_abs_diff_a = max(self.res.max_abs_diff_a, abs(q - logged_a))
             if len(self.res.first) < self.keep:
-                self.res.first.append(Divergence(k, number, logged_a, q, logged_en,
-                                                 bool(cmd.enable)))
+                self.res.first.append(Divergence(k, number, logged_a, q, logged_en, enable))
+
+
+def _is_lockstep_log(side: dict[str, Any] | None) -> bool:
+    """A log written by the lockstep simulator (no overruns: a CycleCount gap is lost commands)."""
+    return bool(side) and "lockstep" in str(side.get("tool", ""))  # type: ignore[union-attr]
 
 
 def replay_log(path: str | Path, mode: str | None = None, config: Path | None = None,
-               scenario: Path | None = None, keep: int = 5) -> ReplayResult:
-    """Replay a log through the controller; see the module docstring."""
+               scenario: Path | None = None, keep: int = 5, gaps: str = "auto") -> ReplayResult:
+    """Replay a log through the controller; see the module docstring. ``gaps``: ``overrun``,
+    ``lost`` or ``auto`` (see :class:`_Replayer`)."""
     log = resolve_log(path)
     setup = resolve_setup(log, mode, config, scenario)
-    r = _Replayer(setup, keep)
-    for number, msg in enumerate(read_log(log, bad=r.res.bad_lines), start=1):
+    lost = gaps == "lost" or (gaps == "auto" and _is_lockstep_log(read_sidecar(log)))
+    r = _Replayer(setup, keep, lost)
+    numbered = list(enumerate(read_frames(log, bad=r.res.bad_lines), start=1))
+    numbered.sort(key=lambda nm: nm[1].timestamp)  # receive time; stable for equal stamps
+    for number, msg in numbered:
         r.frame(msg, number)
     if r.res.cycles == 0:
         raise ReplayError(f"{log}: no VALVE_CMD with Enable=1: nothing to compare")
@@ -274,7 +323,7 @@ def describe(d: Divergence, ts_s: float) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Replay and print the verdict: 0 identical, 1 diverged."""
-    res = replay_log(args.log, args.mode, args.config, args.scenario, args.show)
+    res = replay_log(args.log, args.mode, args.config, args.scenario, args.show, args.gaps)
     s = res.setup
     print(f"replayed {res.cycles} cycles with mode {s.mode} at Ts = {s.ts_s * 1e3:g} ms "
           f"(config from {s.source})")

@@ -17,10 +17,10 @@ from pathlib import Path
 from ..canlog import CandumpLogger
 from ..canlog.sidecar import jsonable
 from ..codec import FrameCodec
-from ..control.base import Measurement
 from ..control.controllers import LoopBase
 from ..control.registry import make_controller
 from ..control.tuning import ControlTuning
+from ..driver import ControllerDriver
 from ..emulation import PlantEmulation, SensorSample
 from ..physics.params import Params, load_params
 from ..runtime.status_frames import MODE_CODE, MODE_UNKNOWN
@@ -33,11 +33,11 @@ class _Bench:
     """Emulator side + controller side + logger for one run."""
 
     def __init__(self, sc: Scenario, ctrl: LoopBase, prm: Params, log: CandumpLogger,
-                 truth: bool, t0_s: float) -> None:
+                 truth: bool, t0_s: float, x_d: list[float]) -> None:
         self.sc, self.ctrl, self.log, self.truth, self.t0 = sc, ctrl, log, truth, t0_s
         self.emu = PlantEmulation(prm, sc)
         self.tx_emu, self.tx_ctrl, self.rx_ctrl = FrameCodec(), FrameCodec(), FrameCodec()
-        self.meas = Measurement()
+        self.drv = ControllerDriver(ctrl, x_d.__getitem__)
         self.faults = self.emu.faults
 
     def send(self, codec: FrameCodec, name: str, values: dict[str, float], t_s: float) -> None:
@@ -49,8 +49,9 @@ class _Bench:
             self.send(self.tx_emu, "PLANT_TRUTH", {"Position": _clip(s.true_position_m, 0.5),
                                                    "SpoolActual": _clip(s.true_spool_m, 0.01),
                                                    "Stuck": int(s.faults.stuck)}, t)
-        if self.emu.frame_lost(0):
-            self.meas.fresh = False
+        if self.emu.frame_lost(0):  # lost on the way: the sensor's E2E counters move on
+            self.tx_emu.skip("SENSOR_POS")
+            self.tx_emu.skip("SENSOR_AUX")
             return
         f1 = self.tx_emu.encode("SENSOR_POS", {"Position": _clip(s.position_m, 0.5),
                                                "Spool": _clip(s.spool_m, 0.01)}, t + 10e-6)
@@ -60,12 +61,10 @@ class _Bench:
         self.log.log(f1)
         self.log.log(f2)
         d1, d2 = self.rx_ctrl.classify(f1), self.rx_ctrl.classify(f2)
-        m = self.meas
-        m.fresh = bool(d1.values and d2.values)
         if d1.values and d2.values:
-            m.position_m, m.spool_m = float(d1.values["Position"]), float(d1.values["Spool"])
-            m.load_pressure_pa = float(d2.values["LoadPressure"])
-            m.coil_current_a = float(d2.values["CoilCurrent"])
+            self.drv.position(float(d1.values["Position"]), float(d1.values["Spool"]),
+                              f1.data[1] & 0x0F)
+            self.drv.aux(float(d2.values["CoilCurrent"]), float(d2.values["LoadPressure"]))
 
     def status(self, t: float) -> None:
         st = self.ctrl.status()
@@ -108,22 +107,23 @@ def write_lockstep_log(scenario: Scenario, mode: str, path: str | os.PathLike[st
             "scenario": jsonable(scenario), "config": {"mode": mode, "rate_hz": 1.0 / ts},
             "clock": "synthetic: t0 + k*Ts (+ µs per frame), s since the Unix epoch"}
     log = CandumpLogger(path, iface="vcan0", sidecar=side)
-    b = _Bench(scenario, ctrl, prm, log, truth, t0_s)
+    x_d = scenario.reference_samples().tolist()
+    b = _Bench(scenario, ctrl, prm, log, truth, t0_s, x_d)
     set_truth = getattr(ctrl, "set_truth", None)
     queue: deque[float | None] = deque([0.0] * scenario.transport_delay_samples)
     held = 0.0
     try:
-        for k, xd in enumerate(scenario.reference_samples().tolist()):
+        for k in range(len(x_d)):
             t = t0_s + k * ts
             s = b.emu.measure()
             b.sensors(s, t)
-            b.meas.reference_m = xd
             if set_truth is not None:
                 set_truth(s.faults)
-            cmd = ctrl.step(b.meas)
-            current = _clip(cmd.current_a if cmd.enable else 0.0, 1.0)
+            fresh, echo = b.drv.fresh, b.drv.counter
+            cur, enable = b.drv.step()
+            current = cur if enable else 0.0
             f = b.tx_ctrl.encode("VALVE_CMD", {"CurrentSetpoint": current, "Enable": 1,
-                                               "SensorCounterEcho": k & 0xF,
+                                               "SensorCounterEcho": echo if fresh else 0,
                                                "CycleCount": k & 0xFFFF}, t + 100e-6)
             lost = b.emu.frame_lost(1)
             if not lost:

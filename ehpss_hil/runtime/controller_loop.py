@@ -19,18 +19,17 @@ per received sensor pair (triggered by SENSOR_AUX, which the emulator sends afte
 from __future__ import annotations
 
 import logging
-import math
 import resource
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import can
 
-from ..codec import SampleCount, Verdict
+from ..codec import Verdict
 from ..config import Watchdog
-from ..control.base import Controller, HeldSample, Measurement, hold_sample, observe_held
+from ..control.base import Controller, Measurement
 from ..control.sampleclock import RESYNC_SAMPLES
+from ..driver import ControllerDriver
 from ..scenario import Reference, ReferenceBlocks
 from .deadline import DeadlineTimer, socket_wake
 from .frameio import FrameIO
@@ -82,6 +81,8 @@ class ControllerLoop:
         self.opts = opts
         self.ts_s = 1.0 / opts.rate_hz
         self.ref = ReferenceBlocks(reference, self.ts_s)
+        #: sensor values → Measurement → step → command (the same driver as replay and the sim)
+        self.driver = ControllerDriver(controller, self.ref.at, opts.current_limit_a)
         self.wd = SensorWatchdog(opts.watchdog, max_skipped=RESYNC_SAMPLES)
         #: a sensor frame received longer ago than this (s) is stale: the watchdog's window
         self.stale_after_s = opts.watchdog.timeout_cycles * self.ts_s
@@ -96,7 +97,6 @@ class ControllerLoop:
         self.life = Lifecycle()
         self.life.to(State.CONFIGURED)
         self.stats = LoopStats(opts.stats_capacity)
-        self.meas = Measurement()
         self._id_pos = self.codec.can_id("SENSOR_POS")
         self._id_aux = self.codec.can_id("SENSOR_AUX")
         self._id_setpoint = self.codec.can_id("SETPOINT")
@@ -106,7 +106,6 @@ class ControllerLoop:
         self._log_every = round(opts.stats_interval_s * opts.rate_hz)
         self._interval_compute_max_s = 0.0
         self.cycles = 0
-        self.k_active = 0
         self.failsafe_cycles = 0
         #: grid periods skipped by overruns, stepped without a frame (:meth:`catch_up`)
         self.skipped_periods = 0
@@ -114,24 +113,15 @@ class ControllerLoop:
         self.woken_by_sensor = 0
         self._woke_wall_s = 0.0
         self._aux_ts = 0.0
-        self.saturations = 0
         self.overruns = 0
         self.last_current_a = 0.0
         self.last_enable = False
-        self._override_m: float | None = None
         self._compute_max_s = 0.0
         self.reporter = StatusReporter(io)
         self._logged_cycle = 0  # self.cycles at the last _periodic
         self._rx_ids = frozenset((self._id_pos, self._id_aux, self._id_setpoint))
         self._lockstep = False
         self._last_pos_counter = 0  # counter of the newest usable SENSOR_POS (lockstep gaps)
-        self._samples = SampleCount()  # sensor samples between the SENSOR_POS stepped on
-        #: the controller's ``observe`` (optional in the Controller protocol: a controller
-        #: without it takes the newest sample of a burst only)
-        self._observe: Callable[[Measurement], None] | None = getattr(controller, "observe", None)
-        #: this cycle's superseded sensor samples, for ``observe``
-        self._superseded: list[HeldSample] = []
-        self._scratch = Measurement()
         self._reset_cycle_rx()
 
     # ---- receive ----------------------------------------------------------------------------
@@ -179,21 +169,33 @@ class ControllerLoop:
             if self._lockstep and d.verdict is Verdict.OK_SOME_LOST:
                 self.catch_up((counter - self._last_pos_counter - 1) & 0x0F, overrun=False)
             self._last_pos_counter = counter
-            if self._fresh and self._observe is not None:  # a burst: keep the older sample
-                self._superseded.append(hold_sample(self.meas, self._pos_counter))
-            self.meas.position_m = float(v["Position"])
-            self.meas.spool_m = float(v["Spool"])
+            self.driver.position(float(v["Position"]), float(v["Spool"]), counter)
             self._fresh = True
             self._pos_counter = counter
             self._pos_ts = msg.timestamp
         elif fid == self._id_aux:
             self._aux_fresh = True
             self._aux_ts = msg.timestamp
-            self.meas.coil_current_a = float(v["CoilCurrent"])
-            self.meas.load_pressure_pa = float(v["LoadPressure"])
+            self.driver.aux(float(v["CoilCurrent"]), float(v["LoadPressure"]))
         else:
-            self._override_m = float(v["Position"]) if v["Override"] else None
+            self.driver.setpoint(float(v["Position"]) if v["Override"] else None)
         return d.verdict
+
+    # ---- the driver's state, as the loop's --------------------------------------------------
+    @property
+    def meas(self) -> Measurement:
+        """The measurement the controller steps on (the driver's)."""
+        return self.driver.meas
+
+    @property
+    def k_active(self) -> int:
+        """The reference sample of the next cycle (cycles run, caught up or in fail-safe)."""
+        return self.driver.k
+
+    @property
+    def saturations(self) -> int:
+        """Commands clipped to ±current_limit_a or non-finite."""
+        return self.driver.saturations
 
     # ---- one cycle --------------------------------------------------------------------------
     def _update_state(self) -> None:
@@ -211,8 +213,7 @@ class ControllerLoop:
         if st is State.ACTIVE and tripped:
             self._fault()
         elif st is State.FAULT and not tripped:
-            self.controller.reset()
-            self._samples.reset()
+            self.driver.restart()
             self.life.to(State.ACTIVE)
             log.warning("cycle %d: sensor data fresh for %d cycles: ACTIVE again", self.cycles,
                         self.wd.fresh_cycles)
@@ -225,24 +226,14 @@ class ControllerLoop:
     def _command(self) -> tuple[float, bool]:
         st = self.life.state
         if st is State.ACTIVE:
-            x_d = self._override_m if self._override_m is not None else self.ref.at(self.k_active)
-            self.meas.reference_m = x_d
-            self.meas.fresh = self._fresh
-            if self._superseded and self._observe is not None:
-                # frames that came in a burst: the predictors step on every sample, after the
-                # periods caught up and before this step (``replay`` does the same in this order)
-                observe_held(self._observe, self._superseded, self._samples.take, self._scratch)
-            if self._fresh:
-                self.meas.samples = self._samples.take(self._pos_counter)
-            cmd = self.controller.step(self.meas)
-            self.k_active += 1
-            return cmd.current_a, cmd.enable
-        self._superseded.clear()
+            return self.driver.step()
         if st is State.FAULT:
             self.failsafe_cycles += 1
-            self.k_active += 1
+            self.driver.failsafe_cycle()
             if self.opts.watchdog.failsafe == "hold":
                 return self.last_current_a, self.last_enable
+            return 0.0, False
+        self.driver.idle_cycle()
         return 0.0, False
 
     def catch_up(self, periods: int, overrun: bool = True) -> None:
@@ -268,19 +259,12 @@ class ControllerLoop:
             if tripped and st is State.ACTIVE:
                 self._fault()
         if self.life.state is State.FAULT:
-            self.k_active += periods
+            self.driver.k += periods
             self.failsafe_cycles += periods
             return
         if self.life.state is not State.ACTIVE:
             return
-        fresh = self.meas.fresh
-        self.meas.fresh = self.meas.command_sent = False
-        for _ in range(periods):
-            self.meas.reference_m = (self._override_m if self._override_m is not None
-                                     else self.ref.at(self.k_active))
-            self.controller.step(self.meas)
-            self.k_active += 1
-        self.meas.fresh, self.meas.command_sent = fresh, True
+        self.driver.catch_up(periods)
 
     def poll_cycle(self, skipped: int = 0, drain: bool = True, late: bool = False
                    ) -> float | None:
@@ -304,10 +288,6 @@ class ControllerLoop:
         """Everything after the drain: state, control step, VALVE_CMD, periodic frames."""
         self._update_state()
         current, enable = self._command()
-        lim = self.opts.current_limit_a
-        if not math.isfinite(current) or abs(current) > lim:
-            self.saturations += 1
-            current = 0.0 if not math.isfinite(current) else max(-lim, min(lim, current))
         self.send_command(current, enable)
         if self._fresh:
             self.stats.latency.add(time.time() - self._pos_ts)

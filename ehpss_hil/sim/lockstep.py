@@ -20,12 +20,11 @@ from collections.abc import Callable
 import numpy as np
 
 from ..blas import limit_blas_threads
-from ..codec.e2e import counter_steps
 from ..codec.frames import FrameCodec
-from ..control.base import Measurement
 from ..control.controllers import LoopBase
 from ..control.registry import make_controller
 from ..control.tuning import ControlTuning
+from ..driver import ControllerDriver
 from ..emulation import PlantEmulation
 from ..errors import ConfigError
 from ..physics.faults import FaultState
@@ -90,40 +89,37 @@ def run_scenario(scenario: Scenario, mode: str, params: Params | None = None,
 def _loop(emu: PlantEmulation, ctrl: LoopBase, tr: QuantizeTransport | FramesTransport,
           x_d: list[float], delay: int, set_truth: Callable[[FaultState], None] | None,
           rows: list[tuple]) -> None:
-    """The per-sample loop (locals bound once: this is the simulator's hot path).
+    """The per-sample loop (locals bound once: this is the simulator's hot path), the controller
+    run by the same :class:`ControllerDriver` as the daemon and replay: sample k's frames carry
+    the E2E counter k mod 16, a lost sample is a cycle without data.
 
     One row per sample: (x_true, y_s, spool, applied current, probe, faults, fresh, J list,
     nominal fallback).
     """
-    meas = Measurement()
+    drv = ControllerDriver(ctrl, x_d.__getitem__)
     queue: deque[float | None] = deque([0.0] * delay)
     held = 0.0
     measure, lost, advance = emu.measure, emu.frame_lost, emu.advance
-    sensor, command, step = tr.sensor, tr.command, ctrl.step
+    sensor, command = tr.sensor, tr.command
+    position, aux, step = drv.position, drv.aux, drv.step
     probe, index_values, push = ctrl.probe, ctrl.index_values, rows.append
-    k_seen = -1  # the sample of the last fresh measurement
-    for k, xd in enumerate(x_d):
+    for k in range(len(x_d)):
         s = measure()
         vals = sensor(s.position_m, s.spool_m, s.load_pressure_pa, s.coil_current_a,
                       s.current_saturated, lost(0))
-        if vals is None:
-            meas.fresh = False
-        else:
-            meas.position_m, meas.spool_m, meas.load_pressure_pa, meas.coil_current_a = vals
-            meas.fresh = True
-            # as the daemon counts them from the E2E counter (1…16)
-            meas.samples = 0 if k_seen < 0 else counter_steps(k, k_seen)
-            k_seen = k
-        meas.reference_m = xd
+        if vals is not None:
+            position(vals[0], vals[1], k & 0x0F)
+            aux(vals[3], vals[2])
         if set_truth is not None:
             set_truth(s.faults)
-        cmd = step(meas)
-        queue.append(command(cmd.current_a if cmd.enable else 0.0, k, lost(1)))
+        fresh = vals is not None
+        current, enable = step()
+        queue.append(command(current if enable else 0.0, k, lost(1)))
         arrived = queue.popleft()
         if arrived is not None:
             held = arrived
         push((s.true_position_m, s.position_m, s.spool_m, advance(held), probe(), s.faults,
-              meas.fresh, index_values(), ctrl.nominal))
+              fresh, index_values(), ctrl.nominal))
 
 
 def _result(sc: Scenario, mode: str, ts: float, x_d: np.ndarray, y_m: np.ndarray,
