@@ -136,3 +136,54 @@ def test_setpoint_override_step_beyond_the_configured_reference(amplitude_m: flo
         final[mode] = x[-1]
     assert final["mmac"] == pytest.approx(amplitude_m, rel=0.002, abs=20 * UM)
     assert abs(final["mmac"] - final["nrc"]) <= 1 * UM
+
+
+def test_leaving_the_fail_safe_mid_motion_with_a_drift_present() -> None:
+    """The daemon resets the controller when it leaves the fail-safe, mid-motion, with the
+    sensor drift (0.5) that was there before: x̂ restarts on the sensor as if k_DFT were 1, and
+    the position channel must still find 0.5 (differences from the restart point, not levels).
+    Before, it settled on θ̂_D ≈ 1, then the failed-sensor model: worse than nrc."""
+    from dataclasses import replace
+
+    from ehpss_hil.control.base import ValveCommand
+    from ehpss_hil.control.registry import make_controller
+    from ehpss_hil.emulation import PlantEmulation
+    from ehpss_hil.scenario import Event, Reference
+    from ehpss_hil.sim import lockstep
+
+    sc = replace(load_scenario(PROJECT_ROOT / "scenarios" / "fault-free.yaml"), duration_s=3.0,
+                 reference=Reference(kind="sine", amplitude_m=1e-3, omega_rad_s=5.0),
+                 events=(Event(t_s=0.3, k_dft=0.5),))
+    off, back = 1000, 1500  # fail-safe (0 A, disabled) over [1.0, 1.5) s, then a reset
+
+    class FailSafe:
+        """The controller as the daemon runs it through a fail-safe period."""
+
+        def __init__(self, mode: str) -> None:
+            self.inner = make_controller(mode, PARAMS, sc.sample_time_s, None, sc.reference)
+            self.index_slots = self.inner.index_slots
+            self.k = 0
+
+        def __getattr__(self, name: str) -> object:
+            return getattr(self.inner, name)
+
+        def step(self, m: object) -> ValveCommand:
+            k, self.k = self.k, self.k + 1
+            if off <= k < back:
+                return ValveCommand(0.0, False)
+            if k == back:
+                self.inner.reset()
+            return self.inner.step(m)  # type: ignore[arg-type]
+
+    err = {}
+    for mode in ("nrc", "mmac"):
+        ctrl = FailSafe(mode)
+        rows: list[tuple] = []
+        lockstep._loop(PlantEmulation(PARAMS, sc), ctrl, lockstep._transport("quantize"),  # type: ignore[arg-type]
+                       sc.reference_samples().tolist(), 1, None, rows)
+        x = np.array([r[0] for r in rows])
+        e = (x - sc.reference_samples())[back + 500:]
+        err[mode] = float(np.sqrt(np.mean(e ** 2)))
+        if mode == "mmac":
+            assert ctrl.inner.k_dft_hat == pytest.approx(0.5, abs=0.01)
+    assert err["mmac"] < 0.05 * err["nrc"]

@@ -83,6 +83,10 @@ class MmacController(LoopBase):
         self._flow_spool_model = self.spool_sup.active
         self.clock.reset()
         self._spool_hold = 0  # samples left without spool evidence (the spool was at its stop)
+        #: the seed point: the sensor (m) and x̂ (m) at the first sample after the reset; the
+        #: position channel regresses y_s − y0 on x̂ − x0 (offset-free whatever k_DFT was then),
+        #: and x0 = y0/(θ̂_D·k̂_Q) keeps x̂ absolute as the estimates move
+        self._y0 = self._x0 = 0.0
 
     def step(self, meas: Measurement) -> ValveCommand:
         """Predict, score both banks, supervise, compensate, PI."""
@@ -90,7 +94,10 @@ class MmacController(LoopBase):
             y_v = meas.spool_m
             tl_prev = self.k_loe_hat / self.k_q_hat
             self.valve.stop_m = self.stroke_m / max(tl_prev, self.min_theta_l)
+            seeding = self.clock.seed
             gap, resync, v, xh = self.clock.sample(meas, tl_prev, self._bridge_gain())
+            if seeding:  # x̂ = y_s now, as if k_DFT were 1: only differences from here are used
+                self._y0 = self._x0 = meas.position_m
             if gap and self._flow_on:
                 self.flow.hold_off(self._flow_hold)
             sb, ss = self.spool_bank, self.spool_sup
@@ -114,19 +121,23 @@ class MmacController(LoopBase):
                 td = self.k_dft_hat
                 if (not self.pos_sup.guarded and td >= self._failed_below
                         and not self.flow.flow_fault):
-                    # re-anchor on the trusted sensor (a dead-reckoned offset must not be taken
-                    # for a drift by the position bank) and skip this sample's regression
-                    xh = self.xhat.x = meas.position_m / td
+                    # re-anchor on the trusted sensor and start the regression over from here: a
+                    # dead-reckoned offset must not be taken for a drift, nor the sensor's reading
+                    # through the present θ̂_D for evidence (x̂ = y_s/θ̂_D, x0 = y0/θ̂_D)
+                    self._y0, self._x0 = meas.position_m, xh
+                    self._rebase(td)
+                    xh = self.xhat.x
                 elif not self.flow.flow_fault:
-                    pb.update(meas.position_m, xh)
-                    ps.update(abs(xh) * self._inv_s_pos)
+                    pb.update(meas.position_m - self._y0, xh - self._x0)
+                    ps.update(abs(xh - self._x0) * self._inv_s_pos)
             elif not self.flow.flow_fault:  # under H_Q the position channel has nothing to explain
-                pb.update(meas.position_m, xh)
-                ps.update(abs(xh) * self._inv_s_pos)
+                pb.update(meas.position_m - self._y0, xh - self._x0)
+                ps.update(abs(xh - self._x0) * self._inv_s_pos)
             tl = 1.0 if ss.guarded else sb.theta[ss.active]
             self.k_loe_hat = tl
             self.k_dft_hat = pb.theta[ps.active]
             self.k_q_hat = 1.0
+            self._rebase(self.k_dft_hat)
             if self._flow_on:
                 self._flow_split(meas, y_v, tl)
                 self._watch(tl)
@@ -136,6 +147,15 @@ class MmacController(LoopBase):
         sent = cmd.current_a if math.isfinite(cmd.current_a) else 0.0  # as the loop sends it
         self.clock.commanded(sent, meas.command_sent)
         return cmd
+
+    def _rebase(self, theta: float) -> None:
+        """Keep x0 = y0/θ with θ = θ̂_D·k̂_Q in use: x̂ moves with x0 (x̂ − x0 is unchanged), so
+        it stays the absolute position while the sensor gain estimate changes; a failed-sensor
+        model (θ below ``sensor_failed_below``) leaves it where it is."""
+        if theta >= self._failed_below:
+            x0 = self._y0 / theta
+            self.xhat.x += x0 - self._x0
+            self._x0 = x0
 
     def observe(self, meas: Measurement) -> None:
         """A sample superseded within this cycle: the sample clock steps the predictors on it."""
@@ -172,10 +192,12 @@ class MmacController(LoopBase):
             self.k_loe_hat = tl * prod
             self.k_dft_hat = 1.0
             self.xhat.x = meas.position_m / prod
+            self._x0 = self._y0 / prod if prod >= self._failed_below else self._x0
             self._in_flow = True
         elif self._in_flow:  # back to H_D: the product is the sensor's gain (≈ 1 when it vanished)
             self._in_flow = False
             self.xhat.x = meas.position_m / prod if prod >= self._failed_below else meas.position_m
+            self._x0 = self._y0 / prod if prod >= self._failed_below else self._y0
             self.pos_bank.seed_ria(prod)
             self.pos_sup.force(self.pos_bank.ria)
             self.k_dft_hat = self.pos_bank.theta[self.pos_bank.ria]
