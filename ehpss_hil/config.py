@@ -10,6 +10,7 @@ from typing import Literal
 
 from .control.tuning import ControlTuning
 from .errors import ConfigError
+from .limits import MAX_RATE_HZ, MIN_RATE_HZ
 from .scenario import Reference
 from .schema import build, load_yaml, rng
 
@@ -114,12 +115,12 @@ class ControllerConfig:
     bus: BusConfig = field(default_factory=BusConfig)
     ids: CanIds = field(default_factory=CanIds)
     mode: Mode = "mmac"
-    rate_hz: float = field(default=1000.0, metadata=rng(10.0, 10000.0))
+    rate_hz: float = field(default=1000.0, metadata=rng(MIN_RATE_HZ, MAX_RATE_HZ))
     reference: Reference = field(default_factory=Reference)
     watchdog: Watchdog = field(default_factory=Watchdog)
     status_rate_hz: float = field(default=50.0, metadata=rng(1.0, 1000.0))
     heartbeat_rate_hz: float = field(default=10.0, metadata=rng(0.1, 100.0))
-    stats_interval_s: float = field(default=10.0, metadata=rng(0.0))
+    stats_interval_s: float = field(default=10.0, metadata=rng(0.0, 86400.0))
     rt: RtOptions = field(default_factory=RtOptions)
     log: LogConfig = field(default_factory=LogConfig)
     tuning: ControlTuning = field(default_factory=ControlTuning)
@@ -130,6 +131,11 @@ class ControllerConfig:
         if self.mode not in DAEMON_MODES:
             raise ConfigError("", "mode", "oracle is for benchmarks only, not for the daemon "
                               f"(expected one of {', '.join(DAEMON_MODES)})")
+        for key in ("k_loe_limits", "k_dft_limits"):
+            lo, hi = getattr(self.tuning, key)
+            if not lo < hi:
+                raise ConfigError("", f"tuning.{key}", f"expected [low, high] with low < high, "
+                                  f"got [{lo:g}, {hi:g}]")
 
 
 @dataclass(frozen=True)
@@ -138,7 +144,7 @@ class EmulatorConfig:
 
     bus: BusConfig = field(default_factory=BusConfig)
     ids: CanIds = field(default_factory=CanIds)
-    rate_hz: float = field(default=1000.0, metadata=rng(10.0, 10000.0))
+    rate_hz: float = field(default=1000.0, metadata=rng(MIN_RATE_HZ, MAX_RATE_HZ))
     mode: Literal["realtime", "lockstep"] = "realtime"
     command_timeout_s: float = field(default=0.010, metadata=rng(0.0, 10.0, lo_open=True))
     truth: bool = False
@@ -166,8 +172,9 @@ def apply_overrides(src: str, bus: BusConfig, rate_hz: float, rt: RtOptions, *,
         except ConfigError as exc:
             raise ConfigError(src, f"bus.{exc.key_path} (command line)", exc.reason) from exc
     rate_hz = rate_hz if rate is None else rate
-    if not 10.0 <= rate_hz <= 10000.0:
-        raise ConfigError(src, "rate_hz (--rate)", f"must be in [10, 10000] Hz, got {rate_hz:g}")
+    if not MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ:
+        raise ConfigError(src, "rate_hz (--rate)",
+                          f"must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate_hz:g}")
     if rt_priority is not None:
         if not 0 <= rt_priority <= 99:
             raise ConfigError(src, "rt.priority (--rt-priority)", "must be in [0, 99]")
@@ -192,21 +199,25 @@ def _resolve(base: Path, value: str) -> str:
     return str(p if p.is_absolute() else (base / p).resolve())
 
 
-def load_controller_config(path: str | Path) -> ControllerConfig:
-    """Load ``controller.yaml``; relative ``params``/``dbc`` paths resolve against its directory
-    (``log.path`` stays relative to the working directory, like ``--log``)."""
+def load_controller_config(path: str | Path, data: object = None) -> ControllerConfig:
+    """Load ``controller.yaml`` (``data``: its parsed content, when the caller read it already);
+    relative ``params``/``dbc``/``reference.path`` paths resolve against its directory
+    (``log.path`` stays relative to the working directory, like ``--log``); a file reference is
+    read now."""
     p = Path(path)
-    cfg = build(ControllerConfig, load_yaml(p), str(p))
+    cfg = build(ControllerConfig, load_yaml(p) if data is None else data, str(p))
     base = p.resolve().parent
     from dataclasses import replace
     return replace(cfg, params=_existing(p, "params", _resolve(base, cfg.params)),
-                   dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)))
+                   dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)),
+                   reference=cfg.reference.loaded(base, str(p)))
 
 
-def load_emulator_config(path: str | Path) -> EmulatorConfig:
-    """Load ``emulator.yaml``; relative paths resolve against its directory."""
+def load_emulator_config(path: str | Path, data: object = None) -> EmulatorConfig:
+    """Load ``emulator.yaml`` (``data``: its parsed content, when the caller read it already);
+    relative paths resolve against its directory."""
     p = Path(path)
-    cfg = build(EmulatorConfig, load_yaml(p), str(p))
+    cfg = build(EmulatorConfig, load_yaml(p) if data is None else data, str(p))
     base = p.resolve().parent
     from dataclasses import replace
     return replace(cfg, params=_existing(p, "params", _resolve(base, cfg.params)),
