@@ -73,9 +73,9 @@ class LogConfig:
     """candump ``-L`` log: empty path = no log. Rotation by size; writer queue bound (lines)."""
 
     path: str = ""
-    max_bytes: int = field(default=256 * 2**20, metadata=rng(4096))
+    max_bytes: int = field(default=256 * 2**20, metadata=rng(4096, 2**40))
     backups: int = field(default=5, metadata=rng(0, 1000))
-    queue_lines: int = field(default=200_000, metadata=rng(1000))
+    queue_lines: int = field(default=200_000, metadata=rng(1000, 10_000_000))
 
 
 @dataclass(frozen=True)
@@ -131,6 +131,9 @@ class ControllerConfig:
         if self.mode not in DAEMON_MODES:
             raise ConfigError("", "mode", "oracle is for benchmarks only, not for the daemon "
                               f"(expected one of {', '.join(DAEMON_MODES)})")
+        if not self.rt.sensor_age_us * 1e-6 < 0.5 / self.rate_hz:
+            raise ConfigError("", "rt.sensor_age_us", f"must be below half a period "
+                              f"({0.5e6 / self.rate_hz:g} µs at rate_hz {self.rate_hz:g})")
         for key in ("k_loe_limits", "k_dft_limits"):
             lo, hi = getattr(self.tuning, key)
             if not lo < hi:

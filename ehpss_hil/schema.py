@@ -102,7 +102,10 @@ def _convert(tp: Any, value: Any, src: str, path: str, meta: dict[str, Any]) -> 
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ConfigError(src, path, f"expected a number, got {show(value)}")
-        x = float(value)
+        try:
+            x = float(value)
+        except OverflowError:  # an integer beyond any float (10**400)
+            x = math.inf
         if not math.isfinite(x):
             raise ConfigError(src, path, f"expected a finite number, got {show(value)}")
         _check_range(x, src, path, meta)

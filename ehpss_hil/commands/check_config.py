@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config import ControllerConfig, EmulatorConfig, load_controller_config, load_emulator_config
-from ..errors import EhpssError, one_line
+from ..errors import ConfigError, EhpssError, one_line
 from ..physics.params import Params, load_params
 from ..scenario import Scenario, load_scenario
 from ..schema import load_yaml
@@ -79,7 +79,17 @@ def _prepare_emulator(path: Path, e: EmulatorConfig) -> None:
 
 
 def summarize(path: Path) -> str:
-    """Load ``path`` as whatever it is and return a one-line summary (raises ConfigError)."""
+    """Load ``path`` as whatever it is and return a one-line summary (raises ConfigError
+    naming ``path``)."""
+    try:
+        return _summarize(path)
+    except ConfigError as exc:
+        if exc.source:
+            raise
+        raise ConfigError(str(path), exc.key_path, exc.reason) from exc
+
+
+def _summarize(path: Path) -> str:
     data = load_yaml(path)
     kind = _kind(data, path)
     if kind == "scenario":

@@ -20,7 +20,8 @@ class ControlTuning:
     models); each limits pair is ``(low, high)`` with low < high (checked by the config).
     """
 
-    nlms_gain_per_ms: float = field(default=0.2, metadata=rng(0.0, 2.0, lo_open=True))
+    #: NLMS contraction per millisecond; at most 1 (a full step), else (1 − g)^(Ts/1 ms) is complex
+    nlms_gain_per_ms: float = field(default=0.2, metadata=rng(0.0, 1.0, lo_open=True))
     index_a1: float = field(default=1.0, metadata=rng(0.0, 1e3))
     index_a2: float = field(default=1.0, metadata=rng(0.0, 1e3))
     forgetting_1_s: float = field(default=10.0, metadata=rng(0.0, 1e4, lo_open=True))

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import PROJECT_ROOT
+from ..errors import ConfigError
 from ..schema import build, load_yaml, rng
 
 DEFAULT_PARAMS = PROJECT_ROOT / "configs" / "params.yaml"
@@ -65,6 +66,19 @@ class Params:
 
     plant: PlantParams = field(default_factory=PlantParams)
     controller: ControllerGains = field(default_factory=ControllerGains)
+
+    def __post_init__(self) -> None:
+        """The fault-free closed loop (eq 39) must be stable: its reference model y_m and the
+        simulated plant diverge otherwise (an integrator at rest, K_i = 0, is accepted)."""
+        import numpy as np
+
+        from .model import closed_loop_matrices
+
+        poles = np.linalg.eigvals(closed_loop_matrices(self)[0])
+        worst = poles[np.argmax(poles.real)]
+        if not np.isfinite(poles).all() or worst.real > 1e-9 * max(1.0, float(abs(poles).max())):
+            raise ConfigError("", "controller", "the fault-free closed loop (eq 39) with these "
+                              f"plant and gain values is unstable (pole at {worst:.4g} 1/s)")
 
 
 def load_params(path: str | Path | None = None) -> Params:
