@@ -191,7 +191,8 @@ def _existing(src: Path, key: str, value: str) -> str:
     """``value`` when empty (the default file) or an existing file, else a ConfigError for
     ``key`` (so a wrong path is a config error naming its key, before any bus is opened)."""
     if value and not Path(value).is_file():
-        raise ConfigError(str(src), key, f"no such file: {value}")
+        what = "not a regular file" if Path(value).exists() else "no such file"
+        raise ConfigError(str(src), key, f"{what}: {value}")
     return value
 
 
