@@ -10,6 +10,7 @@ from typing import Literal
 
 from .control.tuning import ControlTuning
 from .errors import ConfigError
+from .limits import MAX_RATE_HZ, MIN_RATE_HZ
 from .scenario import Reference
 from .schema import build, load_yaml, rng
 
@@ -72,9 +73,9 @@ class LogConfig:
     """candump ``-L`` log: empty path = no log. Rotation by size; writer queue bound (lines)."""
 
     path: str = ""
-    max_bytes: int = field(default=256 * 2**20, metadata=rng(4096))
+    max_bytes: int = field(default=256 * 2**20, metadata=rng(4096, 2**40))
     backups: int = field(default=5, metadata=rng(0, 1000))
-    queue_lines: int = field(default=200_000, metadata=rng(1000))
+    queue_lines: int = field(default=200_000, metadata=rng(1000, 10_000_000))
 
 
 @dataclass(frozen=True)
@@ -118,12 +119,12 @@ class ControllerConfig:
     bus: BusConfig = field(default_factory=BusConfig)
     ids: CanIds = field(default_factory=CanIds)
     mode: Mode = "mmac"
-    rate_hz: float = field(default=1000.0, metadata=rng(10.0, 10000.0))
+    rate_hz: float = field(default=1000.0, metadata=rng(MIN_RATE_HZ, MAX_RATE_HZ))
     reference: Reference = field(default_factory=Reference)
     watchdog: Watchdog = field(default_factory=Watchdog)
     status_rate_hz: float = field(default=50.0, metadata=rng(1.0, 1000.0))
     heartbeat_rate_hz: float = field(default=10.0, metadata=rng(0.1, 100.0))
-    stats_interval_s: float = field(default=10.0, metadata=rng(0.0))
+    stats_interval_s: float = field(default=10.0, metadata=rng(0.0, 86400.0))
     rt: RtOptions = field(default_factory=RtOptions)
     log: LogConfig = field(default_factory=LogConfig)
     tuning: ControlTuning = field(default_factory=ControlTuning)
@@ -134,6 +135,14 @@ class ControllerConfig:
         if self.mode not in DAEMON_MODES:
             raise ConfigError("", "mode", "oracle is for benchmarks only, not for the daemon "
                               f"(expected one of {', '.join(DAEMON_MODES)})")
+        if not self.rt.sensor_age_us * 1e-6 < 0.5 / self.rate_hz:
+            raise ConfigError("", "rt.sensor_age_us", f"must be below half a period "
+                              f"({0.5e6 / self.rate_hz:g} µs at rate_hz {self.rate_hz:g})")
+        for key in ("k_loe_limits", "k_dft_limits"):
+            lo, hi = getattr(self.tuning, key)
+            if not lo < hi:
+                raise ConfigError("", f"tuning.{key}", f"expected [low, high] with low < high, "
+                                  f"got [{lo:g}, {hi:g}]")
 
 
 @dataclass(frozen=True)
@@ -142,7 +151,7 @@ class EmulatorConfig:
 
     bus: BusConfig = field(default_factory=BusConfig)
     ids: CanIds = field(default_factory=CanIds)
-    rate_hz: float = field(default=1000.0, metadata=rng(10.0, 10000.0))
+    rate_hz: float = field(default=1000.0, metadata=rng(MIN_RATE_HZ, MAX_RATE_HZ))
     mode: Literal["realtime", "lockstep"] = "realtime"
     command_timeout_s: float = field(default=0.010, metadata=rng(0.0, 10.0, lo_open=True))
     truth: bool = False
@@ -170,8 +179,9 @@ def apply_overrides(src: str, bus: BusConfig, rate_hz: float, rt: RtOptions, *,
         except ConfigError as exc:
             raise ConfigError(src, f"bus.{exc.key_path} (command line)", exc.reason) from exc
     rate_hz = rate_hz if rate is None else rate
-    if not 10.0 <= rate_hz <= 10000.0:
-        raise ConfigError(src, "rate_hz (--rate)", f"must be in [10, 10000] Hz, got {rate_hz:g}")
+    if not MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ:
+        raise ConfigError(src, "rate_hz (--rate)",
+                          f"must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate_hz:g}")
     if rt_priority is not None:
         if not 0 <= rt_priority <= 99:
             raise ConfigError(src, "rt.priority (--rt-priority)", "must be in [0, 99]")
@@ -185,7 +195,8 @@ def _existing(src: Path, key: str, value: str) -> str:
     """``value`` when empty (the default file) or an existing file, else a ConfigError for
     ``key`` (so a wrong path is a config error naming its key, before any bus is opened)."""
     if value and not Path(value).is_file():
-        raise ConfigError(str(src), key, f"no such file: {value}")
+        what = "not a regular file" if Path(value).exists() else "no such file"
+        raise ConfigError(str(src), key, f"{what}: {value}")
     return value
 
 
@@ -196,21 +207,25 @@ def _resolve(base: Path, value: str) -> str:
     return str(p if p.is_absolute() else (base / p).resolve())
 
 
-def load_controller_config(path: str | Path) -> ControllerConfig:
-    """Load ``controller.yaml``; relative ``params``/``dbc`` paths resolve against its directory
-    (``log.path`` stays relative to the working directory, like ``--log``)."""
+def load_controller_config(path: str | Path, data: object = None) -> ControllerConfig:
+    """Load ``controller.yaml`` (``data``: its parsed content, when the caller read it already);
+    relative ``params``/``dbc``/``reference.path`` paths resolve against its directory
+    (``log.path`` stays relative to the working directory, like ``--log``); a file reference is
+    read now."""
     p = Path(path)
-    cfg = build(ControllerConfig, load_yaml(p), str(p))
+    cfg = build(ControllerConfig, load_yaml(p) if data is None else data, str(p))
     base = p.resolve().parent
     from dataclasses import replace
     return replace(cfg, params=_existing(p, "params", _resolve(base, cfg.params)),
-                   dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)))
+                   dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)),
+                   reference=cfg.reference.loaded(base, str(p)))
 
 
-def load_emulator_config(path: str | Path) -> EmulatorConfig:
-    """Load ``emulator.yaml``; relative paths resolve against its directory."""
+def load_emulator_config(path: str | Path, data: object = None) -> EmulatorConfig:
+    """Load ``emulator.yaml`` (``data``: its parsed content, when the caller read it already);
+    relative paths resolve against its directory."""
     p = Path(path)
-    cfg = build(EmulatorConfig, load_yaml(p), str(p))
+    cfg = build(EmulatorConfig, load_yaml(p) if data is None else data, str(p))
     base = p.resolve().parent
     from dataclasses import replace
     return replace(cfg, params=_existing(p, "params", _resolve(base, cfg.params)),

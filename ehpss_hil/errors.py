@@ -6,8 +6,37 @@ matching builtin so callers may catch either (the pattern of python-can's ``CanE
 
 from __future__ import annotations
 
+import reprlib
 import sys
 from collections.abc import Callable
+from typing import Any
+
+from .limits import MAX_MESSAGE_CHARS, MAX_SHOWN_CHARS
+
+_SHOW = reprlib.Repr()
+_SHOW.maxstring = MAX_SHOWN_CHARS
+_SHOW.maxother = MAX_SHOWN_CHARS
+_SHOW.maxlist = _SHOW.maxtuple = _SHOW.maxset = _SHOW.maxdict = 4
+_SHOW.maxlevel = 2
+
+
+def one_line(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """``text`` on one line (control characters escaped), cut to ``limit`` characters."""
+    if not text.isprintable():
+        text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
+def show(value: Any) -> str:
+    """A short ``repr`` of a value from an input file, for an error message (``reprlib``-cut
+    to about :data:`~ehpss_hil.limits.MAX_SHOWN_CHARS` characters, one line)."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 192:
+        return f"an integer of {value.bit_length()} bits"  # repr() refuses > 4300 digits
+    try:
+        text = _SHOW.repr(value)
+    except (ValueError, RecursionError):
+        text = f"a {type(value).__name__}"
+    return one_line(text, 2 * MAX_SHOWN_CHARS)
 
 
 class EhpssError(Exception):
@@ -31,11 +60,16 @@ class ConfigError(EhpssError, ValueError):
         self.reason = reason
         where = f"{source}: " if source else ""
         key = key_path if key_path else "<top level>"
-        super().__init__(f"{where}{key}: {reason}")
+        super().__init__(one_line(f"{where}{key}: {reason}"))
 
 
 class FrameError(EhpssError, ValueError):
     """A CAN frame cannot be encoded or decoded (malformed, unknown, implausible)."""
+
+
+class FrameIdError(FrameError):
+    """The configured ID layout (``ids.id_base``, node ids) puts a frame outside the 11-bit
+    range or on another frame's ID."""
 
 
 class BusUnavailableError(EhpssError, OSError):

@@ -14,8 +14,16 @@ from typing import Literal
 import numpy as np
 
 from .errors import ConfigError
+from .limits import (
+    MAX_RATE_HZ,
+    MAX_REFERENCE_M,
+    MAX_SCENARIO_SAMPLES,
+    MIN_RATE_HZ,
+    MIN_REFERENCE_SCALE,
+)
 from .physics.faults import FaultState
 from .schema import build, load_yaml, rng
+from .trajectory import ReferenceTable, load_reference_table
 
 
 @dataclass(frozen=True)
@@ -26,19 +34,44 @@ class Reference:
     (``rate_m_s``·(t − start_s), clipped to ±amplitude), ``square`` (±amplitude, period 2π/ω,
     from ``start_s``: +amplitude for the first half period), ``trapezoid`` (period 2π/ω from
     ``start_s``: ramps at ±|rate_m_s| between ±amplitude, a triangle when the ramps take the
-    whole half period), ``file`` (CSV ``t_s,x_m``, linear interpolation, held after the end).
+    whole half period), ``file`` (CSV ``t_s,x_m``, linear interpolation, held after the end;
+    :mod:`ehpss_hil.trajectory`).
+
+    A non-zero ``amplitude_m`` or ``rate_m_s`` is at least
+    :data:`~ehpss_hil.limits.MIN_REFERENCE_SCALE` in magnitude: the adaptive layer normalizes
+    by the spool amplitude they imply. A loaded file reference holds its table (``table``, not a
+    YAML key), read once by :meth:`loaded`; ``path`` is then absolute.
     """
 
     kind: Literal["sine", "step", "ramp", "square", "trapezoid", "file"] = "sine"
-    amplitude_m: float = field(default=0.001, metadata=rng(0.0, 0.5))
+    amplitude_m: float = field(default=0.001, metadata=rng(0.0, MAX_REFERENCE_M))
     omega_rad_s: float = field(default=5.0, metadata=rng(0.0, 2000.0))
     start_s: float = field(default=0.0, metadata=rng(0.0))
     rate_m_s: float = field(default=0.001, metadata=rng(-1.0, 1.0))
     path: str = ""
+    table: ReferenceTable | None = field(default=None, compare=False, repr=False,
+                                         metadata={"internal": True})
 
     def __post_init__(self) -> None:
         if self.kind == "file" and not self.path:
             raise ConfigError("", "path", "required when kind is 'file'")
+        for key in ("amplitude_m", "rate_m_s"):
+            value = getattr(self, key)
+            if 0.0 < abs(value) < MIN_REFERENCE_SCALE:
+                raise ConfigError("", key, f"expected 0 or at least {MIN_REFERENCE_SCALE:g} in "
+                                  f"magnitude, got {value!r}")
+
+    def loaded(self, base_dir: Path | None = None, source: str = "") -> Reference:
+        """This reference with its trajectory file read (kind ``file``; a relative ``path``
+        resolves against ``base_dir``, the directory of the file naming it), else itself.
+        Errors name ``reference.path`` in ``source``."""
+        if self.kind != "file" or self.table is not None:
+            return self
+        p = Path(self.path)
+        if not p.is_absolute() and base_dir is not None:
+            p = base_dir / p
+        p = p.absolute()
+        return replace(self, path=str(p), table=load_reference_table(p, source))
 
     def sample(self, t_s: np.ndarray, base_dir: Path | None = None) -> np.ndarray:
         """x_d at the times ``t_s`` (m)."""
@@ -51,14 +84,9 @@ class Reference:
             return np.clip(x, -self.amplitude_m, self.amplitude_m)
         if self.kind in ("square", "trapezoid"):
             return self._periodic(t_s)
-        p = Path(self.path)
-        if not p.is_absolute() and base_dir is not None:
-            p = base_dir / p
-        try:
-            data = np.loadtxt(p, delimiter=",", ndmin=2)
-        except (OSError, ValueError) as exc:
-            raise ConfigError(str(p), "reference.path", f"cannot read trajectory CSV: {exc}") from exc
-        return np.interp(t_s, data[:, 0], data[:, 1])
+        table = self.loaded(base_dir).table
+        assert table is not None
+        return table.sample(t_s)
 
     def _periodic(self, t_s: np.ndarray) -> np.ndarray:
         """Square or trapezoid wave (m), 0 before ``start_s``."""
@@ -91,9 +119,14 @@ class Reference:
 
 
 class ReferenceBlocks:
-    """x_d sampled in blocks of ``block`` samples (m): cheap per cycle, no per-cycle arrays."""
+    """x_d sampled in blocks of ``block`` samples (m): cheap per cycle, no per-cycle arrays.
+
+    A file reference is read here at the latest (before any loop starts; loaders read it when
+    the config is loaded), then sampled from its table in memory.
+    """
 
     def __init__(self, reference: Reference, ts_s: float, block: int = 1000) -> None:
+        reference = reference.loaded()
         self.reference = reference
         self.ts_s = ts_s
         self._block = block
@@ -206,7 +239,8 @@ class Scenario:
 
     name: str
     duration_s: float = field(metadata=rng(0.0, 86400.0, lo_open=True))
-    sample_time_s: float = field(default=0.001, metadata=rng(1e-5, 0.1))
+    sample_time_s: float = field(default=0.001,
+                                 metadata=rng(1.0 / MAX_RATE_HZ, 1.0 / MIN_RATE_HZ))
     seed: int = field(default=1, metadata=rng(0, 2**32 - 1))
     reference: Reference = field(default_factory=Reference)
     noise: Noise = field(default_factory=Noise)
@@ -260,11 +294,15 @@ class Scenario:
         return self.reference.sample(t, Path(self.base_dir) if self.base_dir else None)
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Load and validate a scenario YAML file."""
+def load_scenario(path: str | Path, data: object = None) -> Scenario:
+    """Load and validate a scenario YAML file (``data``: its parsed content, when the caller
+    read it already). At most :data:`~ehpss_hil.limits.MAX_SCENARIO_SAMPLES` samples, at least
+    one; a file reference is read now, relative to the scenario's directory."""
     p = Path(path)
-    data = load_yaml(p)
-    if isinstance(data, dict) and "base_dir" in data:
-        raise ConfigError(str(p), "base_dir", "unknown key")
-    sc = build(Scenario, data, str(p))
-    return replace(sc, base_dir=str(p.resolve().parent))
+    sc = build(Scenario, load_yaml(p) if data is None else data, str(p))
+    n = sc.duration_s / sc.sample_time_s
+    if not 1 <= round(n) <= MAX_SCENARIO_SAMPLES:
+        raise ConfigError(str(p), "duration_s", f"must hold 1 to {MAX_SCENARIO_SAMPLES} samples "
+                          f"of sample_time_s, got {n:.6g}")
+    base = p.resolve().parent
+    return replace(sc, base_dir=str(base), reference=sc.reference.loaded(base, str(p)))

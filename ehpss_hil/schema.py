@@ -10,15 +10,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 import types
 import typing
 from pathlib import Path
 from typing import Any, Literal, TypeVar, Union, get_args, get_origin, get_type_hints
 
-import yaml
+from .errors import ConfigError, one_line, show
+from .inputfile import load_yaml, parse_yaml
+from .limits import MAX_SHOWN_CHARS
 
-from .errors import ConfigError
+__all__ = ["build", "load", "load_yaml", "parse_yaml", "rng"]
 
 T = TypeVar("T")
 
@@ -26,49 +27,19 @@ _MISSING = dataclasses.MISSING
 
 
 def rng(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
-        doc: str = "") -> dict[str, Any]:
-    """Field metadata for a numeric range ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``)."""
-    return {"min": lo, "max": hi, "lo_open": lo_open, "doc": doc}
+        length: tuple[int, int] | None = None, doc: str = "") -> dict[str, Any]:
+    """Field metadata for a numeric range ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); for a
+    tuple field the range applies to each item and ``length`` bounds the number of items."""
+    return {"min": lo, "max": hi, "lo_open": lo_open, "length": length, "doc": doc}
 
 
-class _Loader(yaml.SafeLoader):
-    """SafeLoader that also reads ``1e7`` / ``3.136e7`` as floats (YAML 1.2 style), not strings."""
-
-
-_Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
-    |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
-    |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
-    |[-+]?\.(?:inf|Inf|INF)
-    |\.(?:nan|NaN|NAN))$""", re.VERBOSE),
-    list("-+0123456789."))
-
-
-def parse_yaml(text: str, source: str = "") -> Any:
-    """Parse YAML text (safe loader, YAML 1.2 floats); syntax errors become ConfigError."""
-    try:
-        return yaml.load(text, Loader=_Loader)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise ConfigError(source, "", f"invalid YAML{where}: {getattr(exc, 'problem', exc)}") from exc
-
-
-def load_yaml(path: str | Path) -> Any:
-    """Parse a YAML file; syntax errors and missing files become ConfigError."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(str(p), "", f"cannot read file ({exc.strerror or exc})") from exc
-    return parse_yaml(text, str(p))
-
-
-def _join(path: str, key: str | int) -> str:
-    if isinstance(key, int):
+def _join(path: str, key: object) -> str:
+    """``path`` extended by a list index or a mapping key (a key from a file is shown cut to
+    one line: it may be anything YAML allows)."""
+    if isinstance(key, int) and not isinstance(key, bool):
         return f"{path}[{key}]"
-    return f"{path}.{key}" if path else key
+    name = one_line(str(key), MAX_SHOWN_CHARS)
+    return f"{path}.{name}" if path else name
 
 
 def _type_name(tp: Any) -> str:
@@ -103,38 +74,45 @@ def _convert(tp: Any, value: Any, src: str, path: str, meta: dict[str, Any]) -> 
                 errors.append(exc)
         if len(errors) == 1:
             raise errors[0]
-        raise ConfigError(src, path, f"expected {_type_name(tp)}, got {value!r}")
+        raise ConfigError(src, path, f"expected {_type_name(tp)}, got {show(value)}")
     if origin is Literal:
         if value not in get_args(tp):
-            raise ConfigError(src, path, f"expected {_type_name(tp)}, got {value!r}")
+            raise ConfigError(src, path, f"expected {_type_name(tp)}, got {show(value)}")
         return value
     if origin is tuple:
         if not isinstance(value, list | tuple):
-            raise ConfigError(src, path, f"expected {_type_name(tp)}, got {value!r}")
+            raise ConfigError(src, path, f"expected {_type_name(tp)}, got {show(value)}")
         (item_tp, *_rest) = get_args(tp)
+        n_min, n_max = meta.get("length") or (0, None)
+        if len(value) < n_min or (n_max is not None and len(value) > n_max):
+            count = f"{n_min}" if n_min == n_max else f"{n_min} to {n_max}"
+            raise ConfigError(src, path, f"expected {count} items, got {len(value)}")
         return tuple(_convert(item_tp, v, src, _join(path, i), meta) for i, v in enumerate(value))
     if dataclasses.is_dataclass(tp):
         return build(typing.cast(type, tp), value, src, path)
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(src, path, f"expected true or false, got {value!r}")
+            raise ConfigError(src, path, f"expected true or false, got {show(value)}")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(src, path, f"expected an integer, got {value!r}")
+            raise ConfigError(src, path, f"expected an integer, got {show(value)}")
         _check_range(value, src, path, meta)
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(src, path, f"expected a number, got {value!r}")
-        x = float(value)
+            raise ConfigError(src, path, f"expected a number, got {show(value)}")
+        try:
+            x = float(value)
+        except OverflowError:  # an integer beyond any float (10**400)
+            x = math.inf
         if not math.isfinite(x):
-            raise ConfigError(src, path, f"expected a finite number, got {value!r}")
+            raise ConfigError(src, path, f"expected a finite number, got {show(value)}")
         _check_range(x, src, path, meta)
         return x
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(src, path, f"expected a string, got {value!r}")
+            raise ConfigError(src, path, f"expected a string, got {show(value)}")
         return value
     raise TypeError(f"schema type {tp!r} at {path} is not supported")  # programming error
 
@@ -144,9 +122,9 @@ def _check_range(x: float, src: str, path: str, meta: dict[str, Any]) -> None:
     lo_open = meta.get("lo_open", False)
     if lo is not None and (x <= lo if lo_open else x < lo):
         bound = f"> {lo}" if lo_open else f">= {lo}"
-        raise ConfigError(src, path, f"expected a value {bound}, got {x!r}")
+        raise ConfigError(src, path, f"expected a value {bound}, got {show(x)}")
     if hi is not None and x > hi:
-        raise ConfigError(src, path, f"expected a value <= {hi}, got {x!r}")
+        raise ConfigError(src, path, f"expected a value <= {hi}, got {show(x)}")
 
 
 def build(cls: type[T], data: Any, src: str = "", path: str = "") -> T:
@@ -154,13 +132,14 @@ def build(cls: type[T], data: Any, src: str = "", path: str = "") -> T:
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise ConfigError(src, path, f"expected a mapping, got {data!r}")
+        raise ConfigError(src, path, f"expected a mapping, got {show(data)}")
     hints = get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(typing.cast(Any, cls)) if f.init}
+    fields = {f.name: f for f in dataclasses.fields(typing.cast(Any, cls))
+              if f.init and not f.metadata.get("internal")}
     unknown = [k for k in data if k not in fields]
     if unknown:
-        known = ", ".join(sorted(n for n, f in fields.items() if not f.metadata.get("internal")))
-        raise ConfigError(src, _join(path, str(unknown[0])), f"unknown key (known keys: {known})")
+        known = ", ".join(sorted(fields))
+        raise ConfigError(src, _join(path, unknown[0]), f"unknown key (known keys: {known})")
     kwargs: dict[str, Any] = {}
     for name, f in fields.items():
         sub = _join(path, name)

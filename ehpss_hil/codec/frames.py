@@ -25,12 +25,14 @@ import cantools
 from cantools.database.can import Message as DbcMessage
 
 from .. import DEFAULT_DBC
-from ..errors import FrameError
+from ..errors import FrameError, FrameIdError
 from .e2e import CounterCheck, E2EState, crc_ok, protect
 from .layout import BitLayout, LayoutMiss
 
 DBC_ID_BASE = 0x100
 HEARTBEAT_BASE = 0x700
+#: largest standard (11-bit) CAN identifier
+MAX_STANDARD_ID = 0x7FF
 _DBC_NODE_IDS = {"HEARTBEAT_CTRL": 0x01, "HEARTBEAT_EMU": 0x02}
 
 
@@ -115,7 +117,7 @@ class FrameCodec:
             raise FrameError(f"{path} is not a CAN database")
         self.db = db
         if not 0 <= id_base <= 0x7FF - 0x6F:
-            raise FrameError(f"id_base 0x{id_base:X} puts frames outside the 11-bit ID range")
+            raise FrameIdError(f"id_base 0x{id_base:X} puts frames outside the 11-bit ID range")
         nodes = {**_DBC_NODE_IDS, **(node_ids or {})}
         self._by_name: dict[str, _Spec] = {}
         self._by_id: dict[int, _Spec] = {}
@@ -124,6 +126,9 @@ class FrameCodec:
                 can_id = HEARTBEAT_BASE + nodes[msg.name]
             else:
                 can_id = msg.frame_id - DBC_ID_BASE + id_base
+                if not 0 <= can_id <= MAX_STANDARD_ID:
+                    raise FrameIdError(f"id_base 0x{id_base:X} puts {msg.name} at 0x{can_id:X}, "
+                                       "outside the 11-bit ID range")
             bounds = tuple(_bounds(s) for s in msg.signals if s.name not in ("CRC", "Counter"))
             zeros = {s.name: 0 for s in msg.signals if s.multiplexer_ids is None}
             conv = {s.name: s.conversion for s in msg.signals}
@@ -132,7 +137,9 @@ class FrameCodec:
             spec = _Spec(msg, msg.name, msg.length, can_id, data_ids, bounds,
                          {b[0]: b[1:] for b in bounds}, zeros, conv, BitLayout.of(msg, e2e), e2e)
             if can_id in self._by_id:
-                raise FrameError(f"{msg.name} and {self._by_id[can_id].msg.name} share ID 0x{can_id:X}")
+                cls = FrameIdError if id_base != DBC_ID_BASE else FrameError
+                raise cls(f"id_base 0x{id_base:X} gives {msg.name} and "
+                          f"{self._by_id[can_id].msg.name} the same ID 0x{can_id:X}")
             self._by_name[msg.name] = spec
             self._by_id[can_id] = spec
         self.max_delta_counter = max_delta_counter

@@ -1,14 +1,20 @@
-"""``ehpss-hil check-config FILE…``: validate configs and scenarios, one summary line each."""
+"""``ehpss-hil check-config FILE…``: validate configs and scenarios, one summary line each.
+
+A file is read once. Beyond the schema, each is prepared as far as its program goes before
+opening a bus (parameters, DBC with the ID layout, trajectory file, the control law or the plant
+emulation built), so a file accepted here is one the programs run with.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
-from ..config import load_controller_config, load_emulator_config
-from ..errors import ConfigError
-from ..physics.params import load_params
+from ..config import ControllerConfig, EmulatorConfig, load_controller_config, load_emulator_config
+from ..errors import ConfigError, EhpssError, one_line
+from ..physics.params import Params, load_params
 from ..scenario import Scenario, load_scenario
 from ..schema import load_yaml
 
@@ -19,8 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("files", nargs="+", type=Path, help="YAML files (kind detected by content)")
 
 
-def _kind(path: Path) -> str:
-    data = load_yaml(path)
+def _kind(data: Any, path: Path) -> str:
     if isinstance(data, dict):
         if "events" in data or "duration_s" in data:
             return "scenario"
@@ -40,23 +45,69 @@ def _loss_text(s: Scenario) -> str:
     return f"sensor {loss.sensor:g} command {loss.command:g}"
 
 
+def _prepare_scenario(s: Scenario, params: Params) -> None:
+    """Build what the simulator builds from a scenario (the plant emulation, the default control
+    law with its reference and sample time)."""
+    from ..control.registry import make_controller
+    from ..emulation import PlantEmulation
+
+    PlantEmulation(params, s)
+    make_controller("mmac", params, s.sample_time_s, None, s.reference)
+
+
+def _prepare_controller(path: Path, c: ControllerConfig) -> None:
+    """What ``ehpss-hil controller`` does with its config before opening the bus."""
+    from ..daemon import default_factory, loop_options
+    from ..runtime.frameio import process_codec
+
+    params = load_params(c.params or None)
+    process_codec(c.dbc, c.ids, str(path))
+    loop_options(c)
+    default_factory(c.mode, params, 1.0 / c.rate_hz, c)
+
+
+def _prepare_emulator(path: Path, e: EmulatorConfig) -> None:
+    """What ``firmware-sim`` does with its config before opening the bus."""
+    from ..runtime.frameio import process_codec
+
+    params = load_params(e.params or None)
+    process_codec(e.dbc, e.ids, str(path))
+    if e.scenario:
+        _prepare_scenario(load_scenario(e.scenario), params)
+
+
 def summarize(path: Path) -> str:
-    """Load ``path`` as whatever it is and return a one-line summary (raises ConfigError)."""
-    kind = _kind(path)
+    """Load ``path`` as whatever it is and return a one-line summary (raises ConfigError
+    naming ``path``)."""
+    try:
+        return _summarize(path)
+    except ConfigError as exc:
+        if exc.source:
+            raise
+        raise ConfigError(str(path), exc.key_path, exc.reason) from exc
+
+
+def _summarize(path: Path) -> str:
+    data = load_yaml(path)
+    kind = _kind(data, path)
     if kind == "scenario":
-        s = load_scenario(path)
+        s = load_scenario(path, data)
+        _prepare_scenario(s, load_params())
         return (f"scenario {s.name}: {s.duration_s:g} s at {1 / s.sample_time_s:g} Hz, "
                 f"{s.reference.kind} {s.reference.amplitude_m * 1e3:g} mm, {len(s.events)} events, "
                 f"loss {_loss_text(s)}, delay {s.transport_delay_samples}")
     if kind == "params":
-        p = load_params(path)
+        p = load_params(path)  # (few bytes: read again rather than a second entry point)
+        _prepare_scenario(Scenario(name="check", duration_s=1.0), p)
         return (f"params: K_c {p.plant.velocity_gain_1_s:.4g} 1/s, K_f {p.controller.k_f:g}, "
                 f"K_p {p.controller.k_p:g}, K_i {p.controller.k_i:g}, K_a {p.controller.k_a:g}")
     if kind == "emulator":
-        e = load_emulator_config(path)
+        e = load_emulator_config(path, data)
+        _prepare_emulator(path, e)
         return (f"emulator: {e.bus.interface}:{e.bus.channel} at {e.rate_hz:g} Hz, {e.mode}, "
                 f"command timeout {e.command_timeout_s * 1e3:g} ms, truth {e.truth}")
-    c = load_controller_config(path)
+    c = load_controller_config(path, data)
+    _prepare_controller(path, c)
     return (f"controller: {c.bus.interface}:{c.bus.channel} at {c.rate_hz:g} Hz, mode {c.mode}, "
             f"watchdog {c.watchdog.timeout_cycles} cycles -> {c.watchdog.failsafe}")
 
@@ -65,8 +116,8 @@ def run(args: argparse.Namespace) -> int:
     status = 0
     for f in args.files:
         try:
-            print(f"{f}: OK: {summarize(f)}")
-        except ConfigError as exc:
-            print(f"{f}: ERROR: {exc}", file=sys.stderr)
+            print(one_line(f"{f}: OK: {summarize(f)}"))
+        except EhpssError as exc:  # ConfigError; a model or DBC that cannot be built from it
+            print(one_line(f"{f}: ERROR: {exc}"), file=sys.stderr)
             status = 2
     return status

@@ -12,44 +12,56 @@ from ..schema import rng
 
 @dataclass(frozen=True)
 class ControlTuning:
-    """Estimator, index and supervisor constants (defaults = DESIGN §5)."""
+    """Estimator, index and supervisor constants (defaults = DESIGN §5).
 
-    nlms_gain_per_ms: float = field(default=0.2, metadata=rng(0.0, 2.0, lo_open=True))
-    index_a1: float = field(default=1.0, metadata=rng(0.0))
-    index_a2: float = field(default=1.0, metadata=rng(0.0))
-    forgetting_1_s: float = field(default=10.0, metadata=rng(0.0, lo_open=True))
+    Every number has a finite range (``rng`` metadata, checked when loaded from YAML): the
+    adaptive layer turns times into sample counts and squares the ε values. The fixed model
+    tuples fill the DBC's model slots (:mod:`.controllers`: at most 2 spool and 3 position
+    models); each limits pair is ``(low, high)`` with low < high (checked by the config).
+    """
+
+    #: NLMS contraction per millisecond; at most 1 (a full step), else (1 − g)^(Ts/1 ms) is complex
+    nlms_gain_per_ms: float = field(default=0.2, metadata=rng(0.0, 1.0, lo_open=True))
+    index_a1: float = field(default=1.0, metadata=rng(0.0, 1e3))
+    index_a2: float = field(default=1.0, metadata=rng(0.0, 1e3))
+    forgetting_1_s: float = field(default=10.0, metadata=rng(0.0, 1e4, lo_open=True))
     hysteresis: float = field(default=0.2, metadata=rng(0.0, 1.0))
-    epsilon0: float = field(default=0.005, metadata=rng(0.0))
-    noise_margin_factor: float = field(default=2.0, metadata=rng(0.0))
-    dwell_s: float = field(default=0.005, metadata=rng(0.0))
+    epsilon0: float = field(default=0.005, metadata=rng(0.0, 10.0))
+    noise_margin_factor: float = field(default=2.0, metadata=rng(0.0, 1e3))
+    dwell_s: float = field(default=0.005, metadata=rng(0.0, 60.0))
     #: a switch needs its condition to hold this long in a row for the same model (s)
     switch_confirm_s: float = field(default=0.01, metadata=rng(0.0, 1.0))
-    warmup_s: float = field(default=0.03, metadata=rng(0.0))
-    min_theta_separation: float = field(default=0.02, metadata=rng(0.0))
-    guard_epsilon: float = field(default=0.4, metadata=rng(0.0, lo_open=True))
+    warmup_s: float = field(default=0.03, metadata=rng(0.0, 60.0))
+    min_theta_separation: float = field(default=0.02, metadata=rng(0.0, 10.0))
+    guard_epsilon: float = field(default=0.4, metadata=rng(0.0, 10.0, lo_open=True))
     sensor_failed_below: float = field(default=0.15, metadata=rng(0.0, 1.0))
-    anchor_rate_1_s: float = field(default=2.0, metadata=rng(0.0))
-    fixed_k_loe: tuple[float, ...] = (1.0, 0.5)
-    fixed_k_dft: tuple[float, ...] = (1.0, 0.5, 0.0)
-    k_loe_limits: tuple[float, ...] = (0.05, 1.5)
-    k_dft_limits: tuple[float, ...] = (0.0, 2.5)
+    anchor_rate_1_s: float = field(default=2.0, metadata=rng(0.0, 1e3))
+    fixed_k_loe: tuple[float, ...] = field(default=(1.0, 0.5),
+                                          metadata=rng(0.0, 1.5, lo_open=True, length=(1, 2)))
+    fixed_k_dft: tuple[float, ...] = field(default=(1.0, 0.5, 0.0),
+                                          metadata=rng(0.0, 2.5, length=(1, 3)))
+    k_loe_limits: tuple[float, ...] = field(default=(0.05, 1.5),
+                                           metadata=rng(0.0, 1.5, length=(2, 2)))
+    k_dft_limits: tuple[float, ...] = field(default=(0.0, 2.5),
+                                           metadata=rng(0.0, 2.5, length=(2, 2)))
     #: channel excitation gate: no switch while |φ| < excitation_floor·S (fraction of S)
     excitation_floor: float = field(default=0.03, metadata=rng(0.0, 1.0))
     #: NLMS regularization c = (nlms_c_fraction·S)²
-    nlms_c_fraction: float = field(default=0.03, metadata=rng(0.0, lo_open=True))
+    nlms_c_fraction: float = field(default=0.03, metadata=rng(0.0, 10.0, lo_open=True))
     #: position-channel guard: when even the best position model leaves a normalized residual
     #: above this, the sensor is not trusted (feedback from the model position x̂, no anchoring)
-    position_guard_epsilon: float = field(default=0.02, metadata=rng(0.0, lo_open=True))
+    position_guard_epsilon: float = field(default=0.02,
+                                         metadata=rng(0.0, 10.0, lo_open=True))
     #: bumpless return from model-position feedback to the sensor: the sensor's share of the
     #: fed-back position ramps from 0 to 1 over this time (s); 0 = switch at once
-    feedback_blend_s: float = field(default=0.02, metadata=rng(0.0))
+    feedback_blend_s: float = field(default=0.02, metadata=rng(0.0, 60.0))
     #: a guard is released when the best J falls below guard_release·J_max
     guard_release: float = field(default=0.25, metadata=rng(0.0, 1.0, lo_open=True))
     #: mmac: attribute a position-channel gain change to the flow gain k_Q when the load pressure
     #: says so (control/flowgain.py): switch, log-likelihood threshold, evidence window (s)
     flow_gain_test: bool = True
-    flow_gain_threshold: float = field(default=8.0, metadata=rng(0.0, lo_open=True))
-    flow_gain_window_s: float = field(default=0.5, metadata=rng(0.0, lo_open=True))
+    flow_gain_threshold: float = field(default=8.0, metadata=rng(0.0, 1e6, lo_open=True))
+    flow_gain_window_s: float = field(default=0.5, metadata=rng(0.0, 60.0, lo_open=True))
     #: … the smallest |θ_prod − 1| taken as a deviation to attribute; the evidence the window
     #: must hold before a decision (s); the increment excitation gate (fraction of the nominal
     #: M-sample increment K_c·S·M·Ts)

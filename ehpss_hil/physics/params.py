@@ -4,25 +4,36 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from .. import PROJECT_ROOT
+from ..errors import ConfigError
 from ..schema import build, load_yaml, rng
 
 DEFAULT_PARAMS = PROJECT_ROOT / "configs" / "params.yaml"
+#: a plant coefficient or the gains K_f, K_a may differ from the paper's eq 39 value by at most
+#: this factor either way: beyond it the model is no EHPSS of this kind (and far enough beyond,
+#: its exact discretization and the adaptive layer's scales overflow)
+PARAM_RANGE_FACTOR = 1000.0
+
+
+def _around(nominal: float) -> dict[str, Any]:
+    """Range metadata: within :data:`PARAM_RANGE_FACTOR` of the paper's ``nominal`` value."""
+    return rng(nominal / PARAM_RANGE_FACTOR, nominal * PARAM_RANGE_FACTOR)
 
 
 @dataclass(frozen=True)
 class PlantParams:
     """Servo valve + cylinder coefficients of the paper's eq 39 (SI units, see each name)."""
 
-    cylinder_damping_1_s: float = field(default=2576.0, metadata=rng(0.0, lo_open=True))
-    hydraulic_stiffness_1_s2: float = field(default=3.136e7, metadata=rng(0.0, lo_open=True))
-    flow_gain_1_s3: float = field(default=1.031e8, metadata=rng(0.0, lo_open=True))
-    valve_damping_1_s: float = field(default=3402.0, metadata=rng(0.0, lo_open=True))
-    valve_stiffness_1_s2: float = field(default=5.905e6, metadata=rng(0.0, lo_open=True))
-    valve_gain_m_per_a_s2: float = field(default=9.739e7, metadata=rng(0.0, lo_open=True))
-    load_mass_kg: float = field(default=20.0, metadata=rng(0.0, lo_open=True))
-    piston_area_m2: float = field(default=2.206e-4, metadata=rng(0.0, lo_open=True))
+    cylinder_damping_1_s: float = field(default=2576.0, metadata=_around(2576.0))
+    hydraulic_stiffness_1_s2: float = field(default=3.136e7, metadata=_around(3.136e7))
+    flow_gain_1_s3: float = field(default=1.031e8, metadata=_around(1.031e8))
+    valve_damping_1_s: float = field(default=3402.0, metadata=_around(3402.0))
+    valve_stiffness_1_s2: float = field(default=5.905e6, metadata=_around(5.905e6))
+    valve_gain_m_per_a_s2: float = field(default=9.739e7, metadata=_around(9.739e7))
+    load_mass_kg: float = field(default=20.0, metadata=_around(20.0))
+    piston_area_m2: float = field(default=2.206e-4, metadata=_around(2.206e-4))
     #: mechanical stroke of the spool, ±spool_stroke_m (m): the actual spool k_LOE·x_v stops
     #: there and the flow saturates. The spool LVDT's range (the DBC's Spool signal, ±10 mm)
     #: covers it: a reading at the stroke is the real spool, held at its stop.
@@ -43,10 +54,10 @@ class PlantParams:
 class ControllerGains:
     """PI gains of eq 39: ``e = K_f·x_d − y_f``, ``z' = K_i·e``, ``I = K_a·(K_p·e + K_i·z)``."""
 
-    k_f: float = field(default=12.71, metadata=rng(0.0, lo_open=True))
-    k_p: float = field(default=4.0, metadata=rng(0.0))
-    k_i: float = field(default=2.0, metadata=rng(0.0))
-    k_a: float = field(default=0.0861, metadata=rng(0.0, lo_open=True))
+    k_f: float = field(default=12.71, metadata=_around(12.71))
+    k_p: float = field(default=4.0, metadata=rng(0.0, 1e3))
+    k_i: float = field(default=2.0, metadata=rng(0.0, 1e3))
+    k_a: float = field(default=0.0861, metadata=_around(0.0861))
 
 
 @dataclass(frozen=True)
@@ -55,6 +66,19 @@ class Params:
 
     plant: PlantParams = field(default_factory=PlantParams)
     controller: ControllerGains = field(default_factory=ControllerGains)
+
+    def __post_init__(self) -> None:
+        """The fault-free closed loop (eq 39) must be stable: its reference model y_m and the
+        simulated plant diverge otherwise (an integrator at rest, K_i = 0, is accepted)."""
+        import numpy as np
+
+        from .model import closed_loop_matrices
+
+        poles = np.linalg.eigvals(closed_loop_matrices(self)[0])
+        worst = poles[np.argmax(poles.real)]
+        if not np.isfinite(poles).all() or worst.real > 1e-9 * max(1.0, float(abs(poles).max())):
+            raise ConfigError("", "controller", "the fault-free closed loop (eq 39) with these "
+                              f"plant and gain values is unstable (pole at {worst:.4g} 1/s)")
 
 
 def load_params(path: str | Path | None = None) -> Params:

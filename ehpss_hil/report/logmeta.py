@@ -35,12 +35,19 @@ class RunInfo:
     sources: list[str] = field(default_factory=list)
 
 
+def _reference_keys(ref: Any) -> Any:
+    """A sidecar's reference mapping without the loaded table (``asdict`` writes it as text)."""
+    return {k: v for k, v in ref.items() if k != "table"} if isinstance(ref, dict) else ref
+
+
 def scenario_from(value: Any, log_dir: Path) -> Scenario | None:
     """A scenario from a sidecar value: mapping, YAML path, or name of a shipped scenario."""
     if isinstance(value, dict):
         if value.get("path"):
             return scenario_from(str(value["path"]), log_dir)
         clean = {k: v for k, v in value.items() if k != "base_dir"}
+        if "reference" in clean:
+            clean["reference"] = _reference_keys(clean["reference"])
         if isinstance(clean.get("events"), list):
             clean["events"] = [{k: v for k, v in ev.items() if v is not None}
                                for ev in clean["events"] if isinstance(ev, dict)]
@@ -89,7 +96,7 @@ def _from_mapping(side: dict[str, Any], log_dir: Path, info: RunInfo) -> None:
     if isinstance(cfg, str) and Path(cfg).is_file():
         _from_config_file(Path(cfg), info)
     cfg_d: dict[str, Any] = cfg if isinstance(cfg, dict) else {}
-    ref_d = cfg_d.get("reference", side.get("reference"))
+    ref_d = _reference_keys(cfg_d.get("reference", side.get("reference")))
     if info.reference is None and isinstance(ref_d, dict):
         info.reference = build(Reference, ref_d, "sidecar", "reference")
     rate = cfg_d.get("rate_hz", side.get("rate_hz"))

@@ -21,7 +21,7 @@ import can
 from ..bus import datagram_rejects, drop_own_frames, frame_reader, frame_writer, stamps_receive_time
 from ..codec import FrameCodec
 from ..config import BusConfig, CanIds, LogConfig
-from ..errors import ConfigError, FrameError
+from ..errors import ConfigError, FrameError, FrameIdError
 
 log = logging.getLogger(__name__)
 
@@ -53,12 +53,15 @@ def open_can_logger(path: str, cfg: LogConfig, bus: BusConfig,
 
 def process_codec(dbc: str, ids: CanIds, config_path: str) -> FrameCodec:
     """The frame codec with a process config's DBC (empty: the shipped one) and ID layout; a DBC
-    that cannot be loaded is a :class:`ConfigError` naming ``dbc`` (exit 2)."""
+    that cannot be loaded is a :class:`ConfigError` naming ``dbc``, an ID layout that does not
+    fit it one naming ``ids.id_base`` (exit 2)."""
     try:
         return FrameCodec(dbc or None, id_base=ids.id_base,
                           node_ids={"HEARTBEAT_CTRL": ids.controller_node,
                                     "HEARTBEAT_EMU": ids.emulator_node},
                           max_delta_counter=ids.max_delta_counter)
+    except FrameIdError as exc:
+        raise ConfigError(config_path, "ids.id_base", str(exc)) from exc
     except ValueError as exc:  # FrameError, or cantools on a file that is no DBC
         raise ConfigError(config_path, "dbc", f"cannot load {dbc}: {exc}") from exc
 

@@ -1,0 +1,43 @@
+"""Bounds on input files: the one home of every cap the loaders apply.
+
+Configs, scenarios and reference trajectories come from people and from other programs; each is
+read once, before any bus is opened, within these bounds. A file beyond a bound is a
+:class:`~ehpss_hil.errors.ConfigError` (exit 2, one line), never a hang, a traceback or gigabytes.
+The shipped files are far inside them (the largest YAML is about 2 kB).
+"""
+
+from __future__ import annotations
+
+#: largest YAML config or scenario file read (bytes); pure-Python YAML parses ~0.5 MB/s
+MAX_YAML_BYTES = 256 * 1024
+#: deepest nesting of mappings/sequences in a YAML file (the shipped files use 3)
+MAX_YAML_DEPTH = 32
+#: most YAML nodes (scalars, mappings, sequences) in one file
+MAX_YAML_NODES = 100_000
+#: wall-time limit for reading and parsing one input file (s)
+MAX_PARSE_S = 5.0
+
+#: largest reference trajectory CSV (``reference: {kind: file}``) read (bytes)
+MAX_REFERENCE_BYTES = 16 * 2**20
+#: most rows (t_s, x_m) in a reference trajectory
+MAX_REFERENCE_ROWS = 1_000_000
+
+#: most samples in a scenario (duration_s / sample_time_s): the lockstep simulator keeps
+#: about 1.3 kB per sample (arrays of every signal), so this bounds one run to ≈ 1.6 GB
+MAX_SCENARIO_SAMPLES = 1_200_000
+#: a non-zero reference amplitude (m) or ramp rate (m/s) is at least this: the adaptive layer
+#: normalizes by the spool amplitude it implies (10 position LSBs of the DBC, 0.1 µm each)
+MIN_REFERENCE_SCALE = 1e-6
+
+#: a value quoted in an error message is cut to this many characters
+MAX_SHOWN_CHARS = 60
+#: an error message (file, key path and reason) is cut to this many characters
+MAX_MESSAGE_CHARS = 400
+
+#: largest |x_d| a reference may ask for (m): the DBC's position range (±0.5 m)
+MAX_REFERENCE_M = 0.5
+
+#: loop rates of the controller and the emulator (Hz); a scenario's sample time is within
+#: their inverses, so every scenario the simulator runs also runs on the bench
+MIN_RATE_HZ = 10.0
+MAX_RATE_HZ = 10000.0
