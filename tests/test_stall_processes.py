@@ -99,3 +99,53 @@ def test_stop_for_5_s(tmp_path: Path) -> None:
     """Both processes in turn, ``mmac`` (the default mode)."""
     pair = _run(tmp_path, "mmac", [("controller", 5.0), ("emulator", 5.0)])
     print("\n".join(_check(pair)))
+
+
+@netns
+@pytest.mark.parametrize("mode", ["nrc", "mmac"])
+def test_a_cpu_hog_beside_the_controller(tmp_path: Path, mode: str) -> None:
+    """Three busy processes pinned with the controller on one CPU for 2 s (it gets about a
+    quarter of it): whatever the host then does, every fail-safe has a starvation or timeout
+    reason, no enabled command uses a stale frame, and the piston never gets more than 1 mm
+    from x_d. The counters are printed (overruns, skipped periods, the reasons)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    cfg = tmp_path / "controller.yaml"
+    cfg.write_text(BENCH_YAML.format(mode=mode, root=ROOT))
+    hogs: list[subprocess.Popen[bytes]] = []
+    with PrivateNetns() as ns:
+        pair = Pair(tmp_path, mode, str(cfg), ns)
+        try:
+            pair.start()
+            assert pair.ctl is not None
+            cpu = sorted(os.sched_getaffinity(0))[-1]
+            os.sched_setaffinity(pair.ctl.p.pid, {cpu})
+            time.sleep(0.3)
+            for _ in range(3):
+                h = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+                os.sched_setaffinity(h.pid, {cpu})
+                hogs.append(h)
+            time.sleep(2.0)
+        finally:
+            for h in hogs:
+                h.kill()
+                h.wait()
+        try:
+            time.sleep(0.5)
+            ctl, _ = pair.finish()
+        finally:
+            pair.kill()
+    cmds, stats = controller_log(tmp_path / "ctl.log")
+    reasons = {st.reason for st in stats if st.state == "FAULT"}
+    assert reasons <= {"LOOP_OVERRUN", "SENSOR_TIMEOUT"}, reasons
+    xs = truth(tmp_path / "emu.log")
+    t_active = next(c.t for c in cmds if c.enable)
+    dev = max(abs(x - x_d(cmds, t)) for t, x in xs if t > t_active)
+    print(json.dumps({"mode": mode, "max_dev_mm": round(dev * 1e3, 3), "fault_reasons":
+                      sorted(reasons), "skipped_periods": ctl.get("skipped_periods"),
+                      "watchdog_trips": ctl.get("watchdog_trips"),
+                      "stale_frames": ctl.get("stale_frames")}))
+    assert dev <= 1e-3
