@@ -21,6 +21,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from _dbc import signal_values
 from _proc import EHPSS_HIL, FIRMWARE_SIM, ROOT, Proc
 
 from ehpss_hil.canlog import read_log
@@ -149,11 +150,11 @@ def controller_log(path: Path) -> tuple[list[Command], list[Status]]:
         if m.arbitration_id == pos:
             last_rx[m.data[1] & 0x0F] = m.timestamp
         elif m.arbitration_id == cmd:
-            v = codec.message("VALVE_CMD").decode(bytes(m.data), decode_choices=False)
+            v = signal_values(codec.message("VALVE_CMD"), m.data)
             cmds.append(Command(n, m.timestamp, int(v["CycleCount"]), float(v["CurrentSetpoint"]),
                                 bool(v["Enable"]), last_rx.get(int(v["SensorCounterEcho"]))))
         elif m.arbitration_id == st:
-            v = codec.message("CTRL_STATUS").decode(bytes(m.data), decode_choices=False)
+            v = signal_values(codec.message("CTRL_STATUS"), m.data)
             stats.append(Status(n, m.timestamp, State(int(v["State"])).name,
                                 FailsafeReason(int(v["FailsafeReason"])).name))
     return cmds, stats
@@ -164,7 +165,7 @@ def truth(path: Path) -> list[tuple[float, float]]:
     codec = FrameCodec()
     tid = codec.can_id("PLANT_TRUTH")
     msg = codec.message("PLANT_TRUTH")
-    return [(m.timestamp, float(msg.decode(bytes(m.data))["Position"]))  # type: ignore[arg-type]
+    return [(m.timestamp, signal_values(msg, m.data)["Position"])
             for m in read_log(path) if m.arbitration_id == tid]
 
 

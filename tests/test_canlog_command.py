@@ -13,6 +13,7 @@ from pathlib import Path
 
 import can
 import pytest
+from _dbc import signal_values
 
 from ehpss_hil.canlog import CandumpLogger, read_log, read_sidecar
 from ehpss_hil.codec import FrameCodec
@@ -117,5 +118,5 @@ def test_cross_process_udp_multicast_in_netns(tmp_path: Path) -> None:
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith("0 stopped on SIGTERM"), r.stdout
     dbc_msg = FrameCodec().message("VALVE_CMD")
-    cycles = [dbc_msg.decode(bytes(m.data))["CycleCount"] for m in read_log(out)]
+    cycles = [signal_values(dbc_msg, m.data)["CycleCount"] for m in read_log(out)]
     assert cycles == list(range(n))

@@ -7,6 +7,7 @@ import sys
 
 import can
 import pytest
+from cantools.database.can import Signal
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -24,6 +25,7 @@ def _physical_signals(name: str) -> list[tuple[str, float, float, float]]:
     for s in CODEC.message(name).signals:
         if s.name in ("CRC", "Counter") or s.minimum is None or s.minimum == s.maximum:
             continue
+        assert s.maximum is not None, f"{name}.{s.name} has a minimum but no maximum"
         out.append((s.name, float(s.minimum), float(s.maximum), float(s.scale)))
     return out
 
@@ -72,15 +74,20 @@ def test_multiplexed_index_frame_round_trip() -> None:
         assert dec.values["ModelSlot"] == slot and dec.values[f"J_{slot}"] == 0.125 * slot
 
 
+def _maximum(s: Signal) -> float:
+    assert s.maximum is not None, f"{s.name} has no DBC maximum"
+    return s.maximum
+
+
 def test_resolution_and_range_meet_the_design() -> None:
     sig = {s.name: s for s in CODEC.message("SENSOR_POS").signals}
-    assert sig["Position"].scale <= 1e-7 and sig["Position"].maximum >= 0.5
-    assert sig["Spool"].scale <= 0.5e-6 and sig["Spool"].maximum >= 0.01
+    assert sig["Position"].scale <= 1e-7 and _maximum(sig["Position"]) >= 0.5
+    assert sig["Spool"].scale <= 0.5e-6 and _maximum(sig["Spool"]) >= 0.01
     aux = {s.name: s for s in CODEC.message("SENSOR_AUX").signals}
-    assert aux["CoilCurrent"].scale <= 10e-6 and aux["CoilCurrent"].maximum >= 1.0
+    assert aux["CoilCurrent"].scale <= 10e-6 and _maximum(aux["CoilCurrent"]) >= 1.0
     # the 24-bit raw range really covers the declared physical range
     for s in (sig["Position"], sig["Spool"], aux["CoilCurrent"]):
-        assert 2 ** (s.length - 1) * s.scale >= s.maximum
+        assert 2 ** (s.length - 1) * s.scale >= _maximum(s)
 
 
 def _sensor(tx: FrameCodec, counter: int | None = None) -> can.Message:

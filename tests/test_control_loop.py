@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from ehpss_hil import PROJECT_ROOT
+from ehpss_hil.control.adaptive import MmacController
 from ehpss_hil.control.base import Measurement
 from ehpss_hil.control.pi import PiLaw
 from ehpss_hil.control.predictors import ModelPosition, ValvePredictor
@@ -135,6 +136,7 @@ def test_mmac_reanchors_x_hat_after_a_gap_and_only_then() -> None:
     puts it on y_s/θ̂_D (and the position bank skips that sample), while an ordinary sample only
     nudges it at the anchor rate. Past the start-up warm-up in both cases."""
     c = make_controller("mmac", PARAMS, TS)
+    assert isinstance(c, MmacController)
     m = Measurement()
     for _ in range(200):  # at rest, past the 0.1 s warm-up
         c.step(m)
@@ -276,6 +278,7 @@ def test_mmac_after_a_reset_mid_motion_starts_from_the_sensor() -> None:
     (before, x̂ began at 0, the guard tripped at once and the loop fed back x̂: a runaway)."""
     res = run_scenario(FAULT_FREE, "nrc")
     c = make_controller("mmac", PARAMS, TS, reference=FAULT_FREE.reference)
+    assert isinstance(c, MmacController)
     m = Measurement()
     k0 = 300  # ≈ 0.9 mm into the sine
     for k in range(k0, k0 + 20):
@@ -299,4 +302,5 @@ def test_one_mode_registry() -> None:
     assert get_args(config.Mode) == MODES == tuple(REGISTRY)
     assert config.DAEMON_MODES == DAEMON_MODES and "oracle" not in DAEMON_MODES
     choices = FrameCodec().message("CTRL_STATUS").get_signal_by_name("Mode").choices
+    assert choices is not None
     assert {str(choices[c]): c for c in MODE_CODE.values()} == MODE_CODE

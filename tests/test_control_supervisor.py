@@ -36,9 +36,9 @@ class FakeBank:
         self.reinit_from.append(source)
 
 
-def _sup(bank: FakeBank, **kw: float) -> Supervisor:
-    t = replace(ControlTuning(), warmup_s=kw.pop("warmup_s", 0.0),  # type: ignore[arg-type]
-                switch_confirm_s=kw.pop("switch_confirm_s", 0.0), **kw)
+def _sup(bank: FakeBank, *, warmup_s: float = 0.0, switch_confirm_s: float = 0.0,
+         dwell_s: float = ControlTuning().dwell_s) -> Supervisor:
+    t = replace(ControlTuning(), warmup_s=warmup_s, switch_confirm_s=switch_confirm_s, dwell_s=dwell_s)
     return Supervisor(bank, t, TS)
 
 

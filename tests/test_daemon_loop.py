@@ -202,7 +202,7 @@ def test_auto_recovery_after_m_fresh_cycles() -> None:
         for _ in range(3):
             r.cycle()
         assert r.loop.life.state is State.FAULT
-        states = []
+        states: list[State] = []
         for _ in range(12):
             r.sensors()
             r.cycle()
@@ -268,9 +268,9 @@ def _check_skipped_steps(rig: Rig) -> None:
     seen: list[tuple[bool, bool]] = []
     orig = rig.ctrl.step
 
-    def step(m: Measurement) -> ValveCommand:
-        seen.append((m.fresh, m.command_sent))
-        return orig(m)
+    def step(meas: Measurement) -> ValveCommand:
+        seen.append((meas.fresh, meas.command_sent))
+        return orig(meas)
 
     rig.ctrl.step = step  # type: ignore[method-assign]
     rig.sensors()

@@ -121,8 +121,10 @@ def _sensor_values(frames: list[can.Message]) -> list[dict[str, float]]:
     for m in frames:
         d = codec.classify(m)
         if d.name == "SENSOR_POS":
+            assert d.values is not None, d
             out.append({k: d.values[k] for k in ("Position", "Spool")})
         elif d.name == "SENSOR_AUX":
+            assert d.values is not None, d
             out[-1].update({k: d.values[k] for k in ("LoadPressure", "CoilCurrent")})
     return out
 
@@ -155,6 +157,7 @@ def test_fault_onset_on_the_exact_sample(buses: tuple[can.BusABC, can.BusABC]) -
         if d.name == "SENSOR_POS":
             k += 1
         elif d.name == "PLANT_FAULTS":
+            assert d.values is not None, d
             cur = (d.values["KLoe"], d.values["KDft"])
             if cur != last:
                 onsets.append((k + 1, *cur))

@@ -26,9 +26,9 @@ def _count_steps(rig: Rig) -> list[bool]:
     seen: list[bool] = []
     orig = rig.ctrl.step
 
-    def step(m: Measurement) -> ValveCommand:
-        seen.append(m.fresh)
-        return orig(m)
+    def step(meas: Measurement) -> ValveCommand:
+        seen.append(meas.fresh)
+        return orig(meas)
 
     rig.ctrl.step = step  # type: ignore[method-assign]
     return seen

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Hashable
+
 import numpy as np
 import pytest
 from scipy.signal import cont2discrete
 
 from ehpss_hil.physics import FaultState, load_params
-from ehpss_hil.physics.discretize import ZohCache, zoh
+from ehpss_hil.physics.discretize import Matrix, ZohCache, zoh
 from ehpss_hil.physics.model import closed_loop_matrices, plant_matrices
 from ehpss_hil.physics.plant import PlantStepper
 from ehpss_hil.physics.reference import ReferenceModel
@@ -92,7 +94,11 @@ def test_plant_stepper_zoh_cache_and_saturation() -> None:
 
 
 def test_zoh_cache_evicts_beyond_capacity() -> None:
-    cache = ZohCache(lambda k: plant_matrices(PARAMS.plant, k, 1.0), 1e-3, max_entries=2)
+    def build(k: Hashable) -> tuple[Matrix, Matrix]:
+        assert isinstance(k, float)  # the keys below are k_loe values
+        return plant_matrices(PARAMS.plant, k, 1.0)
+
+    cache = ZohCache(build, 1e-3, max_entries=2)
     for k in (1.0, 0.9, 0.8):
         cache.get(k)
     assert len(cache) == 2

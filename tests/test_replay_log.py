@@ -8,6 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from _dbc import signal_values
 
 from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.canlog import CandumpLogger, read_log
@@ -57,7 +58,7 @@ def test_tampered_command_is_pinpointed(logs: dict[str, Path], tmp_path: Path) -
         for msg in read_log(logs["nrc"]):
             if msg.arbitration_id == cmd_id:
                 if n == 400:
-                    v = codec.message("VALVE_CMD").decode(bytes(msg.data))
+                    v = signal_values(codec.message("VALVE_CMD"), msg.data)
                     v["CurrentSetpoint"] += 1e-3
                     msg = codec.encode("VALVE_CMD", {k: v[k] for k in (
                         "CurrentSetpoint", "Enable", "SensorCounterEcho", "CycleCount")},

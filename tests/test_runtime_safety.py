@@ -13,9 +13,9 @@ from ehpss_hil.runtime.signals import install_stop_handlers, restore_handlers
 from ehpss_hil.runtime.watchdog import SensorWatchdog
 
 
-def _cycles_to_trip(wd: SensorWatchdog, **kw: int) -> int:
+def _cycles_to_trip(wd: SensorWatchdog, e2e_errors: int = 0, implausible: int = 0) -> int:
     for n in range(1, 100):
-        if wd.update(False, **kw):
+        if wd.update(False, e2e_errors=e2e_errors, implausible=implausible):
             return n
     return -1
 

@@ -53,9 +53,9 @@ def test_socketcan_bus_applies_the_projects_filters(vcan0: str) -> None:
                 codec.encode("HEARTBEAT_EMU", {"NmtState": 5})]
         for m in sent:
             tx.send(m)
-        got = []
-        while (m := rx.recv(timeout=2.0)) is not None:
-            got.append(m)
+        got: list[can.Message] = []
+        while (r := rx.recv(timeout=2.0)) is not None:
+            got.append(r)
             if len(got) == 2:
                 break
         assert rx.recv(timeout=0.3) is None  # VALVE_CMD and the heartbeat were filtered out
