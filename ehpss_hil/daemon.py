@@ -27,7 +27,7 @@ from .control.base import Controller
 from .errors import ConfigError
 from .physics.params import Params, load_params
 from .runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
-from .runtime.frameio import FrameIO, open_process_logger, process_codec
+from .runtime.frameio import FrameIO, limit_sensor_rate, open_process_logger, process_codec
 from .runtime.rt import apply_rt_options, freeze_gc
 from .runtime.signals import install_stop_handlers, restore_handlers
 from .runtime.stats import publish_summary, rejects_text
@@ -128,6 +128,7 @@ def run_daemon(a: DaemonArgs) -> int:
     cfg = resolve_config(a)
     params = load_params(cfg.params or None)
     codec = process_codec(cfg.dbc, cfg.ids, str(a.config))
+    limit_sensor_rate(codec, params.plant.piston_speed_max_m_s, 1.0 / cfg.rate_hz)
     controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
     bus = open_bus(cfg.bus)
     logger = open_process_logger(a.log, cfg.log, cfg.bus, bus, str(a.config), sidecar={

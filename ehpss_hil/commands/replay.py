@@ -36,6 +36,7 @@ from ..errors import EhpssError
 from ..physics.params import Params, load_params
 from ..report.logdata import MODE_NAMES
 from ..report.logmeta import run_info
+from ..runtime.frameio import limit_sensor_rate
 from ..scenario import Reference, ReferenceBlocks, load_scenario
 
 NAME = "replay"
@@ -141,6 +142,7 @@ class _Replayer:
     def __init__(self, setup: ReplaySetup, keep: int) -> None:
         self.ctrl = _make(setup)
         self.codec = FrameCodec()
+        limit_sensor_rate(self.codec, setup.params.plant.piston_speed_max_m_s, setup.ts_s)
         self.res = ReplayResult(setup)
         self.keep = keep
         self.meas = Measurement()

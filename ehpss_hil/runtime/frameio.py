@@ -31,6 +31,7 @@ from ..bus import (
     suppress_own_echoes,
 )
 from ..codec import FrameCodec
+from ..codec.ratelimit import RateLimit, position_step_bound_m
 from ..config import BusConfig, CanIds, LogConfig
 from ..errors import ConfigError, FrameError
 from .collisions import IdCollisions, SentFrames
@@ -73,6 +74,13 @@ def process_codec(dbc: str, ids: CanIds, config_path: str) -> FrameCodec:
                           max_delta_counter=ids.max_delta_counter)
     except ValueError as exc:  # FrameError, or cantools on a file that is no DBC
         raise ConfigError(config_path, "dbc", f"cannot load {dbc}: {exc}") from exc
+
+
+def limit_sensor_rate(codec: FrameCodec, speed_max_m_s: float, ts_s: float) -> RateLimit:
+    """The rate plausibility check of SENSOR_POS Position (:mod:`~ehpss_hil.codec.ratelimit`)
+    for a plant whose piston moves at most ``speed_max_m_s`` (m/s), sampled every ``ts_s`` (s);
+    the daemon and ``replay`` classify alike."""
+    return codec.limit_rate("SENSOR_POS", "Position", position_step_bound_m(speed_max_m_s, ts_s))
 
 
 def open_process_logger(cli_path: str | None, cfg: LogConfig, bus_cfg: BusConfig,
