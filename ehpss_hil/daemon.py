@@ -98,6 +98,7 @@ def loop_options(cfg: ControllerConfig, sensor_age_us: float | None = None) -> L
     """The loop's rates, fail-safe policy and phase-lock target from the config (+ override)."""
     opts = LoopOptions(rate_hz=cfg.rate_hz, status_rate_hz=cfg.status_rate_hz,
                        heartbeat_rate_hz=cfg.heartbeat_rate_hz, watchdog=cfg.watchdog,
+                       setpoint=cfg.setpoint,
                        stats_interval_s=cfg.stats_interval_s)
     key = "--sensor-age-us" if sensor_age_us is not None else "rt.sensor_age_us"
     age_us = sensor_age_us if sensor_age_us is not None else cfg.rt.sensor_age_us
@@ -118,6 +119,8 @@ def format_summary(s: dict[str, object]) -> str:
         f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
         f"  frames received: {s['frames_received']}; by verdict {s['received_by_verdict']}",
         f"  datagrams rejected (not a frame): {rejects_text(s)}",
+        f"  ID collisions (foreign frames on own IDs): {s['id_collisions']}; second "
+        f"transmitter: {s['second_transmitter']}; SETPOINT {s['setpoints']}",
         f"  overruns {st['overruns']}, lateness p50 {lat['p50'] * 1e6:.1f} µs p99 "
         f"{lat['p99'] * 1e6:.1f} µs, compute p99 {cmp_['p99'] * 1e6:.1f} µs, sensor->command "
         f"latency p50 {lcy['p50'] * 1e6:.1f} µs p99 {lcy['p99'] * 1e6:.1f} µs"])

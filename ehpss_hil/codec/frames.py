@@ -292,10 +292,12 @@ class FrameCodec:
             if check is None:
                 check = self._rx_check[spec.can_id] = CounterCheck(self.max_delta_counter)
             state = check.check(data[1])
-            if state is E2EState.REPEATED:
-                return Decoded(Verdict.REPEATED, name, None, ts)
-            if state is E2EState.WRONG_SEQUENCE:
-                return Decoded(Verdict.WRONG_SEQUENCE, name, None, ts)
+            if state is E2EState.REPEATED or state is E2EState.WRONG_SEQUENCE:
+                rate = self._rate.get(spec.can_id)
+                if rate is not None:
+                    rate[1].interrupt()
+                return Decoded(Verdict.REPEATED if state is E2EState.REPEATED
+                               else Verdict.WRONG_SEQUENCE, name, None, ts)
             verdict = Verdict.OK if state is E2EState.OK else Verdict.OK_SOME_LOST
         else:
             verdict = Verdict.OK

@@ -14,7 +14,9 @@ tells most of them apart. The bound must pass what a real sensor does:
   a failed sensor's jump to 0 always passes;
 - anything else (a bias step, a gain step from an already drifted gain): two consecutive
   readings that agree with each other are a new level; the first of them is rejected, the
-  second accepted (one sample lost, like a lost frame).
+  second accepted (one sample lost, like a lost frame). Consecutive: no frame of the ID in
+  between, not even one that failed the sequence check (:meth:`RateLimit.interrupt`), so a
+  second transmitter whose frames alternate with the sensor's never sets a level.
 
 So a random reading passes with probability ≈ 2·(n·step + 1.5·|y|) / 1 m: about 1 in 3 for a
 piston at 0.1 m, 1 in 250 at 1 mm (with the 1-in-3400 E2E chance: 1 in 850 000 random frames).
@@ -58,6 +60,11 @@ class RateLimit:
         self._anchor_counter = 0
         self._candidate: float | None = None
         self._candidate_counter = 0
+
+    def interrupt(self) -> None:
+        """A frame of the ID failed the sequence check: the next reading does not follow the
+        rejected one."""
+        self._candidate = None
 
     def _near(self, value: float, ref: float, samples: int) -> bool:
         return abs(value - ref) <= samples * self.step_m + GAIN_JUMP * abs(ref)

@@ -28,7 +28,7 @@ from typing import Any
 from ..canlog import BadLines, read_log, read_sidecar
 from ..canlog.reader import resolve_log
 from ..codec import FrameCodec, SampleCount
-from ..config import load_controller_config
+from ..config import SetpointPolicy, load_controller_config
 from ..control.base import HeldSample, Measurement, hold_sample, observe_held
 from ..control.sampleclock import RESYNC_SAMPLES
 from ..control.tuning import ControlTuning
@@ -36,6 +36,7 @@ from ..errors import EhpssError
 from ..physics.params import Params, load_params
 from ..report.logdata import MODE_NAMES
 from ..report.logmeta import run_info
+from ..runtime.foreign import SetpointGate
 from ..runtime.frameio import limit_sensor_rate
 from ..scenario import Reference, ReferenceBlocks, load_scenario
 
@@ -56,6 +57,8 @@ class ReplaySetup:
     tuning: ControlTuning
     params: Params
     source: str
+    #: which SETPOINT frames the daemon let override x_d
+    setpoint: SetpointPolicy = field(default_factory=SetpointPolicy)
 
 
 @dataclass
@@ -121,13 +124,13 @@ def resolve_setup(log: Path, mode: str | None, config: Path | None,
     if config is not None:
         cfg = load_controller_config(config)
         return ReplaySetup(mode or cfg.mode, 1.0 / cfg.rate_hz, cfg.reference, cfg.tuning,
-                           load_params(cfg.params or None), str(config))
+                           load_params(cfg.params or None), str(config), cfg.setpoint)
     info = run_info(read_sidecar(log), log.parent,
                     load_scenario(scenario) if scenario is not None else None, log)
     logged = mode or _logged_mode(log) or info.mode or "mmac"
     return ReplaySetup(logged, info.ts_s or 1e-3, info.reference or Reference(),
                        info.tuning or ControlTuning(), load_params(info.params_path),
-                       ", ".join(info.sources) or "defaults")
+                       ", ".join(info.sources) or "defaults", info.setpoint or SetpointPolicy())
 
 
 def _make(setup: ReplaySetup) -> Any:
@@ -143,6 +146,7 @@ class _Replayer:
         self.ctrl = _make(setup)
         self.codec = FrameCodec()
         limit_sensor_rate(self.codec, setup.params.plant.piston_speed_max_m_s, setup.ts_s)
+        self.setpoints = SetpointGate(setup.setpoint)
         self.res = ReplayResult(setup)
         self.keep = keep
         self.meas = Measurement()
@@ -188,7 +192,9 @@ class _Replayer:
         elif name == "SENSOR_AUX":
             m.coil_current_a, m.load_pressure_pa = float(v["CoilCurrent"]), float(v["LoadPressure"])
         elif name == "SETPOINT":
-            self.override = float(v["Position"]) if v["Override"] else None
+            x_d = self.x_d(self.k) if self.override is None else self.override
+            if self.setpoints.admit(bool(v["Override"]), float(v["Position"]), x_d):
+                self.override = float(v["Position"]) if v["Override"] else None
         elif self.started or v["Enable"]:
             cc = int(v["CycleCount"])
             gap = 0 if not self.started else (cc - self.cycle_count - 1) % 65536
