@@ -227,6 +227,9 @@ class ControllerLoop:
         if st is State.ACTIVE and (tripped or collided):
             self._fault(None if tripped else FailsafeReason.ID_COLLISION)
         elif st is State.FAULT and collided:  # the more specific diagnosis
+            if self.life.reason is not FailsafeReason.ID_COLLISION:
+                log.error("cycle %d: second transmitter: FAULT reason %s -> ID_COLLISION",
+                          self.cycles, self.life.reason.name)
             self.life.reason = FailsafeReason.ID_COLLISION
         elif st is State.FAULT and not tripped:
             self.controller.reset()

@@ -77,7 +77,7 @@ class CollisionGuard:
         self._conflict_flag = False  # CommandConflict in a SENSOR_AUX of this cycle
         #: SENSOR_AUX frames with CommandConflict 1
         self.conflict_frames = 0
-        #: episodes: cycles with evidence after at least one without
+        #: episodes: evidence after ``recovery_cycles`` cycles without (or none before)
         self.episodes = 0
         self.quiet_cycles = 0
         self.evident = False
@@ -112,11 +112,10 @@ class CollisionGuard:
             self.quiet_cycles = 0
             self.holding = self.holding or self.fault_on_collision
         else:
-            self.evident = False
             self.quiet_cycles += 1
-            if (self.holding and self._auto_recover
-                    and self.quiet_cycles >= self._recovery_cycles):
-                self.holding = False
+            if self.quiet_cycles >= self._recovery_cycles:  # the episode is over
+                self.evident = False
+                self.holding = self.holding and not self._auto_recover
         return self.holding
 
     def summary(self) -> dict[str, object]:
