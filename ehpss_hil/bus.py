@@ -7,11 +7,17 @@ Interfaces:
 - ``udp_multicast`` (the embedded default, no kernel module): the hop limit/TTL is always 0 so a
   frame never leaves this host, and the receive buffer is raised to
   ``cfg.receive_buffer_bytes`` (bursts of > 100 frames overflow the default buffer). The socket
-  loops multicast back, so **a process receives its own frames**: the loops must drop frames by
-  ID/direction (they only classify the IDs they consume). A datagram on the group that is no
-  frame (anyone on the host may send one) is counted and skipped, never raised
+  loops multicast back, so **a process receives its own frames** unless
+  :func:`suppress_own_echoes` filters them out by their source port. A datagram on the group
+  that is no frame (anyone on the host may send one) is counted and skipped, never raised
   (:func:`datagram_rejects`).
 - ``virtual``: in-process tests and the lockstep simulator.
+
+Own frames (:func:`suppress_own_echoes`): a CAN controller does not receive the frames it sent
+itself, so one on its own TX IDs is another node's. Here: socketcan delivers a socket's own
+frames back only with ``CAN_RAW_RECV_OWN_MSGS`` (python-can ``receive_own_messages``, off here),
+python-can's ``virtual`` only with ``receive_own_messages`` (off here); udp_multicast loops every
+datagram back to its sender, and a kernel filter on the source port drops those.
 
 Filters on ``udp_multicast``/``virtual`` are applied by python-can in user space, and
 ``BusABC.recv(timeout=0)`` returns ``None`` as soon as one frame is filtered out even if more are
@@ -20,8 +26,9 @@ applies them (socketcan); on the other interfaces the loops filter by ID themsel
 
 For loops that drain the bus every cycle: :func:`frame_reader` (one non-blocking read; on
 ``udp_multicast`` without python-can's ``select()`` per frame), :func:`frame_writer` (on
-``udp_multicast`` without a dict and ``msgpack.packb`` per frame) and :func:`drop_own_frames` (on
-``udp_multicast`` a kernel filter for the process's own IDs), all in :mod:`ehpss_hil.bus_udp`.
+``udp_multicast`` without a dict and ``msgpack.packb`` per frame) and :func:`suppress_own_echoes`
+(on ``udp_multicast`` a kernel filter for the process's own datagrams), all in
+:mod:`ehpss_hil.bus_udp`.
 """
 
 from __future__ import annotations
@@ -33,8 +40,9 @@ from functools import partial
 from typing import Any
 
 import can
+from can.interfaces.udp_multicast import UdpMulticastBus
 
-from .bus_udp import GuardedUdpMulticastBus, UdpReader, UdpWriter, attach_own_id_filter
+from .bus_udp import GuardedUdpMulticastBus, UdpReader, UdpWriter, attach_own_source_filter
 from .config import BusConfig
 from .errors import BusUnavailableError
 from .udp_rejects import DatagramRejects
@@ -159,21 +167,33 @@ def frame_writer(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callabl
     """Send one frame: ``bus.send``, or on ``udp_multicast`` the same datagram built from a
     per-frame-shape template (:class:`~ehpss_hil.bus_udp.UdpWriter`; the templates of
     ``shapes`` built now, not on the first send)."""
-    if UdpWriter.supports(bus):
+    if isinstance(bus, GuardedUdpMulticastBus):
         writer = UdpWriter(bus)
         writer.prepare(shapes)
         return writer.write
     return bus.send
 
 
-def drop_own_frames(bus: can.BusABC, can_ids: Iterable[int]) -> bool:
-    """Stop receiving the echoes of the process's own frames where the bus delivers them: a
-    kernel socket filter on ``udp_multicast`` (socketcan and virtual never deliver them here).
-    True when a filter was attached; the caller still drops own IDs itself."""
-    if not UdpReader.supports(bus):
-        return False
-    ok = attach_own_id_filter(bus, can_ids)
-    if not ok:
-        log.warning("udp_multicast: own frames are dropped in user space (kernel filter not "
-                    "attached)")
-    return ok
+def suppress_own_echoes(bus: can.BusABC) -> bool:
+    """Keep ``bus`` from handing this process back the frames it sent itself, where it would
+    (a kernel socket filter on the source port on ``udp_multicast``); True when none ever comes
+    back, so that a frame received on one of the process's own TX IDs is another node's. False:
+    own frames may come back (python-can's plain ``UdpMulticastBus``, a bus opened with
+    ``receive_own_messages``, an unknown interface) and the caller must tell them apart."""
+    if isinstance(bus, UdpMulticastBus):
+        ok = attach_own_source_filter(bus)
+        if not ok:
+            log.warning("udp_multicast: own frames are told apart in user space (kernel filter "
+                        "not attached)")
+        return ok
+    kind = type(bus).__name__
+    if kind == "SocketcanBus":
+        from can.interfaces.socketcan.constants import CAN_RAW_RECV_OWN_MSGS, SOL_CAN_RAW
+        try:
+            return bus.socket.getsockopt(  # type: ignore[attr-defined, no-any-return]
+                SOL_CAN_RAW, CAN_RAW_RECV_OWN_MSGS) == 0
+        except OSError:
+            return False
+    if kind == "VirtualBus":
+        return getattr(bus, "receive_own_messages", True) is False
+    return False

@@ -11,19 +11,20 @@ does not need:
   (:class:`DatagramParser`) instead of decoding the msgpack map into a dict and re-checking it.
   (One difference: python-can's ``recv`` treats a frame with DLC 0 as "no frame" — ``if msg``
   on a Message is its length — and drops it unlogged; here it is returned.)
-- The socket loops every frame back to its sender, so a process receives all its own frames
-  and drops them after decoding. :func:`attach_own_id_filter` installs a classic BPF socket
-  filter that drops them in the kernel. It matches the msgpack layout python-can's
-  ``pack_message`` produces (a map whose first keys are ``timestamp`` as float64 and
-  ``arbitration_id``); a datagram that does not start that way is accepted, so the filter can
-  only ever drop the listed IDs, and :class:`~ehpss_hil.runtime.frameio.FrameIO` still drops
-  own IDs itself.
+- The socket loops every frame back to its sender, so a process receives all its own frames.
+  Every process binds the group's port, so the datagrams of all of them come from that port:
+  :class:`GuardedUdpMulticastBus` sends from a socket of its own instead (an ephemeral port,
+  the same hop limit), whose port tells this process's datagrams from every other sender's, and
+  :func:`attach_own_source_filter` installs a classic BPF socket filter on the receiving socket
+  that drops the datagrams from that port in the kernel (no read, no decoding). A frame on one of
+  the process's own IDs that does reach it was sent by another node (an ID collision, which
+  :class:`~ehpss_hil.runtime.frameio.FrameIO` counts).
 - ``bus.send`` packs every frame through a fresh dict and ``msgpack.packb``. A loop sends the
   same few frame shapes, whose datagrams differ only in the timestamp and the data bytes:
   :class:`UdpWriter` builds each shape's datagram once with python-can's own ``pack_message``,
   checks that splicing a timestamp and data into it reproduces ``pack_message`` exactly, and
-  then writes ``head + timestamp + middle + data + tail`` to the same socket and destination
-  (anything else goes through ``bus.send``).
+  then writes ``head + timestamp + middle + data + tail`` to the bus's sending socket and the
+  group (anything else goes through ``bus.send``).
 
 Anyone on the host (in the namespace) can send a datagram to the group and port. python-can
 raises ``CanOperationError`` for one that is not a frame, which would end every process on the
@@ -51,15 +52,13 @@ SO_ATTACH_FILTER = getattr(socket, "SO_ATTACH_FILTER", 26)
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 _TIMESPEC = struct.Struct("@ll")
 _F64 = struct.Struct(">d")  # msgpack float 64
-_UDP_HEADER = 8  # a UDP socket filter sees the UDP header first
 #: how every python-can datagram starts: fixmap(11), the key "timestamp", the float64 tag
 _HEAD = b"\x8b" + msgpack.packb("timestamp") + b"\xcb"
 _AT_MIDDLE = len(_HEAD) + 8  # after the timestamp's 8 bytes
 
 # classic BPF opcodes (linux/filter.h)
-_LD_W, _LD_H, _LD_B = 0x20, 0x28, 0x30  # BPF_LD | BPF_{W,H,B} | BPF_ABS
-_LD_LEN = 0x80  # BPF_LD | BPF_W | BPF_LEN
-_JEQ, _JGE = 0x15, 0x35  # BPF_JMP | BPF_{JEQ,JGE} | BPF_K
+_LD_H = 0x28  # BPF_LD | BPF_H | BPF_ABS
+_JEQ = 0x15  # BPF_JMP | BPF_JEQ | BPF_K
 _RET = 0x06  # BPF_RET | BPF_K
 _ACCEPT, _DROP = 0xFFFFFFFF, 0
 
@@ -189,15 +188,77 @@ class DatagramParser:
             self.shapes += 1
 
 
+class UdpTransmitter:
+    """The sending socket of one :class:`GuardedUdpMulticastBus`: not bound to the group's port
+    (every receiver is) but to an ephemeral one, :attr:`port`, which no other sender on the host
+    has; otherwise python-can's send (same hop limit, same errors, same send timeout)."""
+
+    def __init__(self, family: socket.AddressFamily, hop_limit: int,
+                 destination: tuple[str, int]) -> None:
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            hops = struct.pack("@I", hop_limit)
+            if family == socket.AF_INET:
+                sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, hops)
+                sock.bind(("", 0))
+            else:
+                sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS, hops)
+                sock.bind(("::", 0))
+        except OSError:
+            sock.close()
+            raise
+        self.sock = sock
+        self.destination = destination
+        #: UDP source port of every datagram this bus sends
+        self.port: int = sock.getsockname()[1]
+        #: the send timeout in force (s; None: blocking), as python-can keeps it
+        self.last_timeout: float | None = None
+
+    def send(self, data: bytes, timeout: float | None = None) -> None:
+        """python-can's ``GeneralPurposeUdpMulticastBus.send`` on this socket."""
+        if timeout != self.last_timeout:
+            self.last_timeout = timeout
+            self.sock.settimeout(timeout)
+        try:
+            sent = self.sock.sendto(data, self.destination)
+            if sent < len(data):
+                raise TimeoutError()
+        except TimeoutError:
+            raise can.CanTimeoutError() from None
+        except OSError as error:
+            raise can.CanOperationError("failed to send via socket") from error
+
+    def close(self) -> None:
+        self.sock.close()
+
+
 class GuardedUdpMulticastBus(UdpMulticastBus):
     """python-can's ``UdpMulticastBus`` whose ``recv`` skips and counts (:attr:`rejects`) a
     datagram that is not a frame instead of raising ``CanOperationError``; socket errors still
-    raise. Frames are unpacked by a :class:`DatagramParser` (the same result as python-can's)."""
+    raise. Frames are unpacked by a :class:`DatagramParser` (the same result as python-can's).
+    Frames are sent from a socket of its own (:attr:`tx`, :class:`UdpTransmitter`), so that its
+    own datagrams can be told from other senders' by their source port."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.rejects = DatagramRejects()
         self._parser = DatagramParser()
+        mc = self._multicast
+        try:
+            self.tx = UdpTransmitter(mc._socket.family, mc.hop_limit, mc._send_destination)
+        except OSError as exc:
+            mc.shutdown()
+            raise can.CanInitializationError("could not create the sending socket") from exc
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """python-can's ``send``, from :attr:`tx`."""
+        if self.protocol is not can.CanProtocol.CAN_FD and msg.is_fd:
+            raise can.CanOperationError("cannot send FD message over bus with CAN FD disabled")
+        self.tx.send(pack_message(msg), timeout)
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self.tx.close()
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         deadline = None if timeout is None else time.monotonic() + timeout
@@ -254,22 +315,14 @@ _Shape = tuple[int, bool, bool, bool, object, int, int, bool, bool, bool]
 class UdpWriter:
     """Sends python-can ``udp_multicast`` frames as spliced templates (see the module doc)."""
 
-    def __init__(self, bus: can.BusABC) -> None:
-        mc = bus._multicast  # type: ignore[attr-defined]
+    def __init__(self, bus: GuardedUdpMulticastBus) -> None:
         self._bus = bus
-        self._mc = mc
-        self._sock: socket.socket = mc._socket
-        self._dest = mc._send_destination
+        self._tx = bus.tx
+        self._sock: socket.socket = bus.tx.sock
+        self._dest = bus.tx.destination
         self._fd = bus.protocol is can.CanProtocol.CAN_FD
         #: shape → (head, middle, tail), or None: that shape goes through ``bus.send``
         self._templates: dict[_Shape, tuple[bytes, bytes, bytes] | None] = {}
-
-    @staticmethod
-    def supports(bus: can.BusABC) -> bool:
-        """True for a python-can ``UdpMulticastBus`` with the attributes this relies on."""
-        mc = getattr(bus, "_multicast", None)
-        return (isinstance(bus, UdpMulticastBus) and mc is not None and hasattr(mc, "_socket")
-                and hasattr(mc, "_send_destination") and hasattr(mc, "_last_send_timeout"))
 
     def prepare(self, shapes: Iterable[can.Message]) -> None:
         """Build the templates of ``shapes`` now rather than on their first send."""
@@ -284,7 +337,7 @@ class UdpWriter:
 
     def write(self, msg: can.Message) -> None:
         """Send ``msg`` as ``bus.send(msg)`` would (same datagram, same errors)."""
-        if self._mc._last_send_timeout is not None or type(msg.timestamp) is not float:
+        if self._tx.last_timeout is not None or type(msg.timestamp) is not float:
             self._bus.send(msg)
             return
         data = msg.data
@@ -308,66 +361,23 @@ class UdpWriter:
             raise can.CanTimeoutError()
 
 
-def _expect(offset: int, data: bytes, fail: str) -> list[tuple[int, int | str, int]]:
-    """Loads and compares (4, 2, then 1 byte at a time) that jump to ``fail`` on a mismatch
-    (the packet is known to be long enough)."""
-    out: list[tuple[int, int | str, int]] = []
-    i = 0
-    while i < len(data):
-        n = 4 if len(data) - i >= 4 else 2 if len(data) - i >= 2 else 1
-        op = {4: _LD_W, 2: _LD_H, 1: _LD_B}[n]
-        out.append((op, 0, offset + i))
-        out.append((_JEQ, fail, int.from_bytes(data[i:i + n], "big")))
-        i += n
-    return out
+def own_source_program(port: int) -> list[tuple[int, int, int, int]]:
+    """The BPF program (code, jt, jf, k) of a UDP socket dropping the datagrams whose source port
+    is ``port`` (a UDP socket filter sees the UDP header first: the source port is its first
+    half-word) and accepting every other."""
+    return [(_LD_H, 0, 0, 0),
+            (_JEQ, 0, 1, port),  # true → next instruction (drop), false → skip it (accept)
+            (_RET, 0, 0, _DROP),
+            (_RET, 0, 0, _ACCEPT)]
 
 
-def own_id_program(can_ids: Iterable[int]) -> list[tuple[int, int, int, int]] | None:
-    """The BPF program (code, jt, jf, k) dropping python-can datagrams of ``can_ids``, or None
-    when python-can's packing is not the layout it relies on (then nothing is filtered)."""
-    key = msgpack.packb("arbitration_id")
-    at_key = _AT_MIDDLE
-    at_id = at_key + len(key)
-    ids = sorted(set(can_ids))
-    blocks: list[tuple[list[tuple[int, int | str, int]], str]] = []
-    for i, can_id in enumerate(ids):
-        enc = msgpack.packb(can_id)
-        probe = pack_message(can.Message(arbitration_id=can_id, timestamp=1.5,
-                                         is_extended_id=can_id > 0x7FF))
-        if not (probe.startswith(_HEAD) and probe[at_key:at_id] == key
-                and probe[at_id:at_id + len(enc)] == enc):
-            return None
-        blocks.append((_expect(_UDP_HEADER + at_id, enc, f"next{i}"), f"next{i}"))
-    if not blocks:
-        return None
-    longest = max(len(msgpack.packb(i)) for i in ids)
-    # a shorter datagram is accepted (a load beyond the packet would make the kernel drop it)
-    code: list[tuple[int, int | str, int]] = [(_LD_LEN, 0, 0),
-                                              (_JGE, "accept", _UDP_HEADER + at_id + longest)]
-    code += _expect(_UDP_HEADER, _HEAD, "accept")
-    code += _expect(_UDP_HEADER + at_key, key, "accept")
-    labels: dict[str, int] = {}
-    for checks, label in blocks:
-        code += checks
-        code.append((_RET, 0, _DROP))
-        labels[label] = len(code)
-    labels["accept"] = len(code)
-    code.append((_RET, 0, _ACCEPT))
-    prog = []
-    for pc, (op, jf, k) in enumerate(code):
-        off = labels[jf] - pc - 1 if isinstance(jf, str) else 0
-        if not 0 <= off <= 255:
-            return None
-        prog.append((op, 0, off, k))  # JEQ/JGE: true → next instruction, false → jump
-    return prog
-
-
-def attach_own_id_filter(bus: can.BusABC, can_ids: Iterable[int]) -> bool:
-    """Drop datagrams carrying ``can_ids`` in the kernel (SO_ATTACH_FILTER); True when attached."""
+def attach_own_source_filter(bus: can.BusABC) -> bool:
+    """Drop the datagrams ``bus`` itself sent (source port :attr:`UdpTransmitter.port`) in the
+    kernel before they reach its receiving socket (SO_ATTACH_FILTER); True when attached."""
     sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
-    prog = own_id_program(can_ids)
-    if sock is None or prog is None:
+    if sock is None or not isinstance(bus, GuardedUdpMulticastBus):
         return False
+    prog = own_source_program(bus.tx.port)
     buf = ctypes.create_string_buffer(b"".join(struct.pack("HBBI", *ins) for ins in prog))
     try:  # struct sock_fprog {unsigned short len; struct sock_filter *filter;}; copied by the kernel
         sock.setsockopt(socket.SOL_SOCKET, SO_ATTACH_FILTER,

@@ -101,6 +101,8 @@ class Watchdog:
     Leaves FAULT after ``recovery_cycles`` fresh cycles only when ``auto_recover`` is true.
     Loop starvation (LOOP_OVERRUN): at least ``starvation_late_fraction`` of the last
     ``starvation_window_cycles`` grid periods late or skipped (docs/runtime.md).
+    ``on_collision``: a second transmitter (a foreign VALVE_CMD, the emulator's CommandConflict,
+    a second SENSOR_POS stream) is a fault (ID_COLLISION) or only counted and warned about.
     """
 
     timeout_cycles: int = field(default=3, metadata=rng(1, 10000))
@@ -110,6 +112,18 @@ class Watchdog:
     max_e2e_errors: int = field(default=10, metadata=rng(1, 1_000_000))
     starvation_window_cycles: int = field(default=200, metadata=rng(10, 1_000_000))
     starvation_late_fraction: float = field(default=0.25, metadata=rng(0.0, 1.0, lo_open=True))
+    on_collision: Literal["fault", "warn"] = "fault"
+
+
+@dataclass(frozen=True)
+class SetpointPolicy:
+    """SETPOINT frames (a host's x_d override, m). The frame names no sender, so a source is
+    allowed by ``enabled`` alone; an override beyond ``max_abs_m`` or more than ``max_step_m``
+    from the x_d in force is rejected (counted). Disabled: every SETPOINT is rejected."""
+
+    enabled: bool = False
+    max_abs_m: float = field(default=0.05, metadata=rng(0.0, 0.5))
+    max_step_m: float = field(default=0.005, metadata=rng(0.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -122,6 +136,7 @@ class ControllerConfig:
     rate_hz: float = field(default=1000.0, metadata=rng(MIN_RATE_HZ, MAX_RATE_HZ))
     reference: Reference = field(default_factory=Reference)
     watchdog: Watchdog = field(default_factory=Watchdog)
+    setpoint: SetpointPolicy = field(default_factory=SetpointPolicy)
     status_rate_hz: float = field(default=50.0, metadata=rng(1.0, 1000.0))
     heartbeat_rate_hz: float = field(default=10.0, metadata=rng(0.1, 100.0))
     stats_interval_s: float = field(default=10.0, metadata=rng(0.0, 86400.0))

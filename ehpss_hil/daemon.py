@@ -27,7 +27,7 @@ from .control.base import Controller
 from .errors import ConfigError
 from .physics.params import Params, load_params
 from .runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
-from .runtime.frameio import FrameIO, open_process_logger, process_codec
+from .runtime.frameio import FrameIO, limit_sensor_rate, open_process_logger, process_codec
 from .runtime.rt import apply_rt_options, freeze_gc
 from .runtime.signals import install_stop_handlers, restore_handlers
 from .runtime.stats import publish_summary, rejects_text
@@ -98,6 +98,7 @@ def loop_options(cfg: ControllerConfig, sensor_age_us: float | None = None) -> L
     """The loop's rates, fail-safe policy and phase-lock target from the config (+ override)."""
     opts = LoopOptions(rate_hz=cfg.rate_hz, status_rate_hz=cfg.status_rate_hz,
                        heartbeat_rate_hz=cfg.heartbeat_rate_hz, watchdog=cfg.watchdog,
+                       setpoint=cfg.setpoint,
                        stats_interval_s=cfg.stats_interval_s)
     key = "--sensor-age-us" if sensor_age_us is not None else "rt.sensor_age_us"
     age_us = sensor_age_us if sensor_age_us is not None else cfg.rt.sensor_age_us
@@ -118,6 +119,8 @@ def format_summary(s: dict[str, object]) -> str:
         f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
         f"  frames received: {s['frames_received']}; by verdict {s['received_by_verdict']}",
         f"  datagrams rejected (not a frame): {rejects_text(s)}",
+        f"  ID collisions (foreign frames on own IDs): {s['id_collisions']}; second "
+        f"transmitter: {s['second_transmitter']}; SETPOINT {s['setpoints']}",
         f"  overruns {st['overruns']}, lateness p50 {lat['p50'] * 1e6:.1f} µs p99 "
         f"{lat['p99'] * 1e6:.1f} µs, compute p99 {cmp_['p99'] * 1e6:.1f} µs, sensor->command "
         f"latency p50 {lcy['p50'] * 1e6:.1f} µs p99 {lcy['p99'] * 1e6:.1f} µs"])
@@ -128,6 +131,7 @@ def run_daemon(a: DaemonArgs) -> int:
     cfg = resolve_config(a)
     params = load_params(cfg.params or None)
     codec = process_codec(cfg.dbc, cfg.ids, str(a.config))
+    limit_sensor_rate(codec, params.plant.piston_speed_max_m_s, 1.0 / cfg.rate_hz)
     controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
     bus = open_bus(cfg.bus)
     logger = open_process_logger(a.log, cfg.log, cfg.bus, bus, str(a.config), sidecar={

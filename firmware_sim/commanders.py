@@ -8,6 +8,12 @@ the others arrive out of CycleCount order. Both are counted here as foreign; a c
 declared when a window of recent frames holds ``limit`` foreign ones and ends when a whole window
 holds none. While it lasts the emulator centres the valve (0 A), as on a command timeout: it
 cannot tell which commander is the real one, and obeying both drove the piston 430 mm away.
+
+A single commander may also jump: a controller stopped for seconds (SIGSTOP, a hog) resumes with
+its CycleCount thousands ahead (and catching up on its backlog, it may send only every ~20th
+cycle for a while). The frame right after an out-of-order one that follows it in order
+resynchronizes the check on it, as the E2E counter check does; interleaved senders alternate
+and so keep counting as foreign.
 """
 
 from __future__ import annotations
@@ -21,8 +27,8 @@ CYCLE_MODULUS = 1 << 16
 class CommanderCheck:
     """Conflict detector over the last ``window`` VALVE_CMD frames (usable or E2E-rejected)."""
 
-    __slots__ = ("_advancing", "_foreign_in_window", "_last", "_limit", "_max_ahead", "_recent",
-                 "conflict", "conflicts", "foreign")
+    __slots__ = ("_advancing", "_candidate", "_foreign_in_window", "_last", "_limit",
+                 "_max_ahead", "_recent", "conflict", "conflicts", "foreign")
 
     def __init__(self, window: int, limit: int, max_ahead: int) -> None:
         """``window``: frames looked back over; ``limit``: foreign frames in it that make a
@@ -33,6 +39,7 @@ class CommanderCheck:
         self._recent: deque[bool] = deque(maxlen=max(window, self._limit))
         self._foreign_in_window = 0
         self._last: int | None = None
+        self._candidate: int | None = None  # the CycleCount of the last out-of-order frame
         self._advancing = False  # the CycleCount has moved on in order at least once
         self.conflict = False
         self.conflicts = 0  # conflicts declared
@@ -53,11 +60,16 @@ class CommanderCheck:
                 self._advancing = True
             elif not self._advancing:  # a sender that does not count cycles: no evidence
                 self._last, ok = cycle_count, True
+            elif (self._candidate is not None and 0 < step < CYCLE_MODULUS // 2
+                  and 1 <= (cycle_count - self._candidate) % CYCLE_MODULUS <= self._max_ahead):
+                self._last, ok = cycle_count, True  # one commander that jumped ahead: resync
+        self._candidate = None if ok else cycle_count
         self._push(not ok)
         return ok
 
     def rejected_sequence(self) -> None:
         """A VALVE_CMD whose E2E counter was REPEATED or WRONG_SEQUENCE."""
+        self._candidate = None
         self._push(True)
 
     def _push(self, foreign: bool) -> None:

@@ -324,6 +324,7 @@ class EmulatorProcess:
             "commands_accepted": self.hold.accepted, "command_timeouts": self.hold.timeouts,
             "lost_sensor_frames": self.lost_sensor, "lost_command_frames": self.lost_cmd,
             "command_conflicts": self.commanders.conflicts,
+            "id_collisions": dict(self.io.collisions.by_name),
             "foreign_commands": self.commanders.foreign,
             "clipped_values": self.clipped, "inject_applied": self.inject_applied,
             "inject_rejected": self.inject_rejected, "inject_ignored": self.inject_ignored,

@@ -1,6 +1,6 @@
-"""udp_multicast at the frame level: the own-ID socket filter (its BPF program run by a small
-interpreter here, and by the kernel in a namespace), the select()-free reader and the template
-writer."""
+"""udp_multicast at the frame level: the own-datagram socket filter (its BPF program run by a
+small interpreter here, and by the kernel in a namespace: a process's own frames are dropped,
+another sender's on the same IDs are not), the select()-free reader and the template writer."""
 
 from __future__ import annotations
 
@@ -18,12 +18,11 @@ from _proc import ROOT
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
 from ehpss_hil.bus import frame_reader
-from ehpss_hil.bus_udp import DatagramParser, own_id_program, template
+from ehpss_hil.bus_udp import DatagramParser, own_source_program, template
 from ehpss_hil.netns import netns_prefix, netns_unavailable_reason
 
 NETNS_SKIP = netns_unavailable_reason()
 netns = pytest.mark.skipif(NETNS_SKIP is not None, reason=f"needs a namespace: {NETNS_SKIP}")
-OWN = (0x120, 0x140, 0x141, 0x142, 0x701)
 
 
 def _run_bpf(prog: list[tuple[int, int, int, int]], packet: bytes) -> int:
@@ -49,34 +48,20 @@ def _run_bpf(prog: list[tuple[int, int, int, int]], packet: bytes) -> int:
             raise AssertionError(f"opcode 0x{code:02x}")
 
 
-def _datagram(can_id: int, timestamp: float) -> bytes:
-    msg = can.Message(arbitration_id=can_id, is_extended_id=can_id > 0x7FF, data=bytes(8),
-                      timestamp=timestamp)
-    return bytes(8) + pack_message(msg)  # the filter sees the UDP header first
+def _datagram(src_port: int, can_id: int) -> bytes:
+    """A UDP header (source port, the group's port, length, checksum) and a frame: what a UDP
+    socket filter sees."""
+    body = pack_message(can.Message(arbitration_id=can_id, data=bytes(8), timestamp=1.5))
+    return struct.pack(">HHHH", src_port, 43113, 8 + len(body), 0) + body
 
 
-def test_own_id_program_drops_exactly_the_own_ids() -> None:
-    prog = own_id_program(OWN)
-    assert prog is not None
+def test_own_source_program_drops_exactly_that_port() -> None:
     rng = random.Random(1)
-    ids = [*OWN, 0x110, 0x111, 0x160, 0x161, 0x702, 0, 5, 0x7F, 0x80, 0xFF, 0x100, 0x7FF,
-           0x1FFFF120, *(rng.randrange(0x800) for _ in range(300))]
-    for can_id in ids:
-        for ts in (0.0, 1.5, 1.7e9 + rng.random()):
-            kept = _run_bpf(prog, _datagram(can_id, timestamp=ts))
-            assert (kept == 0) == (can_id in OWN), hex(can_id)
-
-
-def test_own_id_program_accepts_what_it_does_not_recognise() -> None:
-    prog = own_id_program(OWN)
-    assert prog is not None
-    own = _datagram(0x120, timestamp=1.5)
-    assert _run_bpf(prog, own) == 0
-    for bad in (own[:20], own[:45], own[:8] + b"\x8a" + own[9:],
-                own[:8] + own[8:19] + b"\xca" + own[20:], own[:30] + b"x" + own[31:], b"", bytes(100)):
-        assert _run_bpf(prog, bad) != 0
-    assert own_id_program([]) is None
-    assert own_id_program([0x05, 0x85]) is not None  # fixint and uint8 encodings
+    prog = own_source_program(40001)
+    for port in (40001, 40000, 40002, 43113, 1, 65535, *(rng.randrange(1, 65536) for _ in range(200))):
+        for can_id in (0x120, 0x110, 0x701):
+            assert (_run_bpf(prog, _datagram(port, can_id)) == 0) == (port == 40001)
+    assert _run_bpf(prog, b"") == 0  # no UDP header: never seen on a UDP socket
 
 
 def test_writer_templates_give_pack_message_bytes() -> None:
@@ -171,20 +156,19 @@ def test_frame_reader_elsewhere_is_recv_zero() -> None:
 
 _PROBE = textwrap.dedent("""
     import json, time, can
-    from ehpss_hil.bus import open_bus, frame_reader, frame_writer, drop_own_frames
+    from ehpss_hil.bus import open_bus, frame_reader, frame_writer, suppress_own_echoes
     from ehpss_hil.config import BusConfig
     a, b = open_bus(BusConfig()), open_bus(BusConfig())
-    own = [0x120, 0x140, 0x701, 0x05, 0x85]
-    attached = drop_own_frames(b, own)
+    attached = suppress_own_echoes(b)
     sent = [0x110, 0x120, 0x111, 0x140, 0x160, 0x701, 0x702, 0x05, 0x06, 0x85, 0x86, 0x1FFFF120]
     t0 = time.time()
-    write = frame_writer(a)
+    write, write_b = frame_writer(a), frame_writer(b)
     for i in sent:  # every other one by python-can's send, the rest by the template writer
-        send = write if i % 2 else a.send
-        send(can.Message(arbitration_id=i, data=bytes([i & 0xFF] * 8), is_extended_id=i > 0x7FF,
-                         timestamp=time.time()))
-    b.send(can.Message(arbitration_id=0x120, data=bytes(8), is_extended_id=False))  # own echo
-    b.send(can.Message(arbitration_id=0x333, data=b"", is_extended_id=False))  # DLC 0, foreign
+        send, own = (write, write_b) if i % 2 else (a.send, b.send)
+        for s in (send, own):  # the same frame from a and from b itself
+            s(can.Message(arbitration_id=i, data=bytes([i & 0xFF] * 8), is_extended_id=i > 0x7FF,
+                          timestamp=time.time()))
+    a.send(can.Message(arbitration_id=0x333, data=b"", is_extended_id=False))  # DLC 0
     time.sleep(0.2)
     read = frame_reader(b)
     got = []
@@ -197,14 +181,16 @@ _PROBE = textwrap.dedent("""
 
 
 @netns
-def test_kernel_drops_own_ids_and_reader_returns_the_rest() -> None:
+def test_kernel_drops_own_datagrams_and_reader_returns_every_other_senders() -> None:
+    """b's own frames never reach b; a's reach it on every ID, b's own IDs too."""
     r = subprocess.run([*netns_prefix(), sys.executable, "-c", _PROBE], cwd=ROOT,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     d = json.loads(r.stdout)
     assert d["attached"] is True and d["writer"] == "UdpWriter"
     got = d["got"]
-    assert [g[0] for g in got] == [0x110, 0x111, 0x160, 0x702, 0x06, 0x86, 0x1FFFF120, 0x333]
+    assert [g[0] for g in got] == [0x110, 0x120, 0x111, 0x140, 0x160, 0x701, 0x702, 0x05, 0x06,
+                                   0x85, 0x86, 0x1FFFF120, 0x333]
     assert all(g[1] == f"{g[0] & 0xFF:02x}" * 8 for g in got[:-1]) and got[-1][1] == ""
     assert all(0.0 <= g[2] < 0.2 for g in got)  # kernel receive timestamps, wall clock
 

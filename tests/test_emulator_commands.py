@@ -220,5 +220,11 @@ def test_commander_check_rules() -> None:
         assert chk.usable(c)
     assert not chk.conflict and chk.foreign == 3
     assert not chk.usable(62 + 101)  # a jump beyond max_ahead
+    assert chk.usable(62 + 102) and chk.usable(62 + 103)  # ... by one commander: resync
+    assert chk.foreign == 4 and not chk.conflict
+    for c in range(200, 210):  # two senders alternating never resynchronize on each other
+        chk.usable(c)
+        chk.usable(c + 5000)
+    assert chk.conflict
     wrap = CommanderCheck(window=10, limit=3, max_ahead=100)
     assert all(wrap.usable(c) for c in (65534, 65535, 0, 1))  # the 16-bit wrap is in order

@@ -5,7 +5,8 @@ loop and the emulator), frame loss per direction (lockstep simulator: case 1 mma
 lossless; processes: ``ehpss-hil run`` with a watchdog audit), duplicated/reordered/burst sensor
 frames against a controller process, kill -9 of either process (``--trials``), SIGTERM during a
 run, every config/scenario key made wrong, and hostile surroundings (issue #16: datagrams on the
-bus that are no frame, foreign files in ``run --out``, a full disk under the logs). Process
+bus that are no frame, foreign files in ``run --out``, a full disk under the logs, a second
+VALVE_CMD transmitter). Process
 sections need a private network namespace (root + ``unshare``) and say so when they cannot run;
 the full-disk row needs root for ``mount``. Exit 1 when any row fails. Implementation:
 :mod:`ehpss_hil.reliability`.
@@ -22,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ..reliability import badinput, duplicates, fuzz, hostile, kills, loss, stray
+from ..reliability import badinput, duplicates, fuzz, hostile, kills, loss, rogue, stray
 from ..reliability.procs import skip_reason
 from ..reliability.table import (
     Row,
@@ -34,13 +35,14 @@ from ..reliability.table import (
     hostile_rows,
     kill_rows,
     loss_rows,
+    rogue_rows,
     term_rows,
 )
 from .common import finite_json, write_json
 
 NAME = "faults"
 HELP = ("reliability suite: fuzzing, frame loss, duplicates, kill -9, SIGTERM, bad configs, "
-        "stray datagrams, foreign files in --out, full disk")
+        "stray datagrams, foreign files in --out, full disk, a second transmitter")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -108,7 +110,10 @@ def _hostile_section(q: bool, out: Path, rows: list[Row], s: Summary,
     if hostile.tmpfs_unavailable_reason() is None:
         disk = hostile.disk_full_trial(out / "disk", seconds=3.0 if q else 6.0)
     rows += hostile_rows(st, fo, disk, s)
-    raw.update(stray=st, foreign_files=fo, disk_full=disk)
+    _say("a second VALVE_CMD transmitter ...")
+    rg = rogue.rogue_trial(out / "rogue", rogue_s=0.5 if q else 1.0, duration_s=2.0 if q else 3.0)
+    rows += rogue_rows(rg, s)
+    raw.update(stray=st, foreign_files=fo, disk_full=disk, rogue=rg)
 
 
 def run(args: argparse.Namespace) -> int:

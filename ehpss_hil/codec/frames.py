@@ -28,6 +28,7 @@ from .. import DEFAULT_DBC
 from ..errors import FrameError, FrameIdError
 from .e2e import CounterCheck, E2EState, crc_ok, protect
 from .layout import BitLayout, LayoutMiss
+from .ratelimit import RateLimit
 
 DBC_ID_BASE = 0x100
 HEARTBEAT_BASE = 0x700
@@ -145,6 +146,8 @@ class FrameCodec:
         self.max_delta_counter = max_delta_counter
         self._tx_counter: dict[str, int] = {n: 0 for n in self._by_name}
         self._rx_check: dict[int, CounterCheck] = {}
+        #: CAN ID → (signal, its rate check) (:meth:`limit_rate`)
+        self._rate: dict[int, tuple[str, RateLimit]] = {}
         self.counts: dict[Verdict, int] = {v: 0 for v in Verdict}
         self.counts_by_name: dict[str, dict[Verdict, int]] = {}
 
@@ -170,6 +173,17 @@ class FrameCodec:
     def data_ids(self, name: str) -> tuple[int, ...] | None:
         """The 16 E2E DataIDs of frame ``name`` (None when it is not protected)."""
         return self._by_name[name].data_ids
+
+    def limit_rate(self, name: str, signal: str, step_m: float) -> RateLimit:
+        """Received ``name`` frames whose ``signal`` moves more than ``step_m`` per sample from
+        the previous reading are OUT_OF_RANGE (:class:`~.ratelimit.RateLimit`; an E2E-protected
+        frame only, the samples elapsed taken from its counter); returns the check."""
+        spec = self._by_name[name]
+        if spec.data_ids is None or signal not in spec.bounds_by_name:
+            raise FrameError(f"{name}.{signal}: a rate limit needs an E2E-protected signal")
+        limit = RateLimit(step_m)
+        self._rate[spec.can_id] = (signal, limit)
+        return limit
 
     # ---- transmit ----------------------------------------------------------------------
     def check_plausible(self, name: str, values: dict[str, Any]) -> str | None:
@@ -285,21 +299,28 @@ class FrameCodec:
             if check is None:
                 check = self._rx_check[spec.can_id] = CounterCheck(self.max_delta_counter)
             state = check.check(data[1])
-            if state is E2EState.REPEATED:
-                return Decoded(Verdict.REPEATED, name, None, ts)
-            if state is E2EState.WRONG_SEQUENCE:
-                return Decoded(Verdict.WRONG_SEQUENCE, name, None, ts)
+            if state is E2EState.REPEATED or state is E2EState.WRONG_SEQUENCE:
+                rate = self._rate.get(spec.can_id)
+                if rate is not None:
+                    rate[1].interrupt()
+                return Decoded(Verdict.REPEATED if state is E2EState.REPEATED
+                               else Verdict.WRONG_SEQUENCE, name, None, ts)
             verdict = Verdict.OK if state is E2EState.OK else Verdict.OK_SOME_LOST
         else:
             verdict = Verdict.OK
         values = _values(spec, data)
         if self._implausible(spec, values) is not None:
             return Decoded(Verdict.OUT_OF_RANGE, name, None, ts)
+        rate = self._rate.get(spec.can_id)
+        if rate is not None and not rate[1].check(float(values[rate[0]]), data[1] & 0x0F):
+            return Decoded(Verdict.OUT_OF_RANGE, name, None, ts)
         return Decoded(verdict, name, values, ts)
 
     def reset_rx(self) -> None:
         """Forget all receive sequence state (e.g. after a bus restart)."""
         self._rx_check.clear()
+        for _, limit in self._rate.values():
+            limit.reset()
 
     @property
     def rejected(self) -> int:

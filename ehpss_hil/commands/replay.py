@@ -31,7 +31,7 @@ from typing import Any
 from ..canlog import BadLines, read_sidecar
 from ..canlog.reader import read_frames, resolve_log
 from ..codec import FrameCodec
-from ..config import load_controller_config
+from ..config import SetpointPolicy, load_controller_config
 from ..control.registry import DAEMON_MODES, make_controller
 from ..control.sampleclock import RESYNC_SAMPLES
 from ..control.tuning import ControlTuning
@@ -40,6 +40,8 @@ from ..errors import EhpssError
 from ..physics.params import Params, load_params
 from ..report.logdata import MODE_NAMES
 from ..report.logmeta import run_info
+from ..runtime.foreign import SetpointGate
+from ..runtime.frameio import limit_sensor_rate
 from ..scenario import Reference, ReferenceBlocks, load_scenario
 
 NAME = "replay"
@@ -59,6 +61,8 @@ class ReplaySetup:
     tuning: ControlTuning
     params: Params
     source: str
+    #: which SETPOINT frames the daemon let override x_d
+    setpoint: SetpointPolicy = field(default_factory=SetpointPolicy)
 
 
 @dataclass
@@ -128,13 +132,13 @@ def resolve_setup(log: Path, mode: str | None, config: Path | None,
     if config is not None:
         cfg = load_controller_config(config)
         return ReplaySetup(mode or cfg.mode, 1.0 / cfg.rate_hz, cfg.reference, cfg.tuning,
-                           load_params(cfg.params or None), str(config))
+                           load_params(cfg.params or None), str(config), cfg.setpoint)
     info = run_info(read_sidecar(log), log.parent,
                     load_scenario(scenario) if scenario is not None else None, log)
     logged = mode or _logged_mode(log) or info.mode or "mmac"
     return ReplaySetup(logged, info.ts_s or 1e-3, info.reference or Reference(),
                        info.tuning or ControlTuning(), load_params(info.params_path),
-                       ", ".join(info.sources) or "defaults")
+                       ", ".join(info.sources) or "defaults", info.setpoint or SetpointPolicy())
 
 
 def _make(setup: ReplaySetup) -> Any:
@@ -172,6 +176,8 @@ class _Replayer:
         self.ctrl = _make(setup)
         self.driver = ControllerDriver(self.ctrl, ReferenceBlocks(setup.reference, setup.ts_s).at)
         self.codec = FrameCodec()
+        limit_sensor_rate(self.codec, setup.params.plant.piston_speed_max_m_s, setup.ts_s)
+        self.setpoints = SetpointGate(setup.setpoint)
         self.res = ReplayResult(setup)
         self.keep = keep
         self.ts = setup.ts_s
@@ -243,8 +249,10 @@ class _Replayer:
                 drv.position(r.a, r.b, r.counter)
             elif r.kind == "SENSOR_AUX":
                 drv.aux(r.a, r.b)
-            else:
-                drv.setpoint(r.a if r.override else None)
+            else:  # the daemon's SETPOINT gate, with x_d as the daemon had it then
+                x_d = drv.reference(drv.k) if drv.override_m is None else drv.override_m
+                if self.setpoints.admit(r.override, r.a, x_d):
+                    drv.setpoint(r.a if r.override else None)
         del self.pending[:n]
 
     # ---- cycles -----------------------------------------------------------------------------

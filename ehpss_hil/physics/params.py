@@ -45,6 +45,11 @@ class PlantParams:
         return self.flow_gain_1_s3 / self.hydraulic_stiffness_1_s2
 
     @property
+    def piston_speed_max_m_s(self) -> float:
+        """The fastest steady piston speed (m/s): K_c × the spool stroke (the spool at its stop)."""
+        return self.velocity_gain_1_s * self.spool_stroke_m
+
+    @property
     def valve_static_gain_m_per_a(self) -> float:
         """Steady spool displacement per ampere of coil current (m/A)."""
         return self.valve_gain_m_per_a_s2 / self.valve_stiffness_1_s2

@@ -11,6 +11,7 @@ from .fuzz import FuzzTally
 from .hostile import DiskFullResult, ForeignResult
 from .kills import KillResult, TermResult
 from .loss import TARGET_LEVEL, TARGET_RATIO, LossRow
+from .rogue import MAX_DEVIATION_M, RogueResult
 from .stray import StrayResult
 
 _ABBR = {"OK": "OK", "OK_SOME_LOST": "LOST", "REPEATED": "REP", "WRONG_SEQUENCE": "SEQ",
@@ -244,6 +245,20 @@ def hostile_rows(stray: StrayResult, foreign: ForeignResult | None,
                                                              else ""),
                         "exit 0, exact counts, whole lines, warned", disk.ok))
     return rows
+
+
+def rogue_rows(r: RogueResult, s: Summary) -> list[Row]:
+    """A second VALVE_CMD transmitter beside the controller and the emulator (issue #16)."""
+    s.crashes += sum(v not in (0, None) for v in r.exits.values())
+    c, e = r.controller, r.emulator
+    return [Row("second transmitter", f"rogue VALVE_CMD at 1 kHz, {r.sent} sent",
+                f"emulator conflicts {e.get('command_conflicts')} (foreign "
+                f"{e.get('foreign_commands')}, CommandConflict {int(r.command_conflict_seen)}); "
+                f"controller {c.get('state')}/{c.get('failsafe_reason')}, VALVE_CMD collisions "
+                f"{r.valve_cmd_collisions}; piston max |x − x_d| {r.max_deviation_m * 1e6:.1f} µm; "
+                f"exits {'/'.join(str(v) for v in r.exits.values())}"
+                + (f"; error: {r.error}" if r.error else ""),
+                f"valve centred, ID_COLLISION, |x − x_d| ≤ {MAX_DEVIATION_M * 1e3:g} mm", r.ok)]
 
 
 def format_table(rows: list[Row]) -> str:

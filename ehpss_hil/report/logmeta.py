@@ -15,7 +15,12 @@ from pathlib import Path
 from typing import Any
 
 from .. import PROJECT_ROOT
-from ..config import ControllerConfig, load_controller_config, load_emulator_config
+from ..config import (
+    ControllerConfig,
+    SetpointPolicy,
+    load_controller_config,
+    load_emulator_config,
+)
 from ..control.tuning import ControlTuning
 from ..errors import ConfigError
 from ..scenario import Reference, Scenario, load_scenario
@@ -31,6 +36,7 @@ class RunInfo:
     ts_s: float | None = None
     mode: str | None = None
     tuning: ControlTuning | None = None
+    setpoint: SetpointPolicy | None = None
     params_path: str | None = None
     sources: list[str] = field(default_factory=list)
 
@@ -84,6 +90,7 @@ def _from_config_file(path: Path, info: RunInfo) -> None:
     info.ts_s = info.ts_s or 1.0 / c.rate_hz
     info.mode = info.mode or c.mode
     info.tuning = info.tuning or c.tuning
+    info.setpoint = info.setpoint or c.setpoint
     info.params_path = info.params_path or c.params or None
 
 
@@ -108,6 +115,9 @@ def _from_mapping(side: dict[str, Any], log_dir: Path, info: RunInfo) -> None:
     tun = cfg_d.get("tuning")
     if info.tuning is None and isinstance(tun, dict):
         info.tuning = build(ControlTuning, tun, "sidecar", "config.tuning")
+    sp = cfg_d.get("setpoint")
+    if info.setpoint is None and isinstance(sp, dict):
+        info.setpoint = build(SetpointPolicy, sp, "sidecar", "config.setpoint")
     p = cfg_d.get("params", side.get("params"))
     if info.params_path is None and isinstance(p, str) and p and Path(p).is_file():
         info.params_path = p

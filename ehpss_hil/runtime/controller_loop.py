@@ -26,14 +26,15 @@ from dataclasses import dataclass, field
 import can
 
 from ..codec import Verdict
-from ..config import Watchdog
+from ..config import SetpointPolicy, Watchdog
 from ..control.base import Controller, Measurement
 from ..control.sampleclock import RESYNC_SAMPLES
 from ..driver import ControllerDriver
 from ..scenario import Reference, ReferenceBlocks
 from .deadline import DeadlineTimer, socket_wake
+from .foreign import CollisionGuard, SetpointGate
 from .frameio import FrameIO
-from .lifecycle import Lifecycle, State
+from .lifecycle import FailsafeReason, Lifecycle, State
 from .phaselock import PhaseLock
 from .signals import StopFlag
 from .stats import LoopStats
@@ -44,6 +45,7 @@ log = logging.getLogger("ehpss_hil.controller")
 
 OWN_FRAMES = ("VALVE_CMD", "CTRL_STATUS", "CTRL_INDEX", "CTRL_STATS", "HEARTBEAT_CTRL")
 _E2E_VERDICTS = (Verdict.CRC_ERROR, Verdict.REPEATED, Verdict.WRONG_SEQUENCE, Verdict.BAD_DLC)
+_SEQUENCE_VERDICTS = (Verdict.REPEATED, Verdict.WRONG_SEQUENCE)
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,8 @@ class LoopOptions:
     heartbeat_rate_hz: float = 10.0
     stats_rate_hz: float = 10.0
     watchdog: Watchdog = field(default_factory=Watchdog)
+    #: which SETPOINT frames may override x_d
+    setpoint: SetpointPolicy = field(default_factory=SetpointPolicy)
     current_limit_a: float = 1.0
     lockstep_idle_s: float = 2.0
     #: a one-line counter summary in the log every this many seconds of cycles (0 = never)
@@ -96,6 +100,9 @@ class ControllerLoop:
         self._late = False  # this cycle started after its deadline
         self.life = Lifecycle()
         self.life.to(State.CONFIGURED)
+        #: a second transmitter (ID_COLLISION) and the SETPOINT policy (runtime/foreign.py)
+        self.guard = CollisionGuard(opts.watchdog, io.collisions)
+        self.setpoints = SetpointGate(opts.setpoint)
         self.stats = LoopStats(opts.stats_capacity)
         self._id_pos = self.codec.can_id("SENSOR_POS")
         self._id_aux = self.codec.can_id("SENSOR_AUX")
@@ -151,6 +158,8 @@ class ControllerLoop:
         if fid not in self._rx_ids:
             return None
         d = self.codec.classify(msg)
+        if fid == self._id_pos:
+            self.guard.sensor.add(d.verdict in _SEQUENCE_VERDICTS)
         if not d.verdict.usable or d.values is None:
             if fid != self._id_setpoint:
                 if d.verdict is Verdict.OUT_OF_RANGE:
@@ -177,8 +186,12 @@ class ControllerLoop:
             self._aux_fresh = True
             self._aux_ts = msg.timestamp
             self.driver.aux(float(v["CoilCurrent"]), float(v["LoadPressure"]))
+            self.guard.command_conflict(bool(v["CommandConflict"]))
         else:
-            self.driver.setpoint(float(v["Position"]) if v["Override"] else None)
+            override, x_d = bool(v["Override"]), self.driver.override_m
+            if self.setpoints.admit(override, float(v["Position"]),
+                                    self.ref.at(self.k_active) if x_d is None else x_d):
+                self.driver.setpoint(float(v["Position"]) if override else None)
         return d.verdict
 
     # ---- the driver's state, as the loop's --------------------------------------------------
@@ -200,28 +213,39 @@ class ControllerLoop:
     # ---- one cycle --------------------------------------------------------------------------
     def _update_state(self) -> None:
         st = self.life.state
+        collided = self.guard.update(self.cycles)
         if st is State.CONFIGURED:
             if self._fresh:
                 self.wd.reset()
                 self.life.to(State.ACTIVE)
                 log.info("first sensor data: ACTIVE (mode %s)", self.controller.mode)
+                if collided:
+                    self._fault(FailsafeReason.ID_COLLISION)
             return
         if self._stale_in_cycle:
             log.warning("cycle %d: %d stale sensor frame(s) (received > %.3g ms ago) dropped",
                         self.cycles, self._stale_in_cycle, self.stale_after_s * 1e3)
         tripped = self.wd.update(self._fresh, self._e2e_bad, self._implausible, self._late)
-        if st is State.ACTIVE and tripped:
-            self._fault()
+        if st is State.ACTIVE and (tripped or collided):
+            self._fault(None if tripped else FailsafeReason.ID_COLLISION)
+        elif st is State.FAULT and collided:  # the more specific diagnosis
+            if self.life.reason is not FailsafeReason.ID_COLLISION:
+                log.error("cycle %d: second transmitter: FAULT reason %s -> ID_COLLISION",
+                          self.cycles, self.life.reason.name)
+            self.life.reason = FailsafeReason.ID_COLLISION
         elif st is State.FAULT and not tripped:
             self.driver.restart()
             self.life.to(State.ACTIVE)
             log.warning("cycle %d: sensor data fresh for %d cycles: ACTIVE again", self.cycles,
                         self.wd.fresh_cycles)
 
-    def _fault(self) -> None:
-        self.life.to(State.FAULT, self.wd.reason)
-        log.error("cycle %d: watchdog: %s -> FAULT, fail-safe %s", self.cycles,
-                  self.wd.reason.name, self.opts.watchdog.failsafe)
+    def _fault(self, reason: FailsafeReason | None = None) -> None:
+        """ACTIVE → FAULT for ``reason`` (None: the watchdog's)."""
+        why = self.wd.reason if reason is None else reason
+        self.life.to(State.FAULT, why)
+        log.error("cycle %d: %s: %s -> FAULT, fail-safe %s", self.cycles,
+                  "watchdog" if reason is None else "second transmitter", why.name,
+                  self.opts.watchdog.failsafe)
 
     def _command(self) -> tuple[float, bool]:
         st = self.life.state
@@ -329,9 +353,10 @@ class ControllerLoop:
     def _log_counters(self) -> None:
         """Cheap counters only (no percentiles in the cycle: they would cost an overrun)."""
         log.info("cycles %d, state %s, overruns %d, rejected frames %d, stale frames %d, "
-                 "fail-safe cycles %d, max compute %.0f µs in the last interval", self.cycles,
+                 "fail-safe cycles %d, ID collisions: %s, second-transmitter episodes %d, "
+                 "max compute %.0f µs in the last interval", self.cycles,
                  self.life.state.name, self.overruns, self.codec.rejected, self.stale_frames,
-                 self.failsafe_cycles,
+                 self.failsafe_cycles, self.io.collisions.text(), self.guard.episodes,
                  self._interval_compute_max_s * 1e6)
         self._interval_compute_max_s = 0.0
 
@@ -449,6 +474,10 @@ class ControllerLoop:
                 "nominal_fallbacks": self._fallbacks(),
                 "frames_sent": dict(self.io.sent), "tx_errors": self.io.tx_errors,
                 "frames_received": self.io.received,
+                "id_collisions": dict(self.io.collisions.by_name),
+                "second_transmitter": self.guard.summary(),
+                "setpoints": {"accepted": self.setpoints.accepted,
+                              "rejected": self.setpoints.rejected},
                 "received_by_verdict": {v.name: n for v, n in self.codec.counts.items()},
                 "stats": self.stats.summary(),
                 "max_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}

@@ -1,10 +1,15 @@
-"""Frame I/O at the edge of a loop: encode + send + log, non-blocking drain, own-echo filter.
+"""Frame I/O at the edge of a loop: encode + send + log, non-blocking drain, ID collisions.
 
-On ``udp_multicast`` a process receives its own frames; :class:`FrameIO` drops every received
-frame whose ID is one this process transmits (``own_ids``) before anything else sees it, so
-each frame is logged exactly once (when sent). There a kernel socket filter drops them first
-(:func:`~ehpss_hil.bus.drop_own_frames`: no read, no decoding), and the drain reads without a
-``select()`` per frame (:func:`~ehpss_hil.bus.frame_reader`) and frames go out without
+Each frame is logged exactly once: when sent, or when received. A frame received on one of the
+process's own TX IDs (``own_ids``) is never handed to the loop: either it is the echo of one the
+process sent (dropped unlogged) or another node sent it — an ID collision, counted per frame name
+(:attr:`FrameIO.collisions`, :mod:`.collisions`) and logged. Which it is depends on the bus
+(:func:`~ehpss_hil.bus.suppress_own_echoes`): socketcan and ``virtual`` (as opened here) never
+hand a process its own frames, and on ``udp_multicast`` a kernel socket filter drops the
+datagrams from the process's own sending port (no read, no decoding), so every frame on an own
+ID that arrives is foreign; where echoes do come back, a ring of the frames sent
+(:class:`~.collisions.SentFrames`) tells them apart. On ``udp_multicast`` the drain reads
+without a ``select()`` per frame (:func:`~ehpss_hil.bus.frame_reader`) and frames go out without
 python-can's per-frame packing (:func:`~ehpss_hil.bus.frame_writer`). Every other frame is
 logged when received, then handed to the loop, which classifies only the IDs it consumes.
 """
@@ -18,10 +23,18 @@ from typing import Any, Protocol
 
 import can
 
-from ..bus import datagram_rejects, drop_own_frames, frame_reader, frame_writer, stamps_receive_time
+from ..bus import (
+    datagram_rejects,
+    frame_reader,
+    frame_writer,
+    stamps_receive_time,
+    suppress_own_echoes,
+)
 from ..codec import FrameCodec
+from ..codec.ratelimit import RateLimit, position_step_bound_m
 from ..config import BusConfig, CanIds, LogConfig
 from ..errors import ConfigError, FrameError, FrameIdError
+from .collisions import IdCollisions, SentFrames
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +79,13 @@ def process_codec(dbc: str, ids: CanIds, config_path: str) -> FrameCodec:
         raise ConfigError(config_path, "dbc", f"cannot load {dbc}: {exc}") from exc
 
 
+def limit_sensor_rate(codec: FrameCodec, speed_max_m_s: float, ts_s: float) -> RateLimit:
+    """The rate plausibility check of SENSOR_POS Position (:mod:`~ehpss_hil.codec.ratelimit`)
+    for a plant whose piston moves at most ``speed_max_m_s`` (m/s), sampled every ``ts_s`` (s);
+    the daemon and ``replay`` classify alike."""
+    return codec.limit_rate("SENSOR_POS", "Position", position_step_bound_m(speed_max_m_s, ts_s))
+
+
 def open_process_logger(cli_path: str | None, cfg: LogConfig, bus_cfg: BusConfig,
                         bus: can.BusABC, config_path: str,
                         sidecar: dict[str, Any]) -> FrameLogger | None:
@@ -81,7 +101,8 @@ def open_process_logger(cli_path: str | None, cfg: LogConfig, bus_cfg: BusConfig
 
 
 class FrameIO:
-    """One process's view of the bus: counts sent frames by name and transmit errors."""
+    """One process's view of the bus: counts sent frames by name, transmit errors and ID
+    collisions (frames on the own TX IDs that this process did not send)."""
 
     def __init__(self, bus: can.BusABC, codec: FrameCodec, own_names: tuple[str, ...],
                  logger: FrameLogger | None = None) -> None:
@@ -89,8 +110,12 @@ class FrameIO:
         self.codec = codec
         self.logger = logger
         self.own_ids = frozenset(codec.can_id(n) for n in own_names)
-        #: True when the kernel drops the echoes of own frames (udp_multicast)
-        self.own_filtered_in_kernel = drop_own_frames(bus, self.own_ids)
+        #: True when the bus never hands this process its own frames (then every frame received
+        #: on an own ID is another node's); else :attr:`_echoes` tells echoes apart
+        self.echoes_suppressed = suppress_own_echoes(bus)
+        self._echoes = None if self.echoes_suppressed else SentFrames()
+        #: foreign frames received on the own TX IDs, per frame name
+        self.collisions = IdCollisions({codec.can_id(n): n for n in own_names})
         #: True when a received frame's timestamp is its receive time (wall clock)
         self.receive_timestamps = stamps_receive_time(bus)
         # every DBC frame's datagram template built now, not in the first cycles (udp_multicast)
@@ -129,6 +154,8 @@ class FrameIO:
             self._tx_error(name, exc)
             return False
         self.sent[name] = self.sent.get(name, 0) + 1
+        if self._echoes is not None:
+            self._echoes.add(msg.arbitration_id, msg.data)
         if self.logger is not None:
             self.logger.log(msg)
         return True
@@ -145,15 +172,21 @@ class FrameIO:
             self.logger.kick()
 
     def _accept(self, msg: can.Message | None) -> bool:
-        if msg is None or msg.arbitration_id in self.own_ids:
+        """Count and log a received frame; True when it is for the loop (not on an own ID)."""
+        if msg is None:
             return False
+        own = msg.arbitration_id in self.own_ids
+        if own and self._echoes is not None and self._echoes.take(msg.arbitration_id, msg.data):
+            return False  # the echo of a frame this process sent (logged when sent)
+        if own:
+            self.collisions.add(msg.arbitration_id)
         self.received += 1
         if self.logger is not None:
             self.logger.log(msg)
-        return True
+        return not own
 
     def drain(self, limit: int = 1000) -> Iterator[can.Message]:
-        """Every frame pending now (non-blocking), own echoes dropped; at most ``limit``."""
+        """Every frame pending now (non-blocking) but those on own IDs; at most ``limit`` read."""
         read = self._read
         for _ in range(limit):
             msg = read()
@@ -163,7 +196,7 @@ class FrameIO:
                 yield msg
 
     def recv(self, timeout_s: float) -> can.Message | None:
-        """Wait up to ``timeout_s`` (s) for one foreign frame (own echoes skipped)."""
+        """Wait up to ``timeout_s`` (s) for one frame not on an own ID."""
         deadline = time.monotonic() + timeout_s
         while True:
             left = deadline - time.monotonic()

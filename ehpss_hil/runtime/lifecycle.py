@@ -30,6 +30,9 @@ class FailsafeReason(IntEnum):
     OPERATOR = 4
     #: the loop itself: more periods skipped at once than the predictors bridge, or starved
     LOOP_OVERRUN = 5
+    #: a second transmitter: our VALVE_CMD from another node, the emulator's CommandConflict,
+    #: a second SENSOR_POS stream (runtime/foreign.py; ``watchdog.on_collision: fault``)
+    ID_COLLISION = 6
 
 
 #: CiA 301 heartbeat NMT state for each lifecycle state
