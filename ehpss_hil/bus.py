@@ -1,4 +1,4 @@
-"""python-can bus factory from :class:`~ehpss_hil.config.BusConfig` (DESIGN.md §7).
+"""python-can bus factory from :class:`~ehpss_hil.config.BusConfig` (docs/design.md §8).
 
 Interfaces:
 

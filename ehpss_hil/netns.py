@@ -1,4 +1,4 @@
-"""Private network namespaces for the embedded ``udp_multicast`` bus (DESIGN.md §7).
+"""Private network namespaces for the embedded ``udp_multicast`` bus (docs/design.md §8).
 
 Inside ``unshare --net`` only a loopback device exists; with ``ip link set lo up`` and
 ``ip route add 224.0.0.0/4 dev lo`` multicast works between the processes of that namespace and

@@ -1,4 +1,4 @@
-"""Metrics (DESIGN §10) of an ``ehpss-hil run`` directory, from its bus log alone."""
+"""Metrics (docs/design.md §10) of an ``ehpss-hil run`` directory, from its bus log alone."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from .scenario import load_scenario
 def metrics_from_run(out_dir: Path, plot: bool = False,
                      written: list[Path] | None = None) -> dict[str, Any]:
     """Decode ``out_dir/bus.log`` with the run's scenario; write ``metrics.json`` (a one-row
-    list, DESIGN §10 format) and, with ``plot``, the report figures and ``report/report.md``
+    list, docs/design.md §10 format) and, with ``plot``, the report figures and ``report/report.md``
     (each file written is appended to ``written``). A file that cannot be written is an
     :class:`~ehpss_hil.errors.OutputError`."""
     meta = json.loads((out_dir / "run.json").read_text())

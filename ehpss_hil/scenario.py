@@ -1,4 +1,4 @@
-"""Scenario files (DESIGN.md §9): reference, noise, frame loss, delay, disturbance, fault events.
+"""Scenario files (docs/design.md §10): reference, noise, frame loss, delay, disturbance, fault events.
 
 A scenario is loaded into frozen dataclasses; any unknown key, wrong type, missing key or
 out-of-range value raises :class:`~ehpss_hil.errors.ConfigError` naming file and key path.
@@ -231,7 +231,7 @@ _EVENT_KEYS = (*_FAULT_KEYS, *_LOSS_KEYS)
 
 @dataclass(frozen=True)
 class Scenario:
-    """One test scenario (DESIGN.md §9). Times in s, lengths in m.
+    """One test scenario (docs/design.md §10). Times in s, lengths in m.
 
     Frame loss (probability per frame): ``frame_loss`` for both directions, optionally
     overridden per direction by ``sensor_frame_loss`` / ``command_frame_loss`` (:class:`FrameLoss`).

@@ -1,4 +1,4 @@
-"""DESIGN §10 metrics on synthetic runs with known answers."""
+"""docs/design.md §10 metrics on synthetic runs with known answers."""
 
 from __future__ import annotations
 

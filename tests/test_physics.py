@@ -18,7 +18,7 @@ PARAMS = load_params()
 
 
 def eq39_printed(k_loe: float, k_dft: float) -> tuple[np.ndarray, np.ndarray]:
-    """The paper's eq 39 numbers, with the fault entries of DESIGN §3 (4 significant digits)."""
+    """The paper's eq 39 numbers, with the fault entries of docs/design.md §6 (4 significant digits)."""
     a = np.zeros((6, 6))
     a[0, :] = [-2576, -3.136e7, 0, 0, 1.031e8 * k_loe, 0]
     a[1, 0] = 1

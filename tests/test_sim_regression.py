@@ -1,4 +1,4 @@
-"""Regression per shipped scenario: mmac stays within the DESIGN §11 targets.
+"""Regression per shipped scenario: mmac stays within the docs/design.md §11 targets.
 
 Comparisons with oracle/smac/mmac-paper/nrc run those modes too (each run ≈ 0.1–0.3 s).
 """

@@ -1,4 +1,4 @@
-"""SocketCAN path (DESIGN §12): real ``socketcan`` buses on vcan0, real processes, our log.
+"""SocketCAN path (docs/design.md §11): real ``socketcan`` buses on vcan0, real processes, our log.
 
 Runs natively where ``socket(AF_CAN)`` works and vcan0 is up; on kernels without SocketCAN
 ``.ci/run`` runs this module inside ``../shared/tools/vcan-vm/run`` (a QEMU VM with vcan0/vcan1).

@@ -1,5 +1,5 @@
 """``ehpss-hil bench control``: control quality of every mode on the shipped and unseen scenarios,
-each DESIGN §11 target printed with PASS/FAIL beside the measured figure."""
+each docs/design.md §11 target printed with PASS/FAIL beside the measured figure."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from ..sim.campaign import Job, default_jobs, run_campaign, scenario_paths
 from .common import write_json
 
 NAME = "control"
-HELP = "control quality of nrc/smac/mmac-paper/mmac/oracle against the DESIGN §11 targets"
+HELP = "control quality of nrc/smac/mmac-paper/mmac/oracle against the docs/design.md §11 targets"
 
 SHIPPED = ("fault-free", "case1-loe", "case2-drift", "case3-combined", "case4-disturbance")
 UNSEEN = ("unseen-loe35", "unseen-drift1p4", "unseen-combined", "unseen-noise1pct",
@@ -182,7 +182,7 @@ def _envelope(t: Table, envelope: dict[str, str]) -> list[Verdict]:
 
 
 def verdicts(t: Table, envelope: dict[str, str] | None = None) -> list[Verdict]:
-    """Every DESIGN §11 control target evaluated on the campaign table, then the envelope's
+    """Every docs/design.md §11 control target evaluated on the campaign table, then the envelope's
     ("do no harm") targets; ``envelope``: envelope scenario name → ``fault-free``,
     ``power-on`` or ``other``."""
     env = envelope or {}

@@ -7,7 +7,7 @@ controller's receive load), once plainly and once with RT options (SCHED_FIFO, o
 and prints the controller's cycle compute time (with ``wake_on_sensor``, as in bench runs, the
 sensor pair's receive/classify happens while waiting and is not in it; it is in the latency),
 wake-up lateness and sensor→command latency (p50/p99/p99.9/max), the overrun ratio, rejected
-frames and peak RSS beside DESIGN §11's targets. Figures come from each process's own
+frames and peak RSS beside docs/design.md §11's targets. Figures come from each process's own
 preallocated statistics (``--summary-json``). Then the host's share (:mod:`.hostref`): the
 control step + VALVE_CMD encode alone, after a sleep and back to back.
 """

@@ -4,7 +4,7 @@ Both processes run realtime (mode mmac, fault-free 1 mm sine, the bench watchdog
 run``) in a private network namespace, without candump logs (a 10-minute log would grow by
 hundreds of MB). The bench reads each child's ``/proc/PID/status`` and ``/proc/PID/stat`` every
 ``--interval`` seconds — VmRSS, VmHWM, threads, CPU time, context switches — and prints them at
-start (after ``--warmup`` s) and at the end, the RSS growth from start to end (DESIGN §11: no
+start (after ``--warmup`` s) and at the end, the RSS growth from start to end (docs/design.md §11: no
 growth in a 10-minute soak; controller RSS ≤ 100 MB), the controller's own counter lines (its log
 prints one every ``stats_interval_s``) and both processes' final counters (``--summary-json``).
 """

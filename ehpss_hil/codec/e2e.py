@@ -2,7 +2,7 @@
 
 The CRC is crccheck's ``Crc8Autosar`` (CRC8H2F), the one ``cantools.autosar.end_to_end``
 computes; given an integer DataID cantools uses it as is, so the caller passes
-``data_ids[counter]`` (DESIGN.md §6). crccheck runs it bit by bit (≈ 6 µs per 8-byte frame);
+``data_ids[counter]`` (docs/design.md §7). crccheck runs it bit by bit (≈ 6 µs per 8-byte frame);
 here the same CRC runs byte-wise on a 256-entry table that crccheck itself fills at import (one
 byte from register 0 per entry; the polynomial appears nowhere in this file), ≈ 0.3 µs.
 ``tests/test_codec_layout.py`` checks it against ``cantools.autosar.end_to_end`` for every DataID

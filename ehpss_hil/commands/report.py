@@ -1,7 +1,7 @@
 """``ehpss-hil report DIR_or_LOG [--out DIR]``: metrics, figures and ``report.md`` from a CAN log.
 
 Works from the log alone (its sidecar supplies the reference; ``--scenario`` overrides it).
-Metrics are the DESIGN §10 ones (``ehpss_hil.report.metrics``) when the log has PLANT_TRUTH; the
+Metrics are the docs/design.md §10 ones (``ehpss_hil.report.metrics``) when the log has PLANT_TRUTH; the
 report states which metrics a log without ground truth can still give.
 """
 
@@ -40,7 +40,7 @@ def _ms(v: float) -> str:
 
 
 def _metrics_lines(m: LogMetrics) -> list[str]:
-    lines = ["## Metrics (DESIGN §10)", ""]
+    lines = ["## Metrics (docs/design.md §10)", ""]
     if m.run is not None:
         r = m.run
         lines += ["| metric | value |", "|---|---|",
@@ -97,7 +97,7 @@ def write_markdown(run: LogRun, m: LogMetrics, figures: list[Path], out_dir: Pat
 
 
 def metrics_row(run: LogRun, m: LogMetrics) -> dict[str, object]:
-    """The DESIGN §10 JSON row (plus ``extra`` and ``unavailable``)."""
+    """The docs/design.md §10 JSON row (plus ``extra`` and ``unavailable``)."""
     row: dict[str, object] = (m.run.to_json() if m.run is not None else
                               {"scenario": run.result.scenario,
                                "controller": run.result.controller})

@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenarios", nargs="+", help="scenario YAML files (or directories of them)")
     p.add_argument("--controller", "-C", action="append", choices=MODES, metavar="MODE",
                    help=f"controller mode, repeatable ({', '.join(MODES)}; default mmac)")
-    p.add_argument("--json", metavar="FILE", help="write the DESIGN §10 metric rows as JSON")
+    p.add_argument("--json", metavar="FILE", help="write the docs/design.md §10 metric rows as JSON")
     p.add_argument("--plot", metavar="FILE.png",
                    help="figure like the paper's Fig 5 (several runs: FILE-<scenario>-<mode>.png)")
     p.add_argument("--transport", choices=TRANSPORTS, default="quantize",

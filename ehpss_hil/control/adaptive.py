@@ -1,6 +1,6 @@
 """The adaptive modes: ``mmac`` (per-channel banks) and ``smac``/``mmac-paper`` (joint model).
 
-``mmac`` (DESIGN §5): the spool channel ``y_v = θ_L·v`` (v: commanded spool predicted from the
+``mmac`` (docs/design.md §5): the spool channel ``y_v = θ_L·v`` (v: commanded spool predicted from the
 current echo) and the position channel ``y_s = θ_D·x̂`` (x̂: model position from the spool LVDT),
 each with fixed models + FRA + RIA, a supervisor and a guard. The spool residual depends on
 k_LOE only and the position residual on k_DFT only, which is what makes them separable.
@@ -8,7 +8,7 @@ k_LOE only and the position residual on k_DFT only, which is what makes them sep
 ``mmac-paper``/``smac``: the paper's sensing — the position alone. The regression is over a
 window of M samples, ``y = y_s[k] − y_s[k−M]`` against ``φ = K_c·∫_{k−M}^{k} v dt``, i.e.
 ``y = k_LOE·k_DFT·φ``: only the product is identifiable, so a joint (θ_L, θ_D) model cannot tell a
-50 % LOE from a 0.5 drift (DESIGN §4). ``mmac-paper`` has the fixed pairs nominal, LOE 50 %,
+50 % LOE from a 0.5 drift (docs/design.md §4). ``mmac-paper`` has the fixed pairs nominal, LOE 50 %,
 drift 0.5 plus FRA and RIA, whose adaptive law (the paper's actuator parametrization) adapts θ_L
 with θ_D held (FRA: 1; RIA: the θ_D of the fixed model it was reinitialized to); ``smac`` has one
 adaptive model, θ_L with θ_D = 1. Their x̂ integrates θ̂_L·v (no spool sensor in this sensing).

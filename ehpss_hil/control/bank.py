@@ -8,7 +8,7 @@ nominal amplitude S (``ε_k = (y − ŷ_k)/S``, dimensionless):
     J_k = a1·ε_k² + a2·I_k
 
 The banks also track ``w = Σ Ts·e^{−λ·j·Ts}`` so that ``min_k I_k / w`` is the mean-square residual
-of the best model over the memory window: the channel's noise floor (DESIGN §5).
+of the best model over the memory window: the channel's noise floor (docs/design.md §5).
 """
 
 from __future__ import annotations

@@ -46,7 +46,7 @@ class Measurement:
     ``samples``: sensor samples from the previous fresh measurement to this one, from the
     frames' E2E counter (1: the next sample; 2: one sample between them was lost or superseded
     in the same cycle; 0: unknown, taken as one per cycle). A realtime loop's cycles slip against
-    the sensor's sample clock; this keeps the model position on the sample clock (DESIGN §5,
+    the sensor's sample clock; this keeps the model position on the sample clock (docs/design.md §5,
     docs/control.md §3).
     ``command_sent``: False when this cycle's command will not be sent (a period the loop slept
     through, stepped only to keep its clock on the grid): the valve keeps the previous one.

@@ -1,4 +1,4 @@
-"""Fault compensation (DESIGN §5 step 6): divide the faults out, bumplessly.
+"""Fault compensation (docs/design.md §5 step 6): divide the faults out, bumplessly.
 
 * feedback ``y_f = K_f·y_s/θ̂_D`` while the sensor is trusted, else ``K_f·x̂`` (model position);
 * current ``I = u_PI/θ̂_L``.

@@ -1,6 +1,6 @@
 """The five controller modes and the factory :func:`make_controller`.
 
-Modes (DESIGN §5): ``nrc`` (eq 39 PI only), ``oracle`` (compensation with the true faults, for
+Modes (docs/design.md §5): ``nrc`` (eq 39 PI only), ``oracle`` (compensation with the true faults, for
 benchmarks only), ``smac`` (one joint adaptive model), ``mmac-paper`` (the paper's joint bank),
 ``mmac`` (per-channel banks on the spool LVDT and the position sensor).
 

@@ -3,7 +3,7 @@
 With the piston position and the spool LVDT alone only ``k_DFT·k_Q`` is identifiable: a flow-gain
 loss downstream of the spool (k_Q < 1, e.g. a supply-pressure drop) looks exactly like a
 position-sensor drift to the position channel, and compensating it as a drift makes the loop track
-``k_Q·x_d`` (DESIGN §11's k_Q finding). The load pressure ``P_L = m·ẍ/A_h`` does not go through
+``k_Q·x_d`` (docs/design.md §11's k_Q finding). The load pressure ``P_L = m·ẍ/A_h`` does not go through
 the position sensor: ``P_L = k_LOE·k_Q·(m/A_h)·ẍ₁`` where ẍ₁ is the piston acceleration of a
 unit-gain model driven by the applied-current echo (exact ZOH of valve + cylinder).
 

@@ -1,4 +1,4 @@
-"""Predictors that run beside the loop: the valve model and the model position x̂ (DESIGN §5).
+"""Predictors that run beside the loop: the valve model and the model position x̂ (docs/design.md §5).
 
 Both are built once (exact ZOH for the valve) and step with plain Python floats: for 2-state
 models a hand-written update is several times faster than numpy's small matvec.

@@ -1,4 +1,4 @@
-"""The switching supervisor of one model bank (DESIGN §5 step 5).
+"""The switching supervisor of one model bank (docs/design.md §5 step 5).
 
 Switch from the active model to the argmin of J only when all of these hold:
 

@@ -1,4 +1,4 @@
-"""Tuning constants of the adaptive layer (DESIGN.md §5), as a frozen, YAML-loadable dataclass.
+"""Tuning constants of the adaptive layer (docs/design.md §5), as a frozen, YAML-loadable dataclass.
 
 Units: rates in 1/s, times in s; ε-related values are normalized (dimensionless).
 """
@@ -12,7 +12,7 @@ from ..schema import rng
 
 @dataclass(frozen=True)
 class ControlTuning:
-    """Estimator, index and supervisor constants (defaults = DESIGN §5).
+    """Estimator, index and supervisor constants (defaults = docs/design.md §5).
 
     Every number has a finite range (``rng`` metadata, checked when loaded from YAML): the
     adaptive layer turns times into sample counts and squares the ε values. The fixed model
@@ -46,8 +46,8 @@ class ControlTuning:
                                            metadata=rng(0.0, 2.5, length=(2, 2)))
     #: channel excitation gate: no switch while |φ| < excitation_floor·S (fraction of S)
     excitation_floor: float = field(default=0.03, metadata=rng(0.0, 1.0))
-    #: NLMS regularization c = (nlms_c_fraction·S)²
-    nlms_c_fraction: float = field(default=0.03, metadata=rng(0.0, 10.0, lo_open=True))
+    #: NLMS regularization c = (nlms_c_fraction·S)² (≥ 1e-4: a vanishing c divides by φ² = 0)
+    nlms_c_fraction: float = field(default=0.03, metadata=rng(1e-4, 10.0))
     #: position-channel guard: when even the best position model leaves a normalized residual
     #: above this, the sensor is not trusted (feedback from the model position x̂, no anchoring)
     position_guard_epsilon: float = field(default=0.02,

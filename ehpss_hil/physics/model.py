@@ -1,4 +1,4 @@
-"""Continuous-time EHPSS models (DESIGN.md §3), SI units.
+"""Continuous-time EHPSS models (docs/design.md §6), SI units.
 
 State orders:
 
@@ -49,7 +49,7 @@ def plant_matrices(p: PlantParams, k_loe: float = 1.0, k_q: float = 1.0) -> tupl
 
 def closed_loop_matrices(params: Params, k_loe: float = 1.0, k_dft: float = 1.0,
                          k_q: float = 1.0) -> tuple[Matrix, Matrix, Matrix]:
-    """The paper's eq 39 closed loop (PI on the drifted sensor), corrected per DESIGN §3.
+    """The paper's eq 39 closed loop (PI on the drifted sensor), corrected per docs/design.md §6.
 
     Returns ``(A, B, C)`` for state ``[ẍ, ẋ, x, ẋ_v, x_v, z]``, input ``x_d`` (m), output ``x`` (m).
     The PI is ``e = K_f·x_d − K_f·k_dft·x``, ``ż = K_i·e``, ``I = K_a·(K_p·e + K_i·z)``.

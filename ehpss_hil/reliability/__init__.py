@@ -1,4 +1,4 @@
-"""The reliability suite (DESIGN.md §12, issue 8): what ``ehpss-hil bench faults`` measures.
+"""The reliability suite (docs/design.md §11, issue 8): what ``ehpss-hil bench faults`` measures.
 
 One module per fault class, each returning plain result objects the bench prints and the tests
 assert on: ``fuzz`` (frames with a known verdict and random ones through the codec, the

@@ -6,7 +6,7 @@ each level, RMS error against the lossless run (target: 5 % loss → RMS ≤ 2×
 Processes: ``ehpss-hil run`` (:func:`~ehpss_hil.orchestrate.execute`: bus logger, controller and
 emulator, realtime) with the same scenarios and the bench watchdog of ``ehpss-hil run`` (10
 cycles, auto recovery) unless ``timeout_cycles`` is given (the shipped config's 3 shows how the
-deployment setting copes); RMS from the bus log (DESIGN §10 metrics) and a watchdog audit of the
+deployment setting copes); RMS from the bus log (docs/design.md §10 metrics) and a watchdog audit of the
 controller's log (:func:`~.logcheck.audit_watchdog`): every trip must follow a real timeout
 (``timeout_cycles`` cycles without a usable sensor frame) and every real timeout must trip.
 """

@@ -1,4 +1,4 @@
-"""Reports: the DESIGN §10 metrics (one implementation) and figures."""
+"""Reports: the docs/design.md §10 metrics (one implementation) and figures."""
 
 from .metrics import RECOVERY_BAND_M, EventMetrics, RunMetrics, compute_metrics
 

@@ -288,7 +288,7 @@ def verdict_summary(run: LogRun) -> dict[str, int]:
 # ---- metrics (adapter to report.metrics) ------------------------------------------------------
 @dataclass
 class LogMetrics:
-    """DESIGN §10 metrics of a log where it has ground truth, and what a log gives regardless.
+    """docs/design.md §10 metrics of a log where it has ground truth, and what a log gives regardless.
 
     ``run``: :class:`RunMetrics` (None without PLANT_TRUTH or without a reference, see
     ``unavailable``); ``extra``: switch counter, overruns, max cycle time (s), rejected frames,

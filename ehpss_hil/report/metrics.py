@@ -1,4 +1,4 @@
-"""The DESIGN §10 metrics — the one implementation used by ``sim``, ``bench`` and the tests.
+"""The docs/design.md §10 metrics — the one implementation used by ``sim``, ``bench`` and the tests.
 
 ``e = x_true − y_m`` at every sample (m).
 
@@ -42,7 +42,7 @@ class EventMetrics:
     switches: int = 0
 
     def to_json(self) -> dict[str, Any]:
-        """DESIGN §10 event row (inf → null)."""
+        """docs/design.md §10 event row (inf → null)."""
         return {"t_s": self.t_s, "peak_error_m": self.peak_error_m,
                 "recovery_s": None if math.isinf(self.recovery_s) else self.recovery_s,
                 "active_model": self.active_model}
@@ -68,7 +68,7 @@ class RunMetrics:
     fallback_s: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
-        """The DESIGN §10 JSON row."""
+        """The docs/design.md §10 JSON row."""
         return {"scenario": self.scenario, "controller": self.controller,
                 "rms_error_m": self.rms_error_m, "pre_fault_max_m": self.pre_fault_max_m,
                 "switches": self.switches, "events": [e.to_json() for e in self.events]}
@@ -108,7 +108,7 @@ def recovery_time_s(abs_err: np.ndarray, ts_s: float, band_m: float = RECOVERY_B
 
 
 def compute_metrics(r: SimResult) -> RunMetrics:
-    """All DESIGN §10 metrics of one run."""
+    """All docs/design.md §10 metrics of one run."""
     e = np.abs(r.error_m)
     n, ts = len(e), r.ts_s
     starts = [min(round(t / ts), n) for t in r.event_times_s]

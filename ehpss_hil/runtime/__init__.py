@@ -1,2 +1,2 @@
 """The real-time runtime shared by the controller daemon and the plant emulator: deadline grid,
-loop statistics, RT options, signal handling, watchdog, lifecycle (DESIGN.md §8)."""
+loop statistics, RT options, signal handling, watchdog, lifecycle (docs/design.md §8)."""

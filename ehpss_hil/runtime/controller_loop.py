@@ -1,4 +1,4 @@
-"""The controller daemon's cycle (DESIGN.md §8): read → E2E → watchdog → step → one VALVE_CMD.
+"""The controller daemon's cycle (docs/design.md §8): read → E2E → watchdog → step → one VALVE_CMD.
 
 Per cycle: drain every pending frame without blocking (own echoes dropped by :class:`FrameIO`);
 the newest usable SENSOR_POS/SENSOR_AUX values are used; the watchdog counts the cycle; in

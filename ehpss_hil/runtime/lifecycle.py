@@ -1,4 +1,4 @@
-"""Controller lifecycle (DESIGN.md §8), numbered as the DBC's CTRL_STATUS ``State`` VAL_.
+"""Controller lifecycle (docs/design.md §8), numbered as the DBC's CTRL_STATUS ``State`` VAL_.
 
 INIT → CONFIGURED → ACTIVE ⇄ FAULT → STOPPED (STOPPED reachable from any state).
 """

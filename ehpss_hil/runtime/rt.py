@@ -1,4 +1,4 @@
-"""Real-time process options (DESIGN.md §8): SCHED_FIFO, CPU affinity, mlockall, gc.freeze.
+"""Real-time process options (docs/design.md §8): SCHED_FIFO, CPU affinity, mlockall, gc.freeze.
 
 Each option is best effort: when the OS refuses (no CAP_SYS_NICE, no such CPU, RLIMIT_MEMLOCK…)
 a clear warning is logged and returned, and the process runs on without it.

@@ -1,4 +1,4 @@
-"""Sensor watchdog (DESIGN.md §8): pure logic, one :meth:`SensorWatchdog.update` per cycle.
+"""Sensor watchdog (docs/design.md §8): pure logic, one :meth:`SensorWatchdog.update` per cycle.
 
 A cycle is *fresh* when a usable SENSOR_POS frame arrived in it. ``timeout_cycles`` cycles in a
 row without one trip the watchdog, with the reason taken from what did arrive meanwhile:

@@ -54,7 +54,7 @@ class SimResult:
 
     @property
     def error_m(self) -> Array:
-        """e = x_true − y_m (m), the DESIGN §10 tracking error."""
+        """e = x_true − y_m (m), the docs/design.md §10 tracking error."""
         return self.x_true_m - self.y_m_m
 
     @property
