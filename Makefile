@@ -4,7 +4,7 @@ VENV ?= .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-socketcan venv clean
+.PHONY: demo test test-socketcan lint venv clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -21,6 +21,12 @@ demo: $(STAMP)
 ## the test suite (host); SocketCAN tests skip here unless AF_CAN works
 test: $(STAMP)
 	$(VPY) -m pytest -q
+
+## lint, format and types (CI runs these after make test)
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+	$(VPY) -m mypy ehpss_hil firmware_sim tests
 
 ## the SocketCAN suite (needs vcan0: natively, or inside ../shared/tools/vcan-vm/run)
 test-socketcan: $(STAMP)

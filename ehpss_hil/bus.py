@@ -85,10 +85,16 @@ def _open_socketcan(cfg: BusConfig, can_filters: list[dict[str, Any]] | None) ->
     if not af_can_available():
         raise BusUnavailableError(
             f"socketcan:{cfg.channel}: this kernel has no SocketCAN (socket(AF_CAN) failed); "
-            "use interface udp_multicast (the embedded default) or load the can/vcan modules")
+            "use interface udp_multicast (the embedded default) or load the can/vcan modules"
+        )
     try:
-        return can.Bus(interface="socketcan", channel=cfg.channel, can_filters=can_filters,
-                       receive_own_messages=False, fd=False)
+        return can.Bus(
+            interface="socketcan",
+            channel=cfg.channel,
+            can_filters=can_filters,
+            receive_own_messages=False,
+            fd=False,
+        )
     except (OSError, can.CanError) as exc:
         raise BusUnavailableError(
             f"socketcan:{cfg.channel}: cannot open the interface ({exc}); does it exist and is it "
@@ -105,7 +111,8 @@ def _open_udp_multicast(cfg: BusConfig) -> can.BusABC:
         raise BusUnavailableError(
             f"udp_multicast:{cfg.channel}:{cfg.port}: cannot open ({exc}); a multicast route is "
             "needed (inside a private namespace: 'ip link set lo up; "
-            "ip route add 224.0.0.0/4 dev lo')") from exc
+            "ip route add 224.0.0.0/4 dev lo')"
+        ) from exc
     set_receive_buffer(bus, cfg.receive_buffer_bytes)
     return bus
 
@@ -133,8 +140,11 @@ def set_receive_buffer(bus: can.BusABC, size_bytes: int) -> int:
             continue
     granted = int(sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
     if granted < size_bytes:  # Linux reports twice the requested value when it is granted
-        log.warning("udp_multicast: receive buffer %d bytes < requested %d (raise "
-                    "net.core.rmem_max or run as root)", granted, size_bytes)
+        log.warning(
+            "udp_multicast: receive buffer %d bytes < requested %d (raise net.core.rmem_max or run as root)",
+            granted,
+            size_bytes,
+        )
     return granted
 
 
@@ -150,8 +160,7 @@ def stamps_receive_time(bus: can.BusABC) -> bool:
     return type(bus).__name__ in _RECEIVE_STAMPED
 
 
-def frame_reader(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callable[
-        [], can.Message | None]:
+def frame_reader(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callable[[], can.Message | None]:
     """One pending frame or None, never waiting: ``bus.recv(0.0)``, or on ``udp_multicast`` the
     same read without its ``select()`` system call (:class:`~ehpss_hil.bus_udp.UdpReader`),
     with the templates of ``shapes`` (frames like those to come) built now, not on arrival."""
@@ -162,8 +171,7 @@ def frame_reader(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callabl
     return partial(bus.recv, 0.0)
 
 
-def frame_writer(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callable[
-        [can.Message], None]:
+def frame_writer(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callable[[can.Message], None]:
     """Send one frame: ``bus.send``, or on ``udp_multicast`` the same datagram built from a
     per-frame-shape template (:class:`~ehpss_hil.bus_udp.UdpWriter`; the templates of
     ``shapes`` built now, not on the first send)."""
@@ -183,15 +191,19 @@ def suppress_own_echoes(bus: can.BusABC) -> bool:
     if isinstance(bus, UdpMulticastBus):
         ok = attach_own_source_filter(bus)
         if not ok:
-            log.warning("udp_multicast: own frames are told apart in user space (kernel filter "
-                        "not attached)")
+            log.warning("udp_multicast: own frames are told apart in user space (kernel filter not attached)")
         return ok
     kind = type(bus).__name__
     if kind == "SocketcanBus":
         from can.interfaces.socketcan.constants import CAN_RAW_RECV_OWN_MSGS, SOL_CAN_RAW
+
         try:
-            return bus.socket.getsockopt(  # type: ignore[attr-defined, no-any-return]
-                SOL_CAN_RAW, CAN_RAW_RECV_OWN_MSGS) == 0
+            return (
+                bus.socket.getsockopt(  # type: ignore[attr-defined, no-any-return]
+                    SOL_CAN_RAW, CAN_RAW_RECV_OWN_MSGS
+                )
+                == 0
+            )
         except OSError:
             return False
     if kind == "VirtualBus":

@@ -62,6 +62,7 @@ _JEQ = 0x15  # BPF_JMP | BPF_JEQ | BPF_K
 _RET = 0x06  # BPF_RET | BPF_K
 _ACCEPT, _DROP = 0xFFFFFFFF, 0
 
+
 class UdpReader:
     """Non-blocking reads from a python-can ``UdpMulticastBus`` without ``select()``."""
 
@@ -74,15 +75,18 @@ class UdpReader:
         self._fd = bus.protocol is can.CanProtocol.CAN_FD
         self._parser = DatagramParser()
         #: the bus's own counter when it has one (both read paths count in one place)
-        self.rejects = bus.rejects if isinstance(bus, GuardedUdpMulticastBus) else \
-            DatagramRejects()
+        self.rejects = bus.rejects if isinstance(bus, GuardedUdpMulticastBus) else DatagramRejects()
 
     @staticmethod
     def supports(bus: can.BusABC) -> bool:
         """True for a udp_multicast bus with kernel timestamps (Linux)."""
         mc = getattr(bus, "_multicast", None)
-        return (isinstance(bus, UdpMulticastBus) and mc is not None
-                and getattr(mc, "timestamp_nanosecond", False) and hasattr(mc, "_socket"))
+        return (
+            isinstance(bus, UdpMulticastBus)
+            and mc is not None
+            and getattr(mc, "timestamp_nanosecond", False)
+            and hasattr(mc, "_socket")
+        )
 
     def read(self) -> can.Message | None:
         """One pending frame, or None when none is pending (never waits). Datagrams that are no
@@ -100,19 +104,18 @@ class UdpReader:
                 return msg
         return None
 
-    def _frame(self, data: bytes, anc: list[tuple[int, int, bytes]],
-               flags: int) -> can.Message | None:
+    def _frame(self, data: bytes, anc: list[tuple[int, int, bytes]], flags: int) -> can.Message | None:
         """The frame in one datagram, or None (counted) when it is none."""
         if len(anc) != 1:
-            raise can.CanOperationError("Only requested a single extra field but got a "
-                                        "different amount")
+            raise can.CanOperationError("Only requested a single extra field but got a different amount")
         level, kind, cdata = anc[0]
         if level != socket.SOL_SOCKET or kind != SO_TIMESTAMPNS:
             raise can.CanOperationError("received control message type that was not requested")
         seconds, nanoseconds = _TIMESPEC.unpack(cdata)
         if nanoseconds >= 1e9:
-            raise can.CanOperationError(f"Timestamp nanoseconds field was out of range: "
-                                        f"{nanoseconds} not less than 1e9")
+            raise can.CanOperationError(
+                f"Timestamp nanoseconds field was out of range: {nanoseconds} not less than 1e9"
+            )
         if flags & socket.MSG_TRUNC:
             self.rejects.add("oversize")
             return None
@@ -155,15 +158,20 @@ class DatagramParser:
         """The frame in ``data`` with ``timestamp_s``; CanOperationError when it is none."""
         if data.startswith(_HEAD):
             for mlen, table in self._by_len.items():
-                hit = table.get(data[_AT_MIDDLE:_AT_MIDDLE + mlen])
+                hit = table.get(data[_AT_MIDDLE : _AT_MIDDLE + mlen])
                 if hit is None:
                     continue
                 can_id, ext, dlc, n, tail = hit
                 at = _AT_MIDDLE + mlen
                 if len(data) == at + n + len(tail) and data.endswith(tail):
-                    return can.Message(timestamp=timestamp_s, arbitration_id=can_id,
-                                       is_extended_id=ext, dlc=dlc, data=data[at:at + n],
-                                       check=False)
+                    return can.Message(
+                        timestamp=timestamp_s,
+                        arbitration_id=can_id,
+                        is_extended_id=ext,
+                        dlc=dlc,
+                        data=data[at : at + n],
+                        check=False,
+                    )
         try:
             msg = unpack_message(data, replace={"timestamp": timestamp_s}, check=True)
         except Exception as exc:
@@ -175,8 +183,15 @@ class DatagramParser:
         """Add ``msg``'s shape (a plain data frame; up to :attr:`MAX_SHAPES` shapes)."""
         if self.shapes >= self.MAX_SHAPES:
             return
-        if (msg.is_fd or msg.is_remote_frame or msg.is_error_frame or msg.channel is not None
-                or msg.bitrate_switch or msg.error_state_indicator or msg.dlc != len(msg.data)):
+        if (
+            msg.is_fd
+            or msg.is_remote_frame
+            or msg.is_error_frame
+            or msg.channel is not None
+            or msg.bitrate_switch
+            or msg.error_state_indicator
+            or msg.dlc != len(msg.data)
+        ):
             return
         tpl = template(msg)
         if tpl is None:
@@ -193,8 +208,7 @@ class UdpTransmitter:
     (every receiver is) but to an ephemeral one, :attr:`port`, which no other sender on the host
     has; otherwise python-can's send (same hop limit, same errors, same send timeout)."""
 
-    def __init__(self, family: socket.AddressFamily, hop_limit: int,
-                 destination: tuple[str, int]) -> None:
+    def __init__(self, family: socket.AddressFamily, hop_limit: int, destination: tuple[str, int]) -> None:
         sock = socket.socket(family, socket.SOCK_DGRAM)
         try:
             hops = struct.pack("@I", hop_limit)
@@ -288,21 +302,28 @@ def template(msg: can.Message) -> tuple[bytes, bytes, bytes] | None:
     n = len(msg.data)
 
     def probe(ts: float, data: bytes) -> can.Message:
-        return can.Message(timestamp=ts, arbitration_id=msg.arbitration_id,
-                           is_extended_id=msg.is_extended_id,
-                           is_remote_frame=msg.is_remote_frame,
-                           is_error_frame=msg.is_error_frame, channel=msg.channel,
-                           dlc=msg.dlc, data=data, is_fd=msg.is_fd,
-                           bitrate_switch=msg.bitrate_switch,
-                           error_state_indicator=msg.error_state_indicator, check=False)
+        return can.Message(
+            timestamp=ts,
+            arbitration_id=msg.arbitration_id,
+            is_extended_id=msg.is_extended_id,
+            is_remote_frame=msg.is_remote_frame,
+            is_error_frame=msg.is_error_frame,
+            channel=msg.channel,
+            dlc=msg.dlc,
+            data=data,
+            is_fd=msg.is_fd,
+            bitrate_switch=msg.bitrate_switch,
+            error_state_indicator=msg.error_state_indicator,
+            check=False,
+        )
 
-    data_key = msgpack.packb("data") + msgpack.packb(bytes(n))[:-n or None]
+    data_key = msgpack.packb("data") + msgpack.packb(bytes(n))[: -n or None]
     first = pack_message(probe(1.5, bytes(n)))
     at = first.find(data_key, _AT_MIDDLE)
     if not first.startswith(_HEAD) or at < 0 or first.find(data_key, at + 1) >= 0:
         return None
-    middle = first[_AT_MIDDLE:at + len(data_key)]
-    tail = first[at + len(data_key) + n:]
+    middle = first[_AT_MIDDLE : at + len(data_key)]
+    tail = first[at + len(data_key) + n :]
     for ts, data in ((1.5, bytes(n)), (1779999999.123456, bytes(range(1, n + 1)))):
         if pack_message(probe(ts, data)) != b"".join((_HEAD, _F64.pack(ts), middle, data, tail)):
             return None
@@ -331,9 +352,18 @@ class UdpWriter:
 
     @staticmethod
     def _shape(msg: can.Message) -> _Shape:
-        return (msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame, msg.is_error_frame,
-                msg.channel, msg.dlc, len(msg.data), msg.is_fd, msg.bitrate_switch,
-                msg.error_state_indicator)
+        return (
+            msg.arbitration_id,
+            msg.is_extended_id,
+            msg.is_remote_frame,
+            msg.is_error_frame,
+            msg.channel,
+            msg.dlc,
+            len(msg.data),
+            msg.is_fd,
+            msg.bitrate_switch,
+            msg.error_state_indicator,
+        )
 
     def write(self, msg: can.Message) -> None:
         """Send ``msg`` as ``bus.send(msg)`` would (same datagram, same errors)."""
@@ -365,10 +395,12 @@ def own_source_program(port: int) -> list[tuple[int, int, int, int]]:
     """The BPF program (code, jt, jf, k) of a UDP socket dropping the datagrams whose source port
     is ``port`` (a UDP socket filter sees the UDP header first: the source port is its first
     half-word) and accepting every other."""
-    return [(_LD_H, 0, 0, 0),
-            (_JEQ, 0, 1, port),  # true → next instruction (drop), false → skip it (accept)
-            (_RET, 0, 0, _DROP),
-            (_RET, 0, 0, _ACCEPT)]
+    return [
+        (_LD_H, 0, 0, 0),
+        (_JEQ, 0, 1, port),  # true → next instruction (drop), false → skip it (accept)
+        (_RET, 0, 0, _DROP),
+        (_RET, 0, 0, _ACCEPT),
+    ]
 
 
 def attach_own_source_filter(bus: can.BusABC) -> bool:
@@ -380,8 +412,9 @@ def attach_own_source_filter(bus: can.BusABC) -> bool:
     prog = own_source_program(bus.tx.port)
     buf = ctypes.create_string_buffer(b"".join(struct.pack("HBBI", *ins) for ins in prog))
     try:  # struct sock_fprog {unsigned short len; struct sock_filter *filter;}; copied by the kernel
-        sock.setsockopt(socket.SOL_SOCKET, SO_ATTACH_FILTER,
-                        struct.pack("HL", len(prog), ctypes.addressof(buf)))
+        sock.setsockopt(
+            socket.SOL_SOCKET, SO_ATTACH_FILTER, struct.pack("HL", len(prog), ctypes.addressof(buf))
+        )
     except OSError:
         return False
     return True

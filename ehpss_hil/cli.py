@@ -34,7 +34,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     (its module imported) when given."""
     parser = argparse.ArgumentParser(
         prog="ehpss-hil",
-        description="Fault-tolerant (MMAC) controller for an electro-hydraulic position servo on CAN.")
+        description="Fault-tolerant (MMAC) controller for an electro-hydraulic position servo on CAN.",
+    )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module, help_) in COMMANDS.items():

@@ -43,12 +43,16 @@ class BusConfig:
             except ValueError as exc:
                 raise ConfigError("", "channel", f"not an IP multicast group: {self.channel!r}") from exc
             ok = (addr.version == 4 and addr in ipaddress.ip_network("239.0.0.0/8")) or (
-                addr.version == 6 and any(addr in ipaddress.ip_network(n)
-                                          for n in ("ff01::/16", "ff02::/16")))
+                addr.version == 6 and any(addr in ipaddress.ip_network(n) for n in ("ff01::/16", "ff02::/16"))
+            )
             if not ok:
-                raise ConfigError("", "channel", "udp_multicast group must be in 239.0.0.0/8 "
-                                  f"(or ff01::/16, ff02::/16) so frames stay on this host; "
-                                  f"got {self.channel}")
+                raise ConfigError(
+                    "",
+                    "channel",
+                    "udp_multicast group must be in 239.0.0.0/8 "
+                    f"(or ff01::/16, ff02::/16) so frames stay on this host; "
+                    f"got {self.channel}",
+                )
         elif not self.channel:
             raise ConfigError("", "channel", "must name the interface (e.g. vcan0, can0)")
 
@@ -148,16 +152,24 @@ class ControllerConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in DAEMON_MODES:
-            raise ConfigError("", "mode", "oracle is for benchmarks only, not for the daemon "
-                              f"(expected one of {', '.join(DAEMON_MODES)})")
+            raise ConfigError(
+                "",
+                "mode",
+                "oracle is for benchmarks only, not for the daemon "
+                f"(expected one of {', '.join(DAEMON_MODES)})",
+            )
         if not self.rt.sensor_age_us * 1e-6 < 0.5 / self.rate_hz:
-            raise ConfigError("", "rt.sensor_age_us", f"must be below half a period "
-                              f"({0.5e6 / self.rate_hz:g} µs at rate_hz {self.rate_hz:g})")
+            raise ConfigError(
+                "",
+                "rt.sensor_age_us",
+                f"must be below half a period ({0.5e6 / self.rate_hz:g} µs at rate_hz {self.rate_hz:g})",
+            )
         for key in ("k_loe_limits", "k_dft_limits"):
             lo, hi = getattr(self.tuning, key)
             if not lo < hi:
-                raise ConfigError("", f"tuning.{key}", f"expected [low, high] with low < high, "
-                                  f"got [{lo:g}, {hi:g}]")
+                raise ConfigError(
+                    "", f"tuning.{key}", f"expected [low, high] with low < high, got [{lo:g}, {hi:g}]"
+                )
 
 
 @dataclass(frozen=True)
@@ -179,24 +191,36 @@ class EmulatorConfig:
     dbc: str = ""
 
 
-def apply_overrides(src: str, bus: BusConfig, rate_hz: float, rt: RtOptions, *,
-                    interface: str | None = None, channel: str | None = None,
-                    rate: float | None = None, rt_priority: int | None = None,
-                    cpu: int | None = None) -> tuple[BusConfig, float, RtOptions]:
+def apply_overrides(
+    src: str,
+    bus: BusConfig,
+    rate_hz: float,
+    rt: RtOptions,
+    *,
+    interface: str | None = None,
+    channel: str | None = None,
+    rate: float | None = None,
+    rt_priority: int | None = None,
+    cpu: int | None = None,
+) -> tuple[BusConfig, float, RtOptions]:
     """Command-line overrides of a process config's bus, rate and RT options, validated like
     the YAML (errors name the key and the option)."""
     from dataclasses import replace
 
     if interface or channel:
         try:
-            bus = replace(bus, interface=interface or bus.interface,  # type: ignore[arg-type]
-                          channel=channel or bus.channel)
+            bus = replace(
+                bus,
+                interface=interface or bus.interface,  # type: ignore[arg-type]
+                channel=channel or bus.channel,
+            )
         except ConfigError as exc:
             raise ConfigError(src, f"bus.{exc.key_path} (command line)", exc.reason) from exc
     rate_hz = rate_hz if rate is None else rate
     if not MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ:
-        raise ConfigError(src, "rate_hz (--rate)",
-                          f"must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate_hz:g}")
+        raise ConfigError(
+            src, "rate_hz (--rate)", f"must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {rate_hz:g}"
+        )
     if rt_priority is not None:
         if not 0 <= rt_priority <= 99:
             raise ConfigError(src, "rt.priority (--rt-priority)", "must be in [0, 99]")
@@ -231,9 +255,13 @@ def load_controller_config(path: str | Path, data: object = None) -> ControllerC
     cfg = build(ControllerConfig, load_yaml(p) if data is None else data, str(p))
     base = p.resolve().parent
     from dataclasses import replace
-    return replace(cfg, params=_existing(p, "params", _resolve(base, cfg.params)),
-                   dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)),
-                   reference=cfg.reference.loaded(base, str(p)))
+
+    return replace(
+        cfg,
+        params=_existing(p, "params", _resolve(base, cfg.params)),
+        dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)),
+        reference=cfg.reference.loaded(base, str(p)),
+    )
 
 
 def load_emulator_config(path: str | Path, data: object = None) -> EmulatorConfig:
@@ -243,6 +271,10 @@ def load_emulator_config(path: str | Path, data: object = None) -> EmulatorConfi
     cfg = build(EmulatorConfig, load_yaml(p) if data is None else data, str(p))
     base = p.resolve().parent
     from dataclasses import replace
-    return replace(cfg, params=_existing(p, "params", _resolve(base, cfg.params)),
-                   dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)),
-                   scenario=_existing(p, "scenario", _resolve(base, cfg.scenario)))
+
+    return replace(
+        cfg,
+        params=_existing(p, "params", _resolve(base, cfg.params)),
+        dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)),
+        scenario=_existing(p, "scenario", _resolve(base, cfg.scenario)),
+    )

@@ -34,8 +34,10 @@ from .runtime.stats import publish_summary, rejects_text
 
 log = logging.getLogger("ehpss_hil.controller")
 
-CLOCK_NOTE = ("wall clock (time.time()) at send for frames sent; the bus's receive timestamp "
-              "(kernel SO_TIMESTAMPNS on udp_multicast/socketcan) for frames received")
+CLOCK_NOTE = (
+    "wall clock (time.time()) at send for frames sent; the bus's receive timestamp "
+    "(kernel SO_TIMESTAMPNS on udp_multicast/socketcan) for frames received"
+)
 ControllerFactory = Callable[[str, Params, float, ControllerConfig], Controller]
 
 
@@ -63,9 +65,17 @@ def resolve_config(a: DaemonArgs) -> ControllerConfig:
     cfg = load_controller_config(a.config)
     src = str(a.config)
     bus = cfg.bus
-    bus, rate, rt = apply_overrides(src, bus, cfg.rate_hz, cfg.rt, interface=a.interface,
-                                    channel=a.channel, rate=a.rate_hz,
-                                    rt_priority=a.rt_priority, cpu=a.cpu)
+    bus, rate, rt = apply_overrides(
+        src,
+        bus,
+        cfg.rate_hz,
+        cfg.rt,
+        interface=a.interface,
+        channel=a.channel,
+        rate=a.rate_hz,
+        rt_priority=a.rt_priority,
+        cpu=a.cpu,
+    )
     mode = a.mode or cfg.mode
     if mode not in DAEMON_MODES:
         raise ConfigError(src, "mode (--mode)", f"expected one of {', '.join(DAEMON_MODES)}")
@@ -96,10 +106,14 @@ def load_factory(spec: str | None) -> ControllerFactory:
 
 def loop_options(cfg: ControllerConfig, sensor_age_us: float | None = None) -> LoopOptions:
     """The loop's rates, fail-safe policy and phase-lock target from the config (+ override)."""
-    opts = LoopOptions(rate_hz=cfg.rate_hz, status_rate_hz=cfg.status_rate_hz,
-                       heartbeat_rate_hz=cfg.heartbeat_rate_hz, watchdog=cfg.watchdog,
-                       setpoint=cfg.setpoint,
-                       stats_interval_s=cfg.stats_interval_s)
+    opts = LoopOptions(
+        rate_hz=cfg.rate_hz,
+        status_rate_hz=cfg.status_rate_hz,
+        heartbeat_rate_hz=cfg.heartbeat_rate_hz,
+        watchdog=cfg.watchdog,
+        setpoint=cfg.setpoint,
+        stats_interval_s=cfg.stats_interval_s,
+    )
     key = "--sensor-age-us" if sensor_age_us is not None else "rt.sensor_age_us"
     age_us = sensor_age_us if sensor_age_us is not None else cfg.rt.sensor_age_us
     if not 0.0 <= age_us * 1e-6 < 0.5 / cfg.rate_hz:
@@ -112,18 +126,21 @@ def format_summary(s: dict[str, object]) -> str:
     st = s["stats"]
     assert isinstance(st, dict)
     lat, cmp_, lcy = st["lateness_s"], st["compute_s"], st["latency_s"]
-    return "\n".join([
-        f"controller: cycles {s['cycles']}, final state {s['state']} "
-        f"(reason {s['failsafe_reason']}), watchdog trips {s['watchdog_trips']}, "
-        f"fail-safe cycles {s['failsafe_cycles']}, saturations {s['saturations']}",
-        f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
-        f"  frames received: {s['frames_received']}; by verdict {s['received_by_verdict']}",
-        f"  datagrams rejected (not a frame): {rejects_text(s)}",
-        f"  ID collisions (foreign frames on own IDs): {s['id_collisions']}; second "
-        f"transmitter: {s['second_transmitter']}; SETPOINT {s['setpoints']}",
-        f"  overruns {st['overruns']}, lateness p50 {lat['p50'] * 1e6:.1f} µs p99 "
-        f"{lat['p99'] * 1e6:.1f} µs, compute p99 {cmp_['p99'] * 1e6:.1f} µs, sensor->command "
-        f"latency p50 {lcy['p50'] * 1e6:.1f} µs p99 {lcy['p99'] * 1e6:.1f} µs"])
+    return "\n".join(
+        [
+            f"controller: cycles {s['cycles']}, final state {s['state']} "
+            f"(reason {s['failsafe_reason']}), watchdog trips {s['watchdog_trips']}, "
+            f"fail-safe cycles {s['failsafe_cycles']}, saturations {s['saturations']}",
+            f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
+            f"  frames received: {s['frames_received']}; by verdict {s['received_by_verdict']}",
+            f"  datagrams rejected (not a frame): {rejects_text(s)}",
+            f"  ID collisions (foreign frames on own IDs): {s['id_collisions']}; second "
+            f"transmitter: {s['second_transmitter']}; SETPOINT {s['setpoints']}",
+            f"  overruns {st['overruns']}, lateness p50 {lat['p50'] * 1e6:.1f} µs p99 "
+            f"{lat['p99'] * 1e6:.1f} µs, compute p99 {cmp_['p99'] * 1e6:.1f} µs, sensor->command "
+            f"latency p50 {lcy['p50'] * 1e6:.1f} µs p99 {lcy['p99'] * 1e6:.1f} µs",
+        ]
+    )
 
 
 def run_daemon(a: DaemonArgs) -> int:
@@ -134,10 +151,24 @@ def run_daemon(a: DaemonArgs) -> int:
     limit_sensor_rate(codec, params.plant.piston_speed_max_m_s, 1.0 / cfg.rate_hz)
     controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
     bus = open_bus(cfg.bus)
-    logger = open_process_logger(a.log, cfg.log, cfg.bus, bus, str(a.config), sidecar={
-        "tool": "ehpss-hil controller", "config": asdict(cfg), "config_path": str(a.config),
-        "dbc": cfg.dbc or None, "mode": cfg.mode, "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
-        "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "lockstep": a.lockstep})
+    logger = open_process_logger(
+        a.log,
+        cfg.log,
+        cfg.bus,
+        bus,
+        str(a.config),
+        sidecar={
+            "tool": "ehpss-hil controller",
+            "config": asdict(cfg),
+            "config_path": str(a.config),
+            "dbc": cfg.dbc or None,
+            "mode": cfg.mode,
+            "rate_hz": cfg.rate_hz,
+            "clock": CLOCK_NOTE,
+            "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
+            "lockstep": a.lockstep,
+        },
+    )
     io = FrameIO(bus, codec, OWN_FRAMES, logger)
     loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us))
     stop, previous = install_stop_handlers()
@@ -146,8 +177,14 @@ def run_daemon(a: DaemonArgs) -> int:
         limit_blas_threads(1)  # idle OpenBLAS workers spin and steal the loop's CPU
         _prepare_rt(cfg.rt)
         loop.start()
-        log.info("mode %s on %s:%s at %g Hz%s", cfg.mode, cfg.bus.interface, cfg.bus.channel,
-                 cfg.rate_hz, " (lockstep)" if a.lockstep else "")
+        log.info(
+            "mode %s on %s:%s at %g Hz%s",
+            cfg.mode,
+            cfg.bus.interface,
+            cfg.bus.channel,
+            cfg.rate_hz,
+            " (lockstep)" if a.lockstep else "",
+        )
         if a.lockstep:
             loop.run_lockstep(stop, n)
         else:

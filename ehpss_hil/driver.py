@@ -36,8 +36,9 @@ MAX_CATCH_UP = RESYNC_SAMPLES
 class ControllerDriver:
     """Runs one controller one cycle at a time; ``reference(k)`` gives x_d at sample k (m)."""
 
-    def __init__(self, controller: Controller, reference: Callable[[int], float],
-                 current_limit_a: float = 1.0) -> None:
+    def __init__(
+        self, controller: Controller, reference: Callable[[int], float], current_limit_a: float = 1.0
+    ) -> None:
         self.controller = controller
         self.reference = reference
         self.current_limit_a = current_limit_a

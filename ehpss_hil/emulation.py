@@ -53,8 +53,9 @@ class _Stream:
 
     def next(self) -> float:
         if self._i >= len(self._buf):
-            self._buf = (self._rng.standard_normal(_BLOCK) if self._kind == "normal"
-                         else self._rng.random(_BLOCK))
+            self._buf = (
+                self._rng.standard_normal(_BLOCK) if self._kind == "normal" else self._rng.random(_BLOCK)
+            )
             self._i = 0
         v = self._buf[self._i]
         self._i += 1
@@ -152,12 +153,17 @@ class PlantEmulation:
         else:
             pos = self._measured_position() + nz.position_m * n_pos
         return SensorSample(
-            k=self.k, t_s=self.k * self.ts_s, position_m=pos,
+            k=self.k,
+            t_s=self.k * self.ts_s,
+            position_m=pos,
             spool_m=self.plant.spool_actual_m + nz.spool_m * n_spool,
             load_pressure_pa=self.plant.load_pressure_pa + nz.pressure_pa * n_p,
-            coil_current_a=self._last_applied_a, true_position_m=self.plant.position_m,
-            true_spool_m=self.plant.spool_actual_m, faults=self.plant.faults,
-            current_saturated=self._saturated)
+            coil_current_a=self._last_applied_a,
+            true_position_m=self.plant.position_m,
+            true_spool_m=self.plant.spool_actual_m,
+            faults=self.plant.faults,
+            current_saturated=self._saturated,
+        )
 
     def frame_lost(self, direction: int) -> bool:
         """Seeded loss draw for this sample: direction 0 = sensor frames (probability

@@ -24,7 +24,7 @@ def one_line(text: str, limit: int = MAX_MESSAGE_CHARS) -> str:
     """``text`` on one line (control characters escaped), cut to ``limit`` characters."""
     if not text.isprintable():
         text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-    return text if len(text) <= limit else text[:limit - 1] + "…"
+    return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
 def show(value: Any) -> str:

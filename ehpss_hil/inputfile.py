@@ -23,8 +23,13 @@ import yaml
 from .errors import ConfigError
 from .limits import MAX_PARSE_S, MAX_YAML_BYTES, MAX_YAML_DEPTH, MAX_YAML_NODES
 
-_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a device"),
-          (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"))
+_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISCHR, "a device"),
+    (stat.S_ISBLK, "a device"),
+    (stat.S_ISSOCK, "a socket"),
+)
 
 
 def read_capped(path: str | Path, max_bytes: int, key: str = "") -> bytes:
@@ -68,8 +73,9 @@ def decode_text(data: bytes, src: str, key: str = "") -> str:
     except UnicodeDecodeError as exc:
         line = data.count(b"\n", 0, exc.start) + 1
         col = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
-        raise ConfigError(src, key, f"not UTF-8 text: byte 0x{data[exc.start]:02X} at line "
-                          f"{line}, column {col}") from exc
+        raise ConfigError(
+            src, key, f"not UTF-8 text: byte 0x{data[exc.start]:02X} at line {line}, column {col}"
+        ) from exc
     return text.removeprefix("\ufeff")
 
 
@@ -88,17 +94,15 @@ class _Loader(yaml.SafeLoader):
         mark = self.peek_event().start_mark
         if self.check_event(yaml.AliasEvent):
             raise yaml.composer.ComposerError(
-                None, None, "aliases (*name) are not accepted in these files", mark)
+                None, None, "aliases (*name) are not accepted in these files", mark
+            )
         self._nodes += 1
         if self._nodes > MAX_YAML_NODES:
-            raise yaml.composer.ComposerError(None, None,
-                                              f"more than {MAX_YAML_NODES} values", mark)
+            raise yaml.composer.ComposerError(None, None, f"more than {MAX_YAML_NODES} values", mark)
         if self._nodes % 1024 == 0 and time.monotonic() > self._deadline:
-            raise yaml.composer.ComposerError(None, None,
-                                              f"parsing took longer than {MAX_PARSE_S:g} s", mark)
+            raise yaml.composer.ComposerError(None, None, f"parsing took longer than {MAX_PARSE_S:g} s", mark)
         if self._depth >= MAX_YAML_DEPTH:
-            raise yaml.composer.ComposerError(
-                None, None, f"nested deeper than {MAX_YAML_DEPTH} levels", mark)
+            raise yaml.composer.ComposerError(None, None, f"nested deeper than {MAX_YAML_DEPTH} levels", mark)
         self._depth += 1
         try:
             return super().compose_node(parent, index)
@@ -108,12 +112,16 @@ class _Loader(yaml.SafeLoader):
 
 _Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
-    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+    re.compile(
+        r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
     |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
     |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
     |[-+]?\.(?:inf|Inf|INF)
-    |\.(?:nan|NaN|NAN))$""", re.VERBOSE),
-    list("-+0123456789."))
+    |\.(?:nan|NaN|NAN))$""",
+        re.VERBOSE,
+    ),
+    list("-+0123456789."),
+)
 
 
 def _where(exc: yaml.YAMLError, text: str) -> str:

@@ -31,8 +31,9 @@ def netns_unavailable_reason() -> str | None:
         if shutil.which(tool) is None:
             return f"'{tool}' not found"
     try:
-        r = subprocess.run(["unshare", "--net", "--", "sh", "-c", SETUP_SH],
-                           capture_output=True, text=True, timeout=10)
+        r = subprocess.run(
+            ["unshare", "--net", "--", "sh", "-c", SETUP_SH], capture_output=True, text=True, timeout=10
+        )
     except (OSError, subprocess.TimeoutExpired) as exc:
         return f"unshare --net failed: {exc}"
     if r.returncode != 0:
@@ -63,7 +64,10 @@ class PrivateNetns:
             raise OSError(reason)
         self._holder = subprocess.Popen(
             ["unshare", "--net", "--", "sh", "-c", f"{SETUP_SH} && echo ready && exec cat"],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         assert self._holder.stdout is not None
         line = self._holder.stdout.readline().strip()
         if line != "ready":
@@ -100,6 +104,7 @@ class PrivateNetns:
     def __enter__(self) -> PrivateNetns:
         return self.start()
 
-    def __exit__(self, et: type[BaseException] | None, ev: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None
+    ) -> None:
         self.close()

@@ -99,9 +99,11 @@ def multicast_route_reason(group: str = DEFAULT_MULTICAST_GROUP) -> str | None:
     r = subprocess.run(["ip", "route", "get", group], capture_output=True, text=True, check=False)
     if r.returncode == 0:
         return None
-    return ("no route for multicast on this host: run as root (a private network namespace is "
-            "made automatically), or add one with 'ip route add 224.0.0.0/4 dev lo', or use "
-            "--interface socketcan --channel vcan0")
+    return (
+        "no route for multicast on this host: run as root (a private network namespace is "
+        "made automatically), or add one with 'ip route add 224.0.0.0/4 dev lo', or use "
+        "--interface socketcan --channel vcan0"
+    )
 
 
 def write_config(src: Path, dst: Path, overrides: dict[str, Any]) -> Path:
@@ -124,8 +126,14 @@ def write_config(src: Path, dst: Path, overrides: dict[str, Any]) -> Path:
 
 def _reference_dict(sc: Scenario) -> dict[str, Any]:
     r = sc.reference
-    return {"kind": r.kind, "amplitude_m": r.amplitude_m, "omega_rad_s": r.omega_rad_s,
-            "start_s": r.start_s, "rate_m_s": r.rate_m_s, "path": r.path}
+    return {
+        "kind": r.kind,
+        "amplitude_m": r.amplitude_m,
+        "omega_rad_s": r.omega_rad_s,
+        "start_s": r.start_s,
+        "rate_m_s": r.rate_m_s,
+        "path": r.path,
+    }
 
 
 def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
@@ -136,37 +144,90 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
     if plan.channel:
         bus["bus.channel"] = plan.channel
     emu_mode = "lockstep" if plan.lockstep else "realtime"
-    ctrl_cfg = write_config(plan.controller_yaml, out / "controller.yaml", {
-        **bus, "mode": plan.mode, "reference": _reference_dict(sc),
-        **({"watchdog.auto_recover": True} if plan.auto_recover else {}),
-        **({"watchdog.timeout_cycles": plan.watchdog_cycles} if plan.watchdog_cycles else {}),
-        **({"rt.sensor_age_us": min(plan.sensor_age_us, 0.3e6 * sc.sample_time_s)}
-           if plan.sensor_age_us is not None else {}),
-        **({"rt.wake_on_sensor": plan.wake_on_sensor} if plan.wake_on_sensor is not None else {}),
-        "rate_hz": 1.0 / sc.sample_time_s})
-    emu_cfg = write_config(plan.emulator_yaml, out / "emulator.yaml", {
-        **bus, "mode": emu_mode, "scenario": str(Path(plan.scenario_path).resolve()),
-        "truth": plan.truth, "rate_hz": 1.0 / sc.sample_time_s})
+    ctrl_cfg = write_config(
+        plan.controller_yaml,
+        out / "controller.yaml",
+        {
+            **bus,
+            "mode": plan.mode,
+            "reference": _reference_dict(sc),
+            **({"watchdog.auto_recover": True} if plan.auto_recover else {}),
+            **({"watchdog.timeout_cycles": plan.watchdog_cycles} if plan.watchdog_cycles else {}),
+            **(
+                {"rt.sensor_age_us": min(plan.sensor_age_us, 0.3e6 * sc.sample_time_s)}
+                if plan.sensor_age_us is not None
+                else {}
+            ),
+            **({"rt.wake_on_sensor": plan.wake_on_sensor} if plan.wake_on_sensor is not None else {}),
+            "rate_hz": 1.0 / sc.sample_time_s,
+        },
+    )
+    emu_cfg = write_config(
+        plan.emulator_yaml,
+        out / "emulator.yaml",
+        {
+            **bus,
+            "mode": emu_mode,
+            "scenario": str(Path(plan.scenario_path).resolve()),
+            "truth": plan.truth,
+            "rate_hz": 1.0 / sc.sample_time_s,
+        },
+    )
     bus_cfg = load_yaml(ctrl_cfg)["bus"]
     return {
-        "logger": [py, "-m", "ehpss_hil.cli", "log", "-i", bus_cfg["interface"], "-c",
-                   str(bus_cfg["channel"]), "-o", str(out / "bus.log")],
-        "controller": [py, "-m", "ehpss_hil.cli", "controller", "-c", str(ctrl_cfg),
-                       "--log", str(out / "controller.log"), "--summary-json",
-                       str(out / "controller-summary.json"),
-                       *(["--lockstep"] if plan.lockstep else []), *plan.extra_controller_args],
-        "emulator": [py, "-m", "firmware_sim.cli", "-c", str(emu_cfg), "--log",
-                     str(out / "emulator.log"), "--summary-json", str(out / "emulator-summary.json"),
-                     "--duration", repr(sc.duration_s),
-                     *(["--lockstep-timeout", "60"] if plan.lockstep else []),
-                     *plan.extra_emulator_args],
+        "logger": [
+            py,
+            "-m",
+            "ehpss_hil.cli",
+            "log",
+            "-i",
+            bus_cfg["interface"],
+            "-c",
+            str(bus_cfg["channel"]),
+            "-o",
+            str(out / "bus.log"),
+        ],
+        "controller": [
+            py,
+            "-m",
+            "ehpss_hil.cli",
+            "controller",
+            "-c",
+            str(ctrl_cfg),
+            "--log",
+            str(out / "controller.log"),
+            "--summary-json",
+            str(out / "controller-summary.json"),
+            *(["--lockstep"] if plan.lockstep else []),
+            *plan.extra_controller_args,
+        ],
+        "emulator": [
+            py,
+            "-m",
+            "firmware_sim.cli",
+            "-c",
+            str(emu_cfg),
+            "--log",
+            str(out / "emulator.log"),
+            "--summary-json",
+            str(out / "emulator-summary.json"),
+            "--duration",
+            repr(sc.duration_s),
+            *(["--lockstep-timeout", "60"] if plan.lockstep else []),
+            *plan.extra_emulator_args,
+        ],
     }
 
 
 def _spawn(argv: list[str], prefix: list[str], out: Path, name: str) -> subprocess.Popen[bytes]:
     with open(out / f"{name}.out", "wb") as stdout:  # the child keeps its own descriptor
-        return subprocess.Popen([*prefix, *argv], stdout=stdout, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, cwd=PROJECT_ROOT)
+        return subprocess.Popen(
+            [*prefix, *argv],
+            stdout=stdout,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            cwd=PROJECT_ROOT,
+        )
 
 
 def _stop(proc: subprocess.Popen[bytes], timeout_s: float = 10.0) -> int | None:
@@ -180,8 +241,9 @@ def _stop(proc: subprocess.Popen[bytes], timeout_s: float = 10.0) -> int | None:
     return proc.returncode
 
 
-def _wait_for_line(path: Path, needle: str, timeout_s: float,
-                   procs: dict[str, subprocess.Popen[bytes]]) -> None:
+def _wait_for_line(
+    path: Path, needle: str, timeout_s: float, procs: dict[str, subprocess.Popen[bytes]]
+) -> None:
     """Wait until ``needle`` appears in the growing file ``path`` (e.g. the controller's
     heartbeat in the bus log: the controller is on the bus and the logger hears it)."""
     end = time.monotonic() + timeout_s
@@ -191,8 +253,9 @@ def _wait_for_line(path: Path, needle: str, timeout_s: float,
         dead = {n: p.returncode for n, p in procs.items() if p.poll() is not None}
         if dead:
             name, code = next(iter(dead.items()))
-            raise ProcessFailedError(f"{name} ended during start-up (exit {code}): "
-                                     f"{_last_line(path.parent / f'{name}.out')}", code)
+            raise ProcessFailedError(
+                f"{name} ended during start-up (exit {code}): {_last_line(path.parent / f'{name}.out')}", code
+            )
         time.sleep(0.05)
     raise EhpssError(f"start-up timed out: {needle!r} not seen in {path} after {timeout_s:g} s")
 
@@ -215,8 +278,12 @@ def _namespace(interface: str, quiet: bool) -> PrivateNetns | None:
     if why_not is None:
         return PrivateNetns().start()
     if not quiet:
-        print(f"ehpss-hil run: no private network namespace ({why_not}): the processes use the "
-              "host network (hop limit 0 keeps frames on this host)", file=sys.stderr, flush=True)
+        print(
+            f"ehpss-hil run: no private network namespace ({why_not}): the processes use the "
+            "host network (hop limit 0 keeps frames on this host)",
+            file=sys.stderr,
+            flush=True,
+        )
     if (why := multicast_route_reason()) is not None:
         raise BusUnavailableError(why)
     return None
@@ -265,18 +332,27 @@ def execute(plan: RunPlan) -> RunResult:
     return res
 
 
-def _write_run_json(plan: RunPlan, sc: Scenario, cmds: dict[str, list[str]], res: RunResult,
-                    private_netns: bool) -> None:
-    meta = {"tool": "ehpss-hil run", "version": __version__, "scenario": sc.name,
-            "scenario_path": str(Path(plan.scenario_path).resolve()), "mode": plan.mode,
-            "lockstep": plan.lockstep, "private_netns": private_netns, "commands": cmds,
-            "exit_codes": res.exit_codes, "wall_s": round(res.wall_s, 3),
-            "started_unix_s": time.time() - res.wall_s, "pid": os.getpid()}
+def _write_run_json(
+    plan: RunPlan, sc: Scenario, cmds: dict[str, list[str]], res: RunResult, private_netns: bool
+) -> None:
+    meta = {
+        "tool": "ehpss-hil run",
+        "version": __version__,
+        "scenario": sc.name,
+        "scenario_path": str(Path(plan.scenario_path).resolve()),
+        "mode": plan.mode,
+        "lockstep": plan.lockstep,
+        "private_netns": private_netns,
+        "commands": cmds,
+        "exit_codes": res.exit_codes,
+        "wall_s": round(res.wall_s, 3),
+        "started_unix_s": time.time() - res.wall_s,
+        "pid": os.getpid(),
+    }
     try:
         write_json_atomic(plan.out_dir / "run.json", meta)
     except OSError as exc:
-        raise OutputError(f"{plan.out_dir / 'run.json'}: cannot write: "
-                          f"{exc.strerror or exc}") from exc
+        raise OutputError(f"{plan.out_dir / 'run.json'}: cannot write: {exc.strerror or exc}") from exc
     record_outputs(plan.out_dir)
 
 
@@ -289,8 +365,10 @@ def check_exit_codes(res: RunResult) -> None:
         for name in bad:
             f = res.out_dir / f"{name}.out"
             if f.exists():
-                tails.append(f"--- {name}.out ---\n" + "\n".join(
-                    f.read_text(errors="replace").splitlines()[-8:]))
+                tails.append(
+                    f"--- {name}.out ---\n" + "\n".join(f.read_text(errors="replace").splitlines()[-8:])
+                )
         codes = set(bad.values())
-        raise ProcessFailedError(f"processes ended badly: {bad}\n" + "\n".join(tails),
-                                 codes.pop() if len(codes) == 1 else None)
+        raise ProcessFailedError(
+            f"processes ended badly: {bad}\n" + "\n".join(tails), codes.pop() if len(codes) == 1 else None
+        )

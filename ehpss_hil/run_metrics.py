@@ -12,8 +12,7 @@ from .report.logdata import load_log_run, log_metrics
 from .scenario import load_scenario
 
 
-def metrics_from_run(out_dir: Path, plot: bool = False,
-                     written: list[Path] | None = None) -> dict[str, Any]:
+def metrics_from_run(out_dir: Path, plot: bool = False, written: list[Path] | None = None) -> dict[str, Any]:
     """Decode ``out_dir/bus.log`` with the run's scenario; write ``metrics.json`` (a one-row
     list, docs/design.md §10 format) and, with ``plot``, the report figures and ``report/report.md``
     (each file written is appended to ``written``). A file that cannot be written is an
@@ -31,6 +30,7 @@ def metrics_from_run(out_dir: Path, plot: bool = False,
         written.append(out_dir / "metrics.json")
         if plot:
             from .report.logfigures import draw_all
+
             rep = out_dir / "report"
             figs = draw_all(lr, rep / "figures")
             written += figs

@@ -29,8 +29,17 @@ MANIFEST = ".ehpss-run.json"
 #: the candump logs of a run (each with ``<log>.json`` and rotations ``<log>.N``)
 RUN_LOGS = ("bus.log", "controller.log", "emulator.log")
 #: the other files every run writes, by exact name
-RUN_FILES = ("controller.yaml", "emulator.yaml", "logger.out", "controller.out", "emulator.out",
-             "controller-summary.json", "emulator-summary.json", "run.json", "metrics.json")
+RUN_FILES = (
+    "controller.yaml",
+    "emulator.yaml",
+    "logger.out",
+    "controller.out",
+    "emulator.out",
+    "controller-summary.json",
+    "emulator-summary.json",
+    "run.json",
+    "metrics.json",
+)
 
 
 def run_file_names() -> list[str]:
@@ -42,7 +51,7 @@ def run_file_names() -> list[str]:
 
 
 def _is_rotation(name: str) -> bool:
-    return any(name.startswith(log + ".") and name[len(log) + 1:].isdigit() for log in RUN_LOGS)
+    return any(name.startswith(log + ".") and name[len(log) + 1 :].isdigit() for log in RUN_LOGS)
 
 
 def read_manifest(out: Path) -> list[str] | None:
@@ -102,7 +111,8 @@ def prepare_run_dir(out: Path, overwrite: bool = False) -> None:
             shown = ", ".join(present[:4]) + (", …" if len(present) > 4 else "")
             raise OutputError(
                 f"{out}: not empty and not a run directory ({shown}); choose a new or empty "
-                "--out, or add --overwrite (replaces only the files a run writes)")
+                "--out, or add --overwrite (replaces only the files a run writes)"
+            )
         if listed is None:
             listed = [n for n in present if n in run_file_names()]
         # the logs' rotations: a run's loggers remove them anyway when they open their logs
@@ -116,8 +126,7 @@ def prepare_run_dir(out: Path, overwrite: bool = False) -> None:
                 pass
         if isinstance(exc, OutputError):
             raise
-        raise OutputError(f"{out}: cannot prepare the run directory: "
-                          f"{exc.strerror or exc}") from exc
+        raise OutputError(f"{out}: cannot prepare the run directory: {exc.strerror or exc}") from exc
 
 
 def record_outputs(out: Path, paths: Iterable[Path] = ()) -> None:

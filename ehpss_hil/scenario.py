@@ -49,8 +49,7 @@ class Reference:
     start_s: float = field(default=0.0, metadata=rng(0.0))
     rate_m_s: float = field(default=0.001, metadata=rng(-1.0, 1.0))
     path: str = ""
-    table: ReferenceTable | None = field(default=None, compare=False, repr=False,
-                                         metadata={"internal": True})
+    table: ReferenceTable | None = field(default=None, compare=False, repr=False, metadata={"internal": True})
 
     def __post_init__(self) -> None:
         if self.kind == "file" and not self.path:
@@ -58,8 +57,9 @@ class Reference:
         for key in ("amplitude_m", "rate_m_s"):
             value = getattr(self, key)
             if 0.0 < abs(value) < MIN_REFERENCE_SCALE:
-                raise ConfigError("", key, f"expected 0 or at least {MIN_REFERENCE_SCALE:g} in "
-                                  f"magnitude, got {value!r}")
+                raise ConfigError(
+                    "", key, f"expected 0 or at least {MIN_REFERENCE_SCALE:g} in magnitude, got {value!r}"
+                )
 
     def loaded(self, base_dir: Path | None = None, source: str = "") -> Reference:
         """This reference with its trajectory file read (kind ``file``; a relative ``path``
@@ -98,8 +98,9 @@ class Reference:
         if self.kind == "square":
             x = np.where(phase < 0.5, a, -a)
         else:  # triangle of unit amplitude (0 → 1 → −1 → 0), scaled to the ramp rate, clipped
-            tri = np.where(phase < 0.25, 4.0 * phase,
-                           np.where(phase < 0.75, 2.0 - 4.0 * phase, 4.0 * phase - 4.0))
+            tri = np.where(
+                phase < 0.25, 4.0 * phase, np.where(phase < 0.75, 2.0 - 4.0 * phase, 4.0 * phase - 4.0)
+            )
             peak_m = abs(self.rate_m_s) * np.pi / (2.0 * self.omega_rad_s)
             x = np.clip(peak_m * tri, -a, a)
         return np.where(tt >= 0.0, x, 0.0)
@@ -187,8 +188,7 @@ class FrameLoss:
     sensor: float = 0.0
     command: float = 0.0
 
-    def updated(self, both: float | None, sensor: float | None,
-                command: float | None) -> FrameLoss:
+    def updated(self, both: float | None, sensor: float | None, command: float | None) -> FrameLoss:
         """This loss with the given keys applied (None = key not set)."""
         s = self.sensor if both is None else both
         c = self.command if both is None else both
@@ -239,8 +239,7 @@ class Scenario:
 
     name: str
     duration_s: float = field(metadata=rng(0.0, 86400.0, lo_open=True))
-    sample_time_s: float = field(default=0.001,
-                                 metadata=rng(1.0 / MAX_RATE_HZ, 1.0 / MIN_RATE_HZ))
+    sample_time_s: float = field(default=0.001, metadata=rng(1.0 / MAX_RATE_HZ, 1.0 / MIN_RATE_HZ))
     seed: int = field(default=1, metadata=rng(0, 2**32 - 1))
     reference: Reference = field(default_factory=Reference)
     noise: Noise = field(default_factory=Noise)
@@ -258,13 +257,16 @@ class Scenario:
     def __post_init__(self) -> None:
         for i in range(1, len(self.events)):
             if self.events[i].t_s < self.events[i - 1].t_s:
-                raise ConfigError("", f"events[{i}].t_s",
-                                  f"events must be in time order ({self.events[i].t_s} < "
-                                  f"{self.events[i - 1].t_s})")
+                raise ConfigError(
+                    "",
+                    f"events[{i}].t_s",
+                    f"events must be in time order ({self.events[i].t_s} < {self.events[i - 1].t_s})",
+                )
         for i, ev in enumerate(self.events):
             if ev.t_s > self.duration_s:
-                raise ConfigError("", f"events[{i}].t_s",
-                                  f"event after the end of the run ({ev.t_s} > {self.duration_s})")
+                raise ConfigError(
+                    "", f"events[{i}].t_s", f"event after the end of the run ({ev.t_s} > {self.duration_s})"
+                )
 
     @property
     def n_samples(self) -> int:
@@ -274,8 +276,7 @@ class Scenario:
     @property
     def initial_loss(self) -> FrameLoss:
         """The per-direction frame loss at k = 0."""
-        return FrameLoss().updated(self.frame_loss, self.sensor_frame_loss,
-                                   self.command_frame_loss)
+        return FrameLoss().updated(self.frame_loss, self.sensor_frame_loss, self.command_frame_loss)
 
     def fault_timeline(self) -> list[tuple[int, FaultState, FrameLoss]]:
         """``(sample index, fault state, frame loss per direction)`` at the start and at every
@@ -302,7 +303,10 @@ def load_scenario(path: str | Path, data: object = None) -> Scenario:
     sc = build(Scenario, load_yaml(p) if data is None else data, str(p))
     n = sc.duration_s / sc.sample_time_s
     if not 1 <= round(n) <= MAX_SCENARIO_SAMPLES:
-        raise ConfigError(str(p), "duration_s", f"must hold 1 to {MAX_SCENARIO_SAMPLES} samples "
-                          f"of sample_time_s, got {n:.6g}")
+        raise ConfigError(
+            str(p),
+            "duration_s",
+            f"must hold 1 to {MAX_SCENARIO_SAMPLES} samples of sample_time_s, got {n:.6g}",
+        )
     base = p.resolve().parent
     return replace(sc, base_dir=str(base), reference=sc.reference.loaded(base, str(p)))

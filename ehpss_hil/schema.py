@@ -26,8 +26,14 @@ T = TypeVar("T")
 _MISSING = dataclasses.MISSING
 
 
-def rng(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
-        length: tuple[int, int] | None = None, doc: str = "") -> dict[str, Any]:
+def rng(
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    length: tuple[int, int] | None = None,
+    doc: str = "",
+) -> dict[str, Any]:
     """Field metadata for a numeric range ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); for a
     tuple field the range applies to each item and ``length`` bounds the number of items."""
     return {"min": lo, "max": hi, "lo_open": lo_open, "length": length, "doc": doc}
@@ -55,7 +61,8 @@ def _type_name(tp: Any) -> str:
     if tp is type(None):
         return "null"
     return {float: "a number", int: "an integer", bool: "true or false", str: "a string"}.get(
-        tp, getattr(tp, "__name__", str(tp)))
+        tp, getattr(tp, "__name__", str(tp))
+    )
 
 
 def _convert(tp: Any, value: Any, src: str, path: str, meta: dict[str, Any]) -> Any:
@@ -134,8 +141,11 @@ def build(cls: type[T], data: Any, src: str = "", path: str = "") -> T:
     if not isinstance(data, dict):
         raise ConfigError(src, path, f"expected a mapping, got {show(data)}")
     hints = get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(typing.cast(Any, cls))
-              if f.init and not f.metadata.get("internal")}
+    fields = {
+        f.name: f
+        for f in dataclasses.fields(typing.cast(Any, cls))
+        if f.init and not f.metadata.get("internal")
+    }
     unknown = [k for k in data if k not in fields]
     if unknown:
         known = ", ".join(sorted(fields))
@@ -152,8 +162,7 @@ def build(cls: type[T], data: Any, src: str = "", path: str = "") -> T:
     except ConfigError as exc:
         if exc.source:
             raise
-        raise ConfigError(src, _join(path, exc.key_path) if exc.key_path else path,
-                          exc.reason) from exc
+        raise ConfigError(src, _join(path, exc.key_path) if exc.key_path else path, exc.reason) from exc
     return obj
 
 

@@ -69,8 +69,7 @@ def _check(data: np.ndarray) -> str | None:
     return None
 
 
-def load_reference_table(path: str | Path, source: str = "",
-                         key: str = "reference.path") -> ReferenceTable:
+def load_reference_table(path: str | Path, source: str = "", key: str = "reference.path") -> ReferenceTable:
     """Read and validate the trajectory CSV ``path``; errors are ConfigError for ``key`` in the
     file ``source`` (the config or scenario naming it)."""
     src = source or str(path)
@@ -82,8 +81,9 @@ def load_reference_table(path: str | Path, source: str = "",
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "input contained no data": reported below
-            data = np.loadtxt(io.StringIO(text), delimiter=",", ndmin=2, dtype=np.float64,
-                              max_rows=MAX_REFERENCE_ROWS + 1)
+            data = np.loadtxt(
+                io.StringIO(text), delimiter=",", ndmin=2, dtype=np.float64, max_rows=MAX_REFERENCE_ROWS + 1
+            )
     except ValueError as exc:
         raise ConfigError(src, key, f"{where}not a CSV of numbers t_s,x_m ({exc})") from exc
     problem = _check(data)

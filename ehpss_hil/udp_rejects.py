@@ -44,8 +44,12 @@ class DatagramRejects:
         now = time.monotonic()
         if now >= self._next_warn_s:
             self._next_warn_s = now + self.WARN_INTERVAL_S
-            log.warning("%s: %d datagram(s) rejected so far, not CAN frames (%s); skipped",
-                        self.where, self.total, self.text())
+            log.warning(
+                "%s: %d datagram(s) rejected so far, not CAN frames (%s); skipped",
+                self.where,
+                self.total,
+                self.text(),
+            )
 
     def text(self) -> str:
         """``3 (empty 1, not msgpack 2)`` style counts."""

@@ -31,16 +31,19 @@ from ehpss_hil.scenario import Scenario, load_scenario
 from .process import OWN_FRAMES, EmulatorOptions, EmulatorProcess
 
 log = logging.getLogger("firmware_sim")
-CLOCK_NOTE = ("wall clock (time.time()) at send for frames sent; the bus's receive timestamp "
-              "(kernel SO_TIMESTAMPNS on udp_multicast/socketcan) for frames received")
+CLOCK_NOTE = (
+    "wall clock (time.time()) at send for frames sent; the bus's receive timestamp "
+    "(kernel SO_TIMESTAMPNS on udp_multicast/socketcan) for frames received"
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``firmware-sim`` argument parser."""
     p = argparse.ArgumentParser(prog="firmware-sim", description="EHPSS plant emulator on CAN.")
     p.add_argument("-c", "--config", required=True, type=Path, help="emulator.yaml")
-    p.add_argument("--interface", choices=("udp_multicast", "socketcan", "virtual"),
-                   help="override bus.interface")
+    p.add_argument(
+        "--interface", choices=("udp_multicast", "socketcan", "virtual"), help="override bus.interface"
+    )
     p.add_argument("--channel", help="override bus.channel (vcan0, a 239.x.y.z group, ...)")
     p.add_argument("--scenario", type=Path, help="override the scenario file")
     p.add_argument("--rate", type=float, help="period rate (Hz), overrides rate_hz")
@@ -51,8 +54,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cpu", type=int, help="pin to this CPU")
     p.add_argument("--log", help="candump -L log of every frame sent and received")
     p.add_argument("--duration", type=float, help="stop after this many seconds of plant time")
-    p.add_argument("--lockstep-timeout", type=float, default=5.0,
-                   help="lockstep: give up when no VALVE_CMD arrives for this long (s)")
+    p.add_argument(
+        "--lockstep-timeout",
+        type=float,
+        default=5.0,
+        help="lockstep: give up when no VALVE_CMD arrives for this long (s)",
+    )
     p.add_argument("--summary-json", type=Path, help="write the final counters as JSON here")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     return p
@@ -63,14 +70,28 @@ def _resolve(args: argparse.Namespace) -> tuple[EmulatorConfig, Scenario]:
     cfg = load_emulator_config(args.config)
     src = str(args.config)
     bus = cfg.bus
-    bus, rate, rt = apply_overrides(src, bus, cfg.rate_hz, cfg.rt, interface=args.interface,
-                                    channel=args.channel, rate=args.rate,
-                                    rt_priority=args.rt_priority, cpu=args.cpu)
-    cfg = replace(cfg, bus=bus, rate_hz=rate, mode=args.mode or cfg.mode, rt=rt,
-                  truth=cfg.truth or args.truth, fault_inject=cfg.fault_inject or args.fault_inject)
+    bus, rate, rt = apply_overrides(
+        src,
+        bus,
+        cfg.rate_hz,
+        cfg.rt,
+        interface=args.interface,
+        channel=args.channel,
+        rate=args.rate,
+        rt_priority=args.rt_priority,
+        cpu=args.cpu,
+    )
+    cfg = replace(
+        cfg,
+        bus=bus,
+        rate_hz=rate,
+        mode=args.mode or cfg.mode,
+        rt=rt,
+        truth=cfg.truth or args.truth,
+        fault_inject=cfg.fault_inject or args.fault_inject,
+    )
     path = args.scenario or (Path(cfg.scenario) if cfg.scenario else None)
-    scenario = (load_scenario(path) if path is not None
-                else Scenario(name="default", duration_s=3600.0))
+    scenario = load_scenario(path) if path is not None else Scenario(name="default", duration_s=3600.0)
     if abs(scenario.sample_time_s * rate - 1.0) > 1e-9:
         scenario = replace(scenario, sample_time_s=1.0 / rate)
     if args.duration is not None and args.duration <= 0.0:
@@ -83,17 +104,19 @@ def format_summary(s: dict[str, object]) -> str:
     st = s["stats"]
     assert isinstance(st, dict)
     lat = st["lateness_s"]
-    lines = [f"firmware-sim: periods {s['periods']}",
-             f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
-             f"  frames received: {s['frames_received']}; by verdict {s['received_by_verdict']}",
-             f"  datagrams rejected (not a frame): {rejects_text(s)}",
-             f"  commands accepted {s['commands_accepted']}, command timeouts "
-             f"{s['command_timeouts']}, lost sensor/command frames {s['lost_sensor_frames']}/"
-             f"{s['lost_command_frames']}, clipped values {s['clipped_values']}",
-             f"  overruns {st['overruns']} (skipped periods {st['skipped']}), wake-up lateness "
-             f"p50 {lat['p50'] * 1e6:.1f} µs p99 {lat['p99'] * 1e6:.1f} µs "
-             f"max {lat['max'] * 1e6:.1f} µs, compute p99 "
-             f"{st['compute_s']['p99'] * 1e6:.1f} µs"]
+    lines = [
+        f"firmware-sim: periods {s['periods']}",
+        f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
+        f"  frames received: {s['frames_received']}; by verdict {s['received_by_verdict']}",
+        f"  datagrams rejected (not a frame): {rejects_text(s)}",
+        f"  commands accepted {s['commands_accepted']}, command timeouts "
+        f"{s['command_timeouts']}, lost sensor/command frames {s['lost_sensor_frames']}/"
+        f"{s['lost_command_frames']}, clipped values {s['clipped_values']}",
+        f"  overruns {st['overruns']} (skipped periods {st['skipped']}), wake-up lateness "
+        f"p50 {lat['p50'] * 1e6:.1f} µs p99 {lat['p99'] * 1e6:.1f} µs "
+        f"max {lat['max'] * 1e6:.1f} µs, compute p99 "
+        f"{st['compute_s']['p99'] * 1e6:.1f} µs",
+    ]
     return "\n".join(lines)
 
 
@@ -104,23 +127,51 @@ def run(args: argparse.Namespace) -> int:
     codec = process_codec(cfg.dbc, cfg.ids, str(args.config))
     emu = PlantEmulation(params, scenario)
     bus = open_bus(cfg.bus)
-    logger = open_process_logger(args.log, cfg.log, cfg.bus, bus, str(args.config), sidecar={
-        "tool": "firmware-sim", "config": asdict(cfg), "config_path": str(args.config),
-        "dbc": cfg.dbc or None, "scenario": asdict(scenario), "scenario_name": scenario.name,
-        "rate_hz": cfg.rate_hz, "clock": CLOCK_NOTE,
-        "bus": f"{cfg.bus.interface}:{cfg.bus.channel}", "mode": cfg.mode})
+    logger = open_process_logger(
+        args.log,
+        cfg.log,
+        cfg.bus,
+        bus,
+        str(args.config),
+        sidecar={
+            "tool": "firmware-sim",
+            "config": asdict(cfg),
+            "config_path": str(args.config),
+            "dbc": cfg.dbc or None,
+            "scenario": asdict(scenario),
+            "scenario_name": scenario.name,
+            "rate_hz": cfg.rate_hz,
+            "clock": CLOCK_NOTE,
+            "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
+            "mode": cfg.mode,
+        },
+    )
     io = FrameIO(bus, codec, OWN_FRAMES, logger)
-    proc = EmulatorProcess(emu, io, EmulatorOptions(
-        command_timeout_s=cfg.command_timeout_s, truth=cfg.truth, fault_inject=cfg.fault_inject,
-        heartbeat_rate_hz=cfg.heartbeat_rate_hz, lockstep_timeout_s=args.lockstep_timeout))
+    proc = EmulatorProcess(
+        emu,
+        io,
+        EmulatorOptions(
+            command_timeout_s=cfg.command_timeout_s,
+            truth=cfg.truth,
+            fault_inject=cfg.fault_inject,
+            heartbeat_rate_hz=cfg.heartbeat_rate_hz,
+            lockstep_timeout_s=args.lockstep_timeout,
+        ),
+    )
     stop, previous = install_stop_handlers()
     ok = True
     try:
         limit_blas_threads(1)  # idle OpenBLAS workers spin and steal the loop's CPU
         apply_rt_options(cfg.rt)
         freeze_gc(cfg.rt.gc_freeze)
-        log.info("%s on %s:%s at %g Hz, scenario %s", cfg.mode, cfg.bus.interface,
-                 cfg.bus.channel, cfg.rate_hz, scenario.name)
+        log.info(
+            "%s on %s:%s at %g Hz, scenario %s",
+            cfg.mode,
+            cfg.bus.interface,
+            cfg.bus.channel,
+            cfg.rate_hz,
+            scenario.name,
+        )
         if cfg.mode == "lockstep":
             n = scenario.n_samples if args.duration is None else round(args.duration * cfg.rate_hz)
             ok = proc.run_lockstep(stop, n)
@@ -139,8 +190,11 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``firmware-sim`` console script."""
     args = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
-                        format="firmware-sim: %(levelname)s: %(message)s")
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        stream=sys.stderr,
+        format="firmware-sim: %(levelname)s: %(message)s",
+    )
     return run_console("firmware-sim", lambda: run(args))
 
 

@@ -44,8 +44,9 @@ class CommandHold:
         self.timed_out = self.periods_since >= self.timeout_periods
         if self.timed_out and not was:
             self.timeouts += 1
-            log.warning("t=%.4f s: no valid VALVE_CMD for %d periods: applied current 0 A",
-                        t_s, self.periods_since)
+            log.warning(
+                "t=%.4f s: no valid VALVE_CMD for %d periods: applied current 0 A", t_s, self.periods_since
+            )
         elif was and not self.timed_out and self.accepted > 1:
             log.info("t=%.4f s: VALVE_CMD fresh again, command timeout cleared", t_s)
         return self.setpoint_a

@@ -27,8 +27,18 @@ CYCLE_MODULUS = 1 << 16
 class CommanderCheck:
     """Conflict detector over the last ``window`` VALVE_CMD frames (usable or E2E-rejected)."""
 
-    __slots__ = ("_advancing", "_candidate", "_foreign_in_window", "_last", "_limit",
-                 "_max_ahead", "_recent", "conflict", "conflicts", "foreign")
+    __slots__ = (
+        "_advancing",
+        "_candidate",
+        "_foreign_in_window",
+        "_last",
+        "_limit",
+        "_max_ahead",
+        "_recent",
+        "conflict",
+        "conflicts",
+        "foreign",
+    )
 
     def __init__(self, window: int, limit: int, max_ahead: int) -> None:
         """``window``: frames looked back over; ``limit``: foreign frames in it that make a
@@ -60,8 +70,11 @@ class CommanderCheck:
                 self._advancing = True
             elif not self._advancing:  # a sender that does not count cycles: no evidence
                 self._last, ok = cycle_count, True
-            elif (self._candidate is not None and 0 < step < CYCLE_MODULUS // 2
-                  and 1 <= (cycle_count - self._candidate) % CYCLE_MODULUS <= self._max_ahead):
+            elif (
+                self._candidate is not None
+                and 0 < step < CYCLE_MODULUS // 2
+                and 1 <= (cycle_count - self._candidate) % CYCLE_MODULUS <= self._max_ahead
+            ):
                 self._last, ok = cycle_count, True  # one commander that jumped ahead: resync
         self._candidate = None if ok else cycle_count
         self._push(not ok)

@@ -77,8 +77,10 @@ class EmulatorProcess:
         self._id_inject = self.codec.can_id("FAULT_INJECT")
         self._hb_every = max(1, round(rate_hz / opts.heartbeat_rate_hz))
         self._faults_every = max(1, round(rate_hz / opts.faults_rate_hz))
-        self._bounds = {n: {s.name: (s.minimum, s.maximum) for s in self.codec.message(n).signals}
-                        for n in ("SENSOR_POS", "SENSOR_AUX", "PLANT_TRUTH")}
+        self._bounds = {
+            n: {s.name: (s.minimum, s.maximum) for s in self.codec.message(n).signals}
+            for n in ("SENSOR_POS", "SENSOR_AUX", "PLANT_TRUTH")
+        }
         self.stats = LoopStats(opts.stats_capacity)
         self.periods = 0
         #: periods slept through by overruns, the plant advanced without frames (step_period)
@@ -109,8 +111,12 @@ class EmulatorProcess:
                 in_order, cmd = False, None
             if chk.conflict != was:
                 if chk.conflict:
-                    log.error("t=%.4f s: a second VALVE_CMD transmitter (%d foreign frames): "
-                              "valve centred until one commander is left", self.t_s, chk.foreign)
+                    log.error(
+                        "t=%.4f s: a second VALVE_CMD transmitter (%d foreign frames): "
+                        "valve centred until one commander is left",
+                        self.t_s,
+                        chk.foreign,
+                    )
                 else:
                     log.warning("t=%.4f s: one VALVE_CMD commander again", self.t_s)
             return cmd if (in_order and cmd is not None and not chk.conflict) else False
@@ -161,22 +167,38 @@ class EmulatorProcess:
     def _send_sample(self, y: SensorSample) -> bool:
         """SENSOR_POS + SENSOR_AUX for y (unless lost) and PLANT_TRUTH; True when sent."""
         if self.opts.truth:
-            self.io.send("PLANT_TRUTH", self._clip("PLANT_TRUTH", {
-                "Position": y.true_position_m, "SpoolActual": y.true_spool_m,
-                "Stuck": int(y.faults.stuck)}))
+            self.io.send(
+                "PLANT_TRUTH",
+                self._clip(
+                    "PLANT_TRUTH",
+                    {
+                        "Position": y.true_position_m,
+                        "SpoolActual": y.true_spool_m,
+                        "Stuck": int(y.faults.stuck),
+                    },
+                ),
+            )
         if self.emu.frame_lost(0):  # lost on the way: the counters move on (receiver: a gap)
             self.lost_sensor += 1
             self._skip_sample()
             return False
         self.io.send_together(
-            ("SENSOR_POS", self._clip("SENSOR_POS", {
-                "Position": y.position_m, "Spool": y.spool_m})),
-            ("SENSOR_AUX", self._clip("SENSOR_AUX", {
-                "LoadPressure": y.load_pressure_pa, "CoilCurrent": y.coil_current_a,
-                "ValveEnabled": int(self.hold.valve_enabled),
-                "CmdTimeout": int(self.hold.timed_out),
-                "CurrentSaturated": int(y.current_saturated),
-                "CommandConflict": int(self.commanders.conflict)})))
+            ("SENSOR_POS", self._clip("SENSOR_POS", {"Position": y.position_m, "Spool": y.spool_m})),
+            (
+                "SENSOR_AUX",
+                self._clip(
+                    "SENSOR_AUX",
+                    {
+                        "LoadPressure": y.load_pressure_pa,
+                        "CoilCurrent": y.coil_current_a,
+                        "ValveEnabled": int(self.hold.valve_enabled),
+                        "CmdTimeout": int(self.hold.timed_out),
+                        "CurrentSaturated": int(y.current_saturated),
+                        "CommandConflict": int(self.commanders.conflict),
+                    },
+                ),
+            ),
+        )
         return True
 
     def _skip_sample(self) -> None:
@@ -186,15 +208,20 @@ class EmulatorProcess:
 
     def _send_faults(self) -> None:
         f = self.emu.faults
-        self.io.send("PLANT_FAULTS", {"KLoe": min(f.k_loe, 6.5535), "KQ": min(f.k_q, 6.5535),
-                                      "KDft": min(f.k_dft, 6.5535)})
+        self.io.send(
+            "PLANT_FAULTS",
+            {"KLoe": min(f.k_loe, 6.5535), "KQ": min(f.k_q, 6.5535), "KDft": min(f.k_dft, 6.5535)},
+        )
 
     def _check_faults(self) -> None:
         f = self.emu.faults
         if f != self._faults:
             old = self._faults
-            diff = ", ".join(f"{k} {getattr(old, k)} -> {getattr(f, k)}"
-                             for k in f.__dataclass_fields__ if getattr(old, k) != getattr(f, k))
+            diff = ", ".join(
+                f"{k} {getattr(old, k)} -> {getattr(f, k)}"
+                for k in f.__dataclass_fields__
+                if getattr(old, k) != getattr(f, k)
+            )
             log.info("t=%.4f s (k=%d): faults changed: %s", self.t_s, self.emu.k, diff)
             self._faults = f
             if self.opts.truth:
@@ -302,8 +329,11 @@ class EmulatorProcess:
                 arrived, cmd = self._await_command(stop)
                 if not arrived:
                     if not stop:
-                        log.error("lockstep: no VALVE_CMD within %.1f s at k=%d; stopping",
-                                  self.opts.lockstep_timeout_s, self.emu.k)
+                        log.error(
+                            "lockstep: no VALVE_CMD within %.1f s at k=%d; stopping",
+                            self.opts.lockstep_timeout_s,
+                            self.emu.k,
+                        )
                     return bool(stop)
             delay.append(self._take_command(cmd))
             self.applied_a = self.emu.advance(delay.popleft())
@@ -317,15 +347,22 @@ class EmulatorProcess:
     def summary(self) -> dict[str, Any]:
         """Counters and period statistics (JSON-able)."""
         return {
-            "periods": self.periods, "skipped_periods": self.skipped_periods,
+            "periods": self.periods,
+            "skipped_periods": self.skipped_periods,
             "frames_sent": dict(self.io.sent),
-            "tx_errors": self.io.tx_errors, "frames_received": self.io.received,
+            "tx_errors": self.io.tx_errors,
+            "frames_received": self.io.received,
             "received_by_verdict": {v.name: n for v, n in self.codec.counts.items()},
-            "commands_accepted": self.hold.accepted, "command_timeouts": self.hold.timeouts,
-            "lost_sensor_frames": self.lost_sensor, "lost_command_frames": self.lost_cmd,
+            "commands_accepted": self.hold.accepted,
+            "command_timeouts": self.hold.timeouts,
+            "lost_sensor_frames": self.lost_sensor,
+            "lost_command_frames": self.lost_cmd,
             "command_conflicts": self.commanders.conflicts,
             "id_collisions": dict(self.io.collisions.by_name),
             "foreign_commands": self.commanders.foreign,
-            "clipped_values": self.clipped, "inject_applied": self.inject_applied,
-            "inject_rejected": self.inject_rejected, "inject_ignored": self.inject_ignored,
-            "stats": self.stats.summary()}
+            "clipped_values": self.clipped,
+            "inject_applied": self.inject_applied,
+            "inject_rejected": self.inject_rejected,
+            "inject_ignored": self.inject_ignored,
+            "stats": self.stats.summary(),
+        }

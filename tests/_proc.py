@@ -24,15 +24,16 @@ class Proc:
 
     def __init__(self, argv: list[str]) -> None:
         self.argv = argv
-        self.p = subprocess.Popen(argv, cwd=ROOT, env=ENV, stdout=subprocess.PIPE,
-                                  stderr=subprocess.PIPE, text=True)
+        self.p = subprocess.Popen(
+            argv, cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
         self.out: list[str] = []
         self.err: list[str] = []
         self._q: queue.Queue[tuple[str, str]] = queue.Queue()
         self._threads = [
             threading.Thread(target=self._read, args=(stream, sink, tag), daemon=True)
-            for stream, sink, tag in ((self.p.stdout, self.out, "out"),
-                                      (self.p.stderr, self.err, "err"))]
+            for stream, sink, tag in ((self.p.stdout, self.out, "out"), (self.p.stderr, self.err, "err"))
+        ]
         for t in self._threads:
             t.start()
 
@@ -70,8 +71,7 @@ class Proc:
         except subprocess.TimeoutExpired as exc:
             self.p.kill()
             self.p.wait()
-            raise AssertionError(
-                f"{self.argv} did not end; stderr: {''.join(self.err)[-2000:]}") from exc
+            raise AssertionError(f"{self.argv} did not end; stderr: {''.join(self.err)[-2000:]}") from exc
 
     def terminate(self) -> None:
         if self.p.poll() is None:

@@ -66,13 +66,35 @@ class Pair:
     stops: list[Stop] = field(default_factory=list)
 
     def start(self) -> None:
-        self.emu = Proc(self.ns.prefix() + FIRMWARE_SIM + [
-            "-c", EMU_CFG, "--truth", "--log", str(self.tmp / "emu.log"),
-            "--summary-json", str(self.tmp / "emu.json")])
+        self.emu = Proc(
+            self.ns.prefix()
+            + FIRMWARE_SIM
+            + [
+                "-c",
+                EMU_CFG,
+                "--truth",
+                "--log",
+                str(self.tmp / "emu.log"),
+                "--summary-json",
+                str(self.tmp / "emu.json"),
+            ]
+        )
         assert self.emu.wait_for("realtime on"), self.emu.text
-        self.ctl = Proc(self.ns.prefix() + EHPSS_HIL + [
-            "controller", "-c", self.config, "--mode", self.mode,
-            "--log", str(self.tmp / "ctl.log"), "--summary-json", str(self.tmp / "ctl.json")])
+        self.ctl = Proc(
+            self.ns.prefix()
+            + EHPSS_HIL
+            + [
+                "controller",
+                "-c",
+                self.config,
+                "--mode",
+                self.mode,
+                "--log",
+                str(self.tmp / "ctl.log"),
+                "--summary-json",
+                str(self.tmp / "ctl.json"),
+            ]
+        )
         assert self.ctl.wait_for("first sensor data: ACTIVE"), self.ctl.text + self.emu.text
 
     def stop(self, who: str, seconds: float) -> None:
@@ -106,8 +128,10 @@ class Pair:
             if p is not None:
                 p.terminate()
                 assert p.wait() == 0, p.text
-        return (json.loads((self.tmp / "ctl.json").read_text()),
-                json.loads((self.tmp / "emu.json").read_text()))
+        return (
+            json.loads((self.tmp / "ctl.json").read_text()),
+            json.loads((self.tmp / "emu.json").read_text()),
+        )
 
     def kill(self) -> None:
         for p in (self.ctl, self.emu):
@@ -151,12 +175,23 @@ def controller_log(path: Path) -> tuple[list[Command], list[Status]]:
             last_rx[m.data[1] & 0x0F] = m.timestamp
         elif m.arbitration_id == cmd:
             v = signal_values(codec.message("VALVE_CMD"), m.data)
-            cmds.append(Command(n, m.timestamp, int(v["CycleCount"]), float(v["CurrentSetpoint"]),
-                                bool(v["Enable"]), last_rx.get(int(v["SensorCounterEcho"]))))
+            cmds.append(
+                Command(
+                    n,
+                    m.timestamp,
+                    int(v["CycleCount"]),
+                    float(v["CurrentSetpoint"]),
+                    bool(v["Enable"]),
+                    last_rx.get(int(v["SensorCounterEcho"])),
+                )
+            )
         elif m.arbitration_id == st:
             v = signal_values(codec.message("CTRL_STATUS"), m.data)
-            stats.append(Status(n, m.timestamp, State(int(v["State"])).name,
-                                FailsafeReason(int(v["FailsafeReason"])).name))
+            stats.append(
+                Status(
+                    n, m.timestamp, State(int(v["State"])).name, FailsafeReason(int(v["FailsafeReason"])).name
+                )
+            )
     return cmds, stats
 
 
@@ -165,8 +200,11 @@ def truth(path: Path) -> list[tuple[float, float]]:
     codec = FrameCodec()
     tid = codec.can_id("PLANT_TRUTH")
     msg = codec.message("PLANT_TRUTH")
-    return [(m.timestamp, signal_values(msg, m.data)["Position"])
-            for m in read_log(path) if m.arbitration_id == tid]
+    return [
+        (m.timestamp, signal_values(msg, m.data)["Position"])
+        for m in read_log(path)
+        if m.arbitration_id == tid
+    ]
 
 
 def resumed_at(cmds: list[Command], s: Stop) -> int:
@@ -209,21 +247,24 @@ def figures(pair: Pair, window_s: float) -> list[dict[str, object]]:
         jumps = [abs(b.current_a - a.current_a) for a, b in itertools.pairwise(seq)]
         xa = [abs(x) for t, x in xs if s.t_stop < t < end]
         dev = [abs(x - x_d(cmds, t)) for t, x in xs if s.t_stop < t < end]
-        out.append({
-            "stop": f"{s.who} {s.t_cont - s.t_stop:.3f} s",
-            "statuses_after": [f"{st.state}/{st.reason}" for st in stats
-                               if s.t_cont < st.t < end][:3],
-            "in_flight_commands": sum(c.n < n0 for c in after),
-            "enabled_commands_after": len(used),
-            "stale_rx_used": sum(c.echo_rx_t is not None and c.echo_rx_t < s.t_cont - window_s
-                                 for c in used),
-            "first_50_enabled_age_max_ms": round(1e3 * max(ages), 2) if ages else None,
-            "max_current_step_ma": round(1e3 * max(jumps), 3) if jumps else None,
-            "max_abs_current_ma_after": round(1e3 * max((abs(c.current_a) for c in after),
-                                                        default=0.0), 3),
-            "max_abs_x_true_mm": round(1e3 * max(xa), 4) if xa else None,
-            "max_x_true_minus_x_d_mm": round(1e3 * max(dev), 4) if dev else None,  # bench ref
-        })
+        out.append(
+            {
+                "stop": f"{s.who} {s.t_cont - s.t_stop:.3f} s",
+                "statuses_after": [f"{st.state}/{st.reason}" for st in stats if s.t_cont < st.t < end][:3],
+                "in_flight_commands": sum(c.n < n0 for c in after),
+                "enabled_commands_after": len(used),
+                "stale_rx_used": sum(
+                    c.echo_rx_t is not None and c.echo_rx_t < s.t_cont - window_s for c in used
+                ),
+                "first_50_enabled_age_max_ms": round(1e3 * max(ages), 2) if ages else None,
+                "max_current_step_ma": round(1e3 * max(jumps), 3) if jumps else None,
+                "max_abs_current_ma_after": round(
+                    1e3 * max((abs(c.current_a) for c in after), default=0.0), 3
+                ),
+                "max_abs_x_true_mm": round(1e3 * max(xa), 4) if xa else None,
+                "max_x_true_minus_x_d_mm": round(1e3 * max(dev), 4) if dev else None,  # bench ref
+            }
+        )
     return out
 
 
@@ -257,8 +298,13 @@ def main() -> int:
                 (a.out / "ctl.stderr").write_text(pair.ctl.text)
     for f in figures(pair, window):
         print(json.dumps(f))
-    print("controller:", {k: ctl[k] for k in ("state", "failsafe_reason", "watchdog_trips",
-                                              "skipped_periods", "failsafe_cycles")})
+    print(
+        "controller:",
+        {
+            k: ctl[k]
+            for k in ("state", "failsafe_reason", "watchdog_trips", "skipped_periods", "failsafe_cycles")
+        },
+    )
     return 0
 
 

@@ -27,8 +27,7 @@ class VirtualPair:
 
     def newest(self) -> dict[str, dict[str, Any]]:
         """The values of the newest valid frame of each name pending at the peer."""
-        return {d.name: d.values for _, d in self.received()
-                if d.name is not None and d.values is not None}
+        return {d.name: d.values for _, d in self.received() if d.name is not None and d.values is not None}
 
     def values_of(self, name: str) -> list[dict[str, Any]]:
         """The values of every valid ``name`` frame pending at the peer, in order."""

@@ -79,8 +79,13 @@ _UDP_PROBE = textwrap.dedent("""
 
 @netns
 def test_udp_multicast_in_namespace_ttl0_rcvbuf_and_own_echo() -> None:
-    r = subprocess.run([*netns_prefix(), sys.executable, "-c", _UDP_PROBE], cwd=ROOT,
-                       capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [*netns_prefix(), sys.executable, "-c", _UDP_PROBE],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 0, r.stderr
     d = json.loads(r.stdout)
     assert d["ttl"] == 0
@@ -91,8 +96,13 @@ def test_udp_multicast_in_namespace_ttl0_rcvbuf_and_own_echo() -> None:
 @netns
 def test_udp_multicast_without_route_exits_3() -> None:
     """A bare namespace (loopback down, no multicast route): the emulator cannot open its bus."""
-    r = subprocess.run(["unshare", "--net", "--", *FIRMWARE_SIM, "-c", EMU_CFG_PATH],
-                       cwd=ROOT, capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        ["unshare", "--net", "--", *FIRMWARE_SIM, "-c", EMU_CFG_PATH],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 3, r.stderr
     assert "udp_multicast" in r.stderr
 

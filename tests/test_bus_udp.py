@@ -35,7 +35,7 @@ def _run_bpf(prog: list[tuple[int, int, int, int]], packet: bytes) -> int:
             n = {0x20: 4, 0x28: 2, 0x30: 1}[code]
             if k + n > len(packet):
                 return 0
-            a = int.from_bytes(packet[k:k + n], "big")
+            a = int.from_bytes(packet[k : k + n], "big")
             pc += 1
         elif code == 0x80:
             a = len(packet)
@@ -72,11 +72,16 @@ def test_writer_templates_give_pack_message_bytes() -> None:
     for _ in range(400):
         n = rng.randrange(9)
         ext = rng.random() < 0.3
-        msg = can.Message(arbitration_id=rng.randrange(1 << (29 if ext else 11)),
-                          is_extended_id=ext, data=rng.randbytes(n), dlc=n,
-                          is_remote_frame=rng.random() < 0.1, is_error_frame=rng.random() < 0.05,
-                          channel=rng.choice([None, "can0", 1]),
-                          timestamp=rng.choice([0.0, 1.5, 1.7e9 + rng.random(), -3.25]))
+        msg = can.Message(
+            arbitration_id=rng.randrange(1 << (29 if ext else 11)),
+            is_extended_id=ext,
+            data=rng.randbytes(n),
+            dlc=n,
+            is_remote_frame=rng.random() < 0.1,
+            is_error_frame=rng.random() < 0.05,
+            channel=rng.choice([None, "can0", 1]),
+            timestamp=rng.choice([0.0, 1.5, 1.7e9 + rng.random(), -3.25]),
+        )
         tpl = template(msg)
         assert tpl is not None, msg
         head, middle, tail = tpl
@@ -86,8 +91,20 @@ def test_writer_templates_give_pack_message_bytes() -> None:
     assert shapes == 400
 
 
-_FIELDS = ("timestamp", "arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame",
-           "channel", "dlc", "data", "is_fd", "bitrate_switch", "error_state_indicator", "is_rx")
+_FIELDS = (
+    "timestamp",
+    "arbitration_id",
+    "is_extended_id",
+    "is_remote_frame",
+    "is_error_frame",
+    "channel",
+    "dlc",
+    "data",
+    "is_fd",
+    "bitrate_switch",
+    "error_state_indicator",
+    "is_rx",
+)
 
 
 def _unpacked(datagram: bytes, ts: float) -> tuple[Any, ...] | None:
@@ -104,9 +121,10 @@ def test_parser_gives_what_unpack_message_gives() -> None:
     ``unpack_message`` rejects is a CanOperationError; the shape table is bounded."""
     rng = random.Random(5)
     parser = DatagramParser()
-    frames = [can.Message(arbitration_id=i, is_extended_id=i > 0x7FF, data=rng.randbytes(n), dlc=n)
-              for i, n in ((0x110, 8), (0x111, 8), (0x05, 2), (0x1FFFF120, 8), (0x701, 1),
-                           (0x333, 0))]
+    frames = [
+        can.Message(arbitration_id=i, is_extended_id=i > 0x7FF, data=rng.randbytes(n), dlc=n)
+        for i, n in ((0x110, 8), (0x111, 8), (0x05, 2), (0x1FFFF120, 8), (0x701, 1), (0x333, 0))
+    ]
     frames.append(can.Message(arbitration_id=0x120, is_remote_frame=True, dlc=4))  # not learnt
     fast = 0
     for round_ in range(3):
@@ -183,14 +201,28 @@ _PROBE = textwrap.dedent("""
 @netns
 def test_kernel_drops_own_datagrams_and_reader_returns_every_other_senders() -> None:
     """b's own frames never reach b; a's reach it on every ID, b's own IDs too."""
-    r = subprocess.run([*netns_prefix(), sys.executable, "-c", _PROBE], cwd=ROOT,
-                       capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [*netns_prefix(), sys.executable, "-c", _PROBE], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
     assert r.returncode == 0, r.stderr
     d = json.loads(r.stdout)
     assert d["attached"] is True and d["writer"] == "UdpWriter"
     got = d["got"]
-    assert [g[0] for g in got] == [0x110, 0x120, 0x111, 0x140, 0x160, 0x701, 0x702, 0x05, 0x06,
-                                   0x85, 0x86, 0x1FFFF120, 0x333]
+    assert [g[0] for g in got] == [
+        0x110,
+        0x120,
+        0x111,
+        0x140,
+        0x160,
+        0x701,
+        0x702,
+        0x05,
+        0x06,
+        0x85,
+        0x86,
+        0x1FFFF120,
+        0x333,
+    ]
     assert all(g[1] == f"{g[0] & 0xFF:02x}" * 8 for g in got[:-1]) and got[-1][1] == ""
     assert all(0.0 <= g[2] < 0.2 for g in got)  # kernel receive timestamps, wall clock
 
@@ -225,8 +257,9 @@ _STRAY = textwrap.dedent("""
 
 @netns
 def test_stray_datagrams_are_counted_and_skipped_on_both_read_paths() -> None:
-    r = subprocess.run([*netns_prefix(), sys.executable, "-c", _STRAY], cwd=ROOT,
-                       capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [*netns_prefix(), sys.executable, "-c", _STRAY], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
     assert r.returncode == 0, r.stderr
     d = json.loads(r.stdout)
     assert d["fast"] == [0x200 + i for i in range(6)]

@@ -17,8 +17,10 @@ from ehpss_hil import DEFAULT_DBC
 from ehpss_hil.canlog import CandumpLogger, decode_log, log_files, read_log, read_sidecar
 from ehpss_hil.codec import FrameCodec
 
-LINE_RE = re.compile(r"^\(\d{10}\.\d{6}\) \S+ ([0-9A-F]{3}|[0-9A-F]{8})#(R[0-8]?|#[0-9A-F]"
-                     r"(?:[0-9A-F]{2})*|(?:[0-9A-F]{2})*)\n$")
+LINE_RE = re.compile(
+    r"^\(\d{10}\.\d{6}\) \S+ ([0-9A-F]{3}|[0-9A-F]{8})#(R[0-8]?|#[0-9A-F]"
+    r"(?:[0-9A-F]{2})*|(?:[0-9A-F]{2})*)\n$"
+)
 CANTOOLS = Path(sys.executable).with_name("cantools")
 T0 = 1_700_000_000.0
 
@@ -28,24 +30,52 @@ def sample_frames(codec: FrameCodec, n_cycles: int = 40) -> list[can.Message]:
     out: list[can.Message] = []
     for k in range(n_cycles):
         t = T0 + k * 1e-3
-        out.append(codec.encode("SENSOR_POS", {"Position": 1e-4 * k - 2e-3, "Spool": -3e-6 * (k % 100)},
-                                timestamp_s=t))
-        out.append(codec.encode("SENSOR_AUX", {"LoadPressure": 1e4 * k, "CoilCurrent": -0.001 * (k % 100),
-                                               "ValveEnabled": 1}, timestamp_s=t))
-        out.append(codec.encode("VALVE_CMD", {"CurrentSetpoint": 0.002 * (k % 100), "Enable": 1,
-                                              "CycleCount": k, "SensorCounterEcho": k % 16},
-                                timestamp_s=t + 1e-4))
-        out.append(codec.encode("PLANT_TRUTH", {"Position": 1e-4 * k, "SpoolActual": 1e-6 * (k % 100)},
-                                timestamp_s=t))
+        out.append(
+            codec.encode(
+                "SENSOR_POS", {"Position": 1e-4 * k - 2e-3, "Spool": -3e-6 * (k % 100)}, timestamp_s=t
+            )
+        )
+        out.append(
+            codec.encode(
+                "SENSOR_AUX",
+                {"LoadPressure": 1e4 * k, "CoilCurrent": -0.001 * (k % 100), "ValveEnabled": 1},
+                timestamp_s=t,
+            )
+        )
+        out.append(
+            codec.encode(
+                "VALVE_CMD",
+                {
+                    "CurrentSetpoint": 0.002 * (k % 100),
+                    "Enable": 1,
+                    "CycleCount": k,
+                    "SensorCounterEcho": k % 16,
+                },
+                timestamp_s=t + 1e-4,
+            )
+        )
+        out.append(
+            codec.encode(
+                "PLANT_TRUTH", {"Position": 1e-4 * k, "SpoolActual": 1e-6 * (k % 100)}, timestamp_s=t
+            )
+        )
         if k % 10 == 0:
             slot = (k // 10) % 7
-            out.append(codec.encode("CTRL_STATUS", {"State": 2, "Mode": 3, "KLoeHat": 0.5,
-                                                    "KDftHat": 1.0, "ActiveSpoolModel": 1},
-                                    timestamp_s=t))
-            out.append(codec.encode("CTRL_INDEX", {"ModelSlot": slot, f"J_{slot}": 0.25 * k,
-                                                   f"Theta_{slot}": 0.5}, timestamp_s=t))
-            out.append(codec.encode("PLANT_FAULTS", {"KLoe": 0.8, "KQ": 1.0, "KDft": 1.0},
-                                    timestamp_s=t))
+            out.append(
+                codec.encode(
+                    "CTRL_STATUS",
+                    {"State": 2, "Mode": 3, "KLoeHat": 0.5, "KDftHat": 1.0, "ActiveSpoolModel": 1},
+                    timestamp_s=t,
+                )
+            )
+            out.append(
+                codec.encode(
+                    "CTRL_INDEX",
+                    {"ModelSlot": slot, f"J_{slot}": 0.25 * k, f"Theta_{slot}": 0.5},
+                    timestamp_s=t,
+                )
+            )
+            out.append(codec.encode("PLANT_FAULTS", {"KLoe": 0.8, "KQ": 1.0, "KDft": 1.0}, timestamp_s=t))
             out.append(codec.encode("HEARTBEAT_CTRL", {"NmtState": 5}, timestamp_s=t))
     return out
 
@@ -61,14 +91,21 @@ def write_log(path: Path, frames: list[can.Message], **kw: object) -> CandumpLog
 def test_golden_lines(tmp_path: Path) -> None:
     """Byte-exact candump -L lines for standard, extended, remote and FD frames."""
     msgs = [
-        can.Message(timestamp=1.5, arbitration_id=0x110, is_extended_id=False,
-                    data=bytes.fromhex("8700000000881300")),
-        can.Message(timestamp=1700000000.000001, arbitration_id=0x1ABCDEF, is_extended_id=True,
-                    data=b"\x01\xab"),
-        can.Message(timestamp=2.0, arbitration_id=0x123, is_extended_id=False,
-                    is_remote_frame=True, dlc=8),
-        can.Message(timestamp=3.25, arbitration_id=0x7FF, is_extended_id=False, is_fd=True,
-                    bitrate_switch=True, data=bytes(range(12))),
+        can.Message(
+            timestamp=1.5, arbitration_id=0x110, is_extended_id=False, data=bytes.fromhex("8700000000881300")
+        ),
+        can.Message(
+            timestamp=1700000000.000001, arbitration_id=0x1ABCDEF, is_extended_id=True, data=b"\x01\xab"
+        ),
+        can.Message(timestamp=2.0, arbitration_id=0x123, is_extended_id=False, is_remote_frame=True, dlc=8),
+        can.Message(
+            timestamp=3.25,
+            arbitration_id=0x7FF,
+            is_extended_id=False,
+            is_fd=True,
+            bitrate_switch=True,
+            data=bytes(range(12)),
+        ),
         can.Message(timestamp=4.0, arbitration_id=0x001, is_extended_id=False, data=b""),
     ]
     write_log(tmp_path / "g.log", msgs)
@@ -77,7 +114,8 @@ def test_golden_lines(tmp_path: Path) -> None:
         "(1700000000.000001) vcan0 01ABCDEF#01AB\n"
         "(0000000002.000000) vcan0 123#R8\n"
         "(0000000003.250000) vcan0 7FF##1000102030405060708090A0B\n"
-        "(0000000004.000000) vcan0 001#\n")
+        "(0000000004.000000) vcan0 001#\n"
+    )
     back = list(read_log(tmp_path / "g.log"))
     for a, b in zip(msgs, back, strict=True):
         assert a.equals(b, timestamp_delta=1e-6, check_channel=False, check_direction=False)
@@ -91,8 +129,12 @@ def test_python_can_round_trip(tmp_path: Path) -> None:
         back = list(reader)
     assert len(back) == len(frames)
     for a, b in zip(frames, back, strict=True):
-        assert (b.arbitration_id, bytes(b.data), b.dlc, b.is_extended_id) == \
-               (a.arbitration_id, bytes(a.data), a.dlc, a.is_extended_id)
+        assert (b.arbitration_id, bytes(b.data), b.dlc, b.is_extended_id) == (
+            a.arbitration_id,
+            bytes(a.data),
+            a.dlc,
+            a.is_extended_id,
+        )
         assert b.timestamp == pytest.approx(a.timestamp, abs=1e-6)
         assert b.channel == "vcan0"
 
@@ -114,9 +156,14 @@ def test_cantools_decode_cli_frame_for_frame(tmp_path: Path) -> None:
     frames = sample_frames(codec)
     log = tmp_path / "run.log"
     write_log(log, frames)
-    res = subprocess.run([str(CANTOOLS), "decode", "--single-line", "--no-decode-choices",
-                          str(DEFAULT_DBC)], stdin=log.open(), capture_output=True, text=True,
-                         check=True, timeout=60)
+    res = subprocess.run(
+        [str(CANTOOLS), "decode", "--single-line", "--no-decode-choices", str(DEFAULT_DBC)],
+        stdin=log.open(),
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
+    )
     lines = res.stdout.splitlines()
     assert len(lines) == len(frames)
     rx = FrameCodec()
@@ -220,8 +267,7 @@ def test_overflow_is_counted_never_blocks(tmp_path: Path) -> None:
 
 def test_close_is_idempotent_and_late_frames_counted(tmp_path: Path) -> None:
     codec = FrameCodec()
-    lg = CandumpLogger(tmp_path / "run.log", sidecar={"scenario": {"name": "x"},
-                                                      "dbc": str(DEFAULT_DBC)})
+    lg = CandumpLogger(tmp_path / "run.log", sidecar={"scenario": {"name": "x"}, "dbc": str(DEFAULT_DBC)})
     lg.log(codec.encode("SENSOR_POS", {}, timestamp_s=T0))
     s1 = lg.close()
     s2 = lg.close()
@@ -257,4 +303,5 @@ def test_kick_from_a_loop_keeps_every_frame(tmp_path: Path) -> None:
     assert s.written == len(frames) and s.dropped == 0
     back = list(read_log(tmp_path / "k.log"))
     assert [(m.arbitration_id, bytes(m.data)) for m in back] == [
-        (m.arbitration_id, bytes(m.data)) for m in frames]
+        (m.arbitration_id, bytes(m.data)) for m in frames
+    ]

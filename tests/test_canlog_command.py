@@ -21,9 +21,11 @@ from ehpss_hil.commands import log as log_cmd
 from ehpss_hil.netns import netns_prefix, netns_unavailable_reason
 
 ROOT = Path(__file__).resolve().parents[1]
-RUN_LOG_CMD = ("import sys, argparse; from ehpss_hil.commands import log; "
-               "p = argparse.ArgumentParser(); log.add_arguments(p); "
-               "sys.exit(log.run(p.parse_args(sys.argv[1:])))")
+RUN_LOG_CMD = (
+    "import sys, argparse; from ehpss_hil.commands import log; "
+    "p = argparse.ArgumentParser(); log.add_arguments(p); "
+    "sys.exit(log.run(p.parse_args(sys.argv[1:])))"
+)
 
 
 class _StopAfter(CandumpLogger):
@@ -42,10 +44,13 @@ class _StopAfter(CandumpLogger):
 
 def test_record_on_virtual_bus(tmp_path: Path) -> None:
     codec = FrameCodec()
-    sent = [codec.encode("SENSOR_POS", {"Position": 1e-6 * k}, timestamp_s=1e9 + k * 1e-3)
-            for k in range(500)]
-    with can.Bus(interface="virtual", channel="t-log") as rx, \
-            can.Bus(interface="virtual", channel="t-log") as tx:
+    sent = [
+        codec.encode("SENSOR_POS", {"Position": 1e-6 * k}, timestamp_s=1e9 + k * 1e-3) for k in range(500)
+    ]
+    with (
+        can.Bus(interface="virtual", channel="t-log") as rx,
+        can.Bus(interface="virtual", channel="t-log") as tx,
+    ):
         for m in sent:
             tx.send(m)
         stop = threading.Event()
@@ -59,9 +64,13 @@ def test_record_on_virtual_bus(tmp_path: Path) -> None:
 def test_sigterm_stops_with_counts(tmp_path: Path) -> None:
     out = tmp_path / "bus.log"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-c", RUN_LOG_CMD, "-i", "virtual", "-c", "x",
-                             "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=env)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", RUN_LOG_CMD, "-i", "virtual", "-c", "x", "-o", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     assert proc.stderr is not None
     assert proc.stderr.readline().startswith("logging virtual:x")
     proc.send_signal(signal.SIGTERM)
@@ -76,9 +85,24 @@ def test_sigterm_stops_with_counts(tmp_path: Path) -> None:
 def test_bus_unavailable_exits_3(tmp_path: Path) -> None:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     from ehpss_hil.cli import main  # noqa: F401 - the CLI maps BusUnavailableError to exit 3
-    r = subprocess.run([sys.executable, "-c", RUN_LOG_CMD, "-i", "no_such_interface", "-c", "x",
-                        "-o", str(tmp_path / "x.log")], capture_output=True, text=True, env=env,
-                       timeout=60)
+
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            RUN_LOG_CMD,
+            "-i",
+            "no_such_interface",
+            "-c",
+            "x",
+            "-o",
+            str(tmp_path / "x.log"),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
     assert r.returncode != 0 and "no_such_interface" in r.stderr
 
 
@@ -107,14 +131,18 @@ SENDER = textwrap.dedent("""
 
 
 @pytest.mark.netns
-@pytest.mark.skipif(netns_unavailable_reason() is not None,
-                    reason=str(netns_unavailable_reason()))
+@pytest.mark.skipif(netns_unavailable_reason() is not None, reason=str(netns_unavailable_reason()))
 def test_cross_process_udp_multicast_in_netns(tmp_path: Path) -> None:
     out = tmp_path / "mc.log"
     n = 2000
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    r = subprocess.run([*netns_prefix(), sys.executable, "-c", SENDER, str(out), str(n),
-                        RUN_LOG_CMD], capture_output=True, text=True, env=env, timeout=120)
+    r = subprocess.run(
+        [*netns_prefix(), sys.executable, "-c", SENDER, str(out), str(n), RUN_LOG_CMD],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith("0 stopped on SIGTERM"), r.stdout
     dbc_msg = FrameCodec().message("VALVE_CMD")

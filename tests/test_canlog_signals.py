@@ -48,8 +48,13 @@ def _wait_for_file(path: Path, proc: subprocess.Popen[str]) -> None:
 def test_sigterm_leaves_complete_log(tmp_path: Path) -> None:
     log = tmp_path / "run.log"
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, str(log)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CHILD, str(log)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     assert proc.stdout is not None
     assert proc.stdout.readline().strip() == "ready"
     _wait_for_file(tmp_path / "run.log.5", proc)  # >= 5 rotations: > 20 000 lines written

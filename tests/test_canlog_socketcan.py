@@ -36,8 +36,10 @@ def _af_can() -> bool:
 pytestmark = [
     pytest.mark.socketcan,
     pytest.mark.skipif(not _af_can(), reason="no SocketCAN: run via ../shared/tools/vcan-vm/run"),
-    pytest.mark.skipif(shutil.which("canplayer") is None or shutil.which("candump") is None,
-                       reason="can-utils (candump, canplayer) not installed"),
+    pytest.mark.skipif(
+        shutil.which("canplayer") is None or shutil.which("candump") is None,
+        reason="can-utils (candump, canplayer) not installed",
+    ),
 ]
 
 
@@ -47,12 +49,13 @@ def _frames() -> list[can.Message]:
     for k in range(30):
         t = 1_700_000_000.0 + k * 1e-3
         out.append(codec.encode("SENSOR_POS", {"Position": 1e-5 * k}, timestamp_s=t))
-        out.append(codec.encode("VALVE_CMD", {"CurrentSetpoint": 1e-3 * k, "CycleCount": k},
-                                timestamp_s=t + 2e-4))
-    out.append(can.Message(timestamp=t + 5e-4, arbitration_id=0x1ABCDE0, is_extended_id=True,
-                           data=b"\x01\x02\x03"))
-    out.append(can.Message(timestamp=t + 6e-4, arbitration_id=0x7FF, is_extended_id=False,
-                           data=b""))
+        out.append(
+            codec.encode("VALVE_CMD", {"CurrentSetpoint": 1e-3 * k, "CycleCount": k}, timestamp_s=t + 2e-4)
+        )
+    out.append(
+        can.Message(timestamp=t + 5e-4, arbitration_id=0x1ABCDE0, is_extended_id=True, data=b"\x01\x02\x03")
+    )
+    out.append(can.Message(timestamp=t + 6e-4, arbitration_id=0x7FF, is_extended_id=False, data=b""))
     return out
 
 
@@ -96,10 +99,16 @@ def test_replay_of_a_candump_recording_is_exact(tmp_path: Path) -> None:
 
     src = PROJECT_ROOT / "scenarios" / "extra" / "unseen-frameloss2pct.yaml"
     scenario = tmp_path / "scenario.yaml"
-    text = "".join(line for line in src.read_text().splitlines(keepends=True)
-                   if "t_s: 1.5" not in line and "t_s: 2.5" not in line)
-    scenario.write_text(text.replace("duration_s: 3.5", "duration_s: 0.6")
-                        .replace("frame_loss: 0.02", "frame_loss: 0.0\nsensor_frame_loss: 0.03"))
+    text = "".join(
+        line
+        for line in src.read_text().splitlines(keepends=True)
+        if "t_s: 1.5" not in line and "t_s: 2.5" not in line
+    )
+    scenario.write_text(
+        text.replace("duration_s: 3.5", "duration_s: 0.6").replace(
+            "frame_loss: 0.02", "frame_loss: 0.0\nsensor_frame_loss: 0.03"
+        )
+    )
     run = write_lockstep_log(load_scenario(scenario), "mmac", tmp_path / "run.log")
     rec = tmp_path / "candump.log"
     with open(rec, "w") as out:

@@ -20,8 +20,13 @@ def test_command_table_names_real_modules(name: str) -> None:
 
 
 def _loaded_after(code: str) -> set[str]:
-    out = subprocess.run([sys.executable, "-c", code + "\nimport sys\nprint(' '.join(sys.modules))"],
-                         capture_output=True, text=True, check=True, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-c", code + "\nimport sys\nprint(' '.join(sys.modules))"],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    )
     return set(out.stdout.split())
 
 
@@ -39,20 +44,35 @@ def test_the_controller_command_loads_neither_the_simulator_nor_the_emulator() -
 
 
 def test_blas_threads_limited_before_numpy_unless_the_user_chose() -> None:
-    code = ("import os\nos.environ['OMP_NUM_THREADS'] = '3'\nimport firmware_sim\nimport sys\n"
-            "assert 'numpy' not in sys.modules\n"
-            "print(os.environ['OPENBLAS_NUM_THREADS'], os.environ['OMP_NUM_THREADS'])")
+    code = (
+        "import os\nos.environ['OMP_NUM_THREADS'] = '3'\nimport firmware_sim\nimport sys\n"
+        "assert 'numpy' not in sys.modules\n"
+        "print(os.environ['OPENBLAS_NUM_THREADS'], os.environ['OMP_NUM_THREADS'])"
+    )
     env = {k: v for k, v in __import__("os").environ.items() if not k.endswith("_NUM_THREADS")}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         env=env, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env, timeout=120
+    )
     assert out.stdout.split() == ["1", "3"]
 
 
 def test_control_knows_nothing_of_scenarios_configs_frames_or_files() -> None:
     """The control package imports only downwards: no scenario, config, codec, bus, runtime."""
     mods = _loaded_after("import ehpss_hil.control.registry")
-    leaked = sorted(m for m in mods if m.startswith(("ehpss_hil.scenario", "ehpss_hil.config",
-                                                     "ehpss_hil.codec", "ehpss_hil.bus",
-                                                     "ehpss_hil.runtime", "ehpss_hil.sim",
-                                                     "can", "cantools")))
+    leaked = sorted(
+        m
+        for m in mods
+        if m.startswith(
+            (
+                "ehpss_hil.scenario",
+                "ehpss_hil.config",
+                "ehpss_hil.codec",
+                "ehpss_hil.bus",
+                "ehpss_hil.runtime",
+                "ehpss_hil.sim",
+                "can",
+                "cantools",
+            )
+        )
+    )
     assert not leaked, leaked

@@ -54,8 +54,10 @@ def test_round_trip_at_range_ends(name: str, end: str) -> None:
 def test_round_trip_random_values_within_one_lsb(data: st.DataObject) -> None:
     name = data.draw(st.sampled_from(FRAMES))
     tx, rx = FrameCodec(), FrameCodec()
-    values = {s: data.draw(st.floats(lo, hi)) if lsb != 1 else data.draw(st.integers(int(lo), int(hi)))
-              for s, lo, hi, lsb in _physical_signals(name)}
+    values = {
+        s: data.draw(st.floats(lo, hi)) if lsb != 1 else data.draw(st.integers(int(lo), int(hi)))
+        for s, lo, hi, lsb in _physical_signals(name)
+    }
     dec = rx.classify(tx.encode(name, values))
     assert dec.verdict is Verdict.OK and dec.values is not None
     for s, _lo, _hi, lsb in _physical_signals(name):
@@ -68,8 +70,9 @@ def test_round_trip_random_values_within_one_lsb(data: st.DataObject) -> None:
 def test_multiplexed_index_frame_round_trip() -> None:
     tx, rx = FrameCodec(), FrameCodec()
     for slot in range(16):
-        dec = rx.classify(tx.encode("CTRL_INDEX", {"ModelSlot": slot, f"J_{slot}": 0.125 * slot,
-                                                   f"Theta_{slot}": 0.5}))
+        dec = rx.classify(
+            tx.encode("CTRL_INDEX", {"ModelSlot": slot, f"J_{slot}": 0.125 * slot, f"Theta_{slot}": 0.5})
+        )
         assert dec.verdict is Verdict.OK and dec.values is not None
         assert dec.values["ModelSlot"] == slot and dec.values[f"J_{slot}"] == 0.125 * slot
 
@@ -104,26 +107,51 @@ def test_each_rejection_reason_is_classified_and_counted() -> None:
     good = _sensor(tx, 4)
     bad_crc = bytearray(good.data)
     bad_crc[0] ^= 0x01
-    assert rx.classify(can.Message(arbitration_id=good.arbitration_id, data=bad_crc,
-                                   is_extended_id=False)).verdict is Verdict.CRC_ERROR
+    assert (
+        rx.classify(
+            can.Message(arbitration_id=good.arbitration_id, data=bad_crc, is_extended_id=False)
+        ).verdict
+        is Verdict.CRC_ERROR
+    )
     flipped = bytearray(good.data)
     flipped[5] ^= 0x10  # payload bit flip, CRC unchanged
-    assert rx.classify(can.Message(arbitration_id=good.arbitration_id, data=flipped,
-                                   is_extended_id=False)).verdict is Verdict.CRC_ERROR
-    assert rx.classify(can.Message(arbitration_id=good.arbitration_id, data=good.data[:7],
-                                   is_extended_id=False)).verdict is Verdict.BAD_DLC
-    assert rx.classify(can.Message(arbitration_id=0x7FF, data=b"\0" * 8,
-                                   is_extended_id=False)).verdict is Verdict.UNKNOWN_ID
-    assert rx.classify(can.Message(arbitration_id=good.arbitration_id, data=good.data,
-                                   is_extended_id=True)).verdict is Verdict.UNKNOWN_ID
+    assert (
+        rx.classify(
+            can.Message(arbitration_id=good.arbitration_id, data=flipped, is_extended_id=False)
+        ).verdict
+        is Verdict.CRC_ERROR
+    )
+    assert (
+        rx.classify(
+            can.Message(arbitration_id=good.arbitration_id, data=good.data[:7], is_extended_id=False)
+        ).verdict
+        is Verdict.BAD_DLC
+    )
+    assert (
+        rx.classify(can.Message(arbitration_id=0x7FF, data=b"\0" * 8, is_extended_id=False)).verdict
+        is Verdict.UNKNOWN_ID
+    )
+    assert (
+        rx.classify(
+            can.Message(arbitration_id=good.arbitration_id, data=good.data, is_extended_id=True)
+        ).verdict
+        is Verdict.UNKNOWN_ID
+    )
     # valid CRC and counter but a position beyond ±0.5 m: raw 0x7FFFFF·1e-7 = 0.839 m
-    raw = bytearray(CODEC.message("SENSOR_POS").encode(
-        {"CRC": 0, "Counter": 0, "Position": 0.8, "Spool": 0.0}, strict=False))
+    raw = bytearray(
+        CODEC.message("SENSOR_POS").encode(
+            {"CRC": 0, "Counter": 0, "Position": 0.8, "Spool": 0.0}, strict=False
+        )
+    )
     ids = CODEC.data_ids("SENSOR_POS")
     assert ids is not None
     implausible = protect(raw, 5, ids)
-    assert rx.classify(can.Message(arbitration_id=good.arbitration_id, data=implausible,
-                                   is_extended_id=False)).verdict is Verdict.OUT_OF_RANGE
+    assert (
+        rx.classify(
+            can.Message(arbitration_id=good.arbitration_id, data=implausible, is_extended_id=False)
+        ).verdict
+        is Verdict.OUT_OF_RANGE
+    )
     c = rx.counts
     assert (c[Verdict.OK], c[Verdict.REPEATED], c[Verdict.OK_SOME_LOST]) == (2, 1, 1)
     assert (c[Verdict.WRONG_SEQUENCE], c[Verdict.CRC_ERROR], c[Verdict.BAD_DLC]) == (1, 2, 1)
@@ -134,8 +162,7 @@ def test_each_rejection_reason_is_classified_and_counted() -> None:
 def test_counter_check_never_accepts_a_reordered_frame_twice() -> None:
     cc = CounterCheck(max_delta=3)
     seq = [cc.check(c) for c in (5, 6, 5, 6, 7)]
-    assert seq == [E2EState.OK, E2EState.OK, E2EState.WRONG_SEQUENCE, E2EState.REPEATED,
-                   E2EState.OK]
+    assert seq == [E2EState.OK, E2EState.OK, E2EState.WRONG_SEQUENCE, E2EState.REPEATED, E2EState.OK]
     # after a long gap, two frames in sequence resynchronize
     assert cc.check(14) is E2EState.WRONG_SEQUENCE
     assert cc.check(15) is E2EState.OK_SOME_LOST
@@ -144,6 +171,7 @@ def test_counter_check_never_accepts_a_reordered_frame_twice() -> None:
 
 def test_crc_is_cantools_profile2_with_per_counter_data_id() -> None:
     from cantools.autosar.end_to_end import compute_profile2_crc
+
     tx = FrameCodec()
     ids = tx.data_ids("VALVE_CMD")
     assert ids is not None and len(set(ids)) == 16
@@ -172,8 +200,12 @@ def test_id_base_shifts_application_frames_not_heartbeats() -> None:
 
 
 def test_cantools_dump_reads_the_dbc() -> None:
-    out = subprocess.run([sys.executable, "-m", "cantools", "dump", str(DEFAULT_DBC)],
-                         capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        [sys.executable, "-m", "cantools", "dump", str(DEFAULT_DBC)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     for name in CODEC.names:
         assert f"Name:           {name}" in out
 
@@ -182,8 +214,7 @@ def test_counter_steps_counts_samples_across_the_wrap() -> None:
     """Samples between two E2E counters (what the controller's ``Measurement.samples`` is):
     1 for the next frame, the wrap from 15 to 0 included, 16 for a whole wrap; consistent with
     the receiver's sequence check (delta 1 → OK, 2…3 → OK_SOME_LOST)."""
-    assert [counter_steps(c, p) for c, p in ((3, 2), (0, 15), (2, 15), (5, 5), (1, 13))] == \
-        [1, 1, 3, 16, 4]
+    assert [counter_steps(c, p) for c, p in ((3, 2), (0, 15), (2, 15), (5, 5), (1, 13))] == [1, 1, 3, 16, 4]
     chk = CounterCheck(3)
     chk.check(14)
     assert chk.check(1) is E2EState.OK_SOME_LOST and counter_steps(1, 14) == 3

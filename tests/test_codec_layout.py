@@ -56,8 +56,11 @@ def _selections(name: str) -> list[dict[str, int]]:
 
 def _signals(name: str, sel: dict[str, int]) -> list[Any]:
     msg = CODEC.message(name)
-    return [s for s in msg.signals
-            if s.multiplexer_ids is None or any(i in s.multiplexer_ids for i in sel.values())]
+    return [
+        s
+        for s in msg.signals
+        if s.multiplexer_ids is None or any(i in s.multiplexer_ids for i in sel.values())
+    ]
 
 
 def _physical(sig: Any, rng: random.Random, mode: str) -> Any:

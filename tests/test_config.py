@@ -54,20 +54,24 @@ def test_case_events_persist_until_changed(tmp_path: Path) -> None:
     assert (tl[3][1].k_loe, tl[3][1].k_dft) == (0.2, 0.5)
 
 
-@pytest.mark.parametrize("mutation,key_path,reason", [
-    (("k_loe: 0.2", "k_loe: 1.7"), "events[2].k_loe", "<= 1.5"),
-    (("k_loe: 0.2", "k_lo: 0.2"), "events[2].k_lo", "unknown key"),
-    (("k_loe: 0.2", "k_loe: fast"), "events[2].k_loe", "expected a number"),
-    (("duration_s: 2.0", "duration_s: -1"), "duration_s", "> 0.0"),
-    (("name: t\n", ""), "name", "missing required key"),
-    (("kind: sine", "kind: sawtooth"), "reference.kind", "one of"),
-    (("omega_rad_s: 5.0", "omega_rad_s: .nan"), "reference.omega_rad_s", "finite"),
-    (("{t_s: 1.0, k_dft: 0.5}", "{t_s: 0.2, k_dft: 0.5}"), "events[1].t_s", "time order"),
-    (("{t_s: 1.0, k_dft: 0.5}", "{t_s: 1.0}"), "events[1]", "at least one"),
-    (("events:", "frame_loss: [1]\nevents:"), "frame_loss", "expected a number"),
-])
-def test_bad_scenario_names_key_path(tmp_path: Path, mutation: tuple[str, str], key_path: str,
-                                     reason: str) -> None:
+@pytest.mark.parametrize(
+    "mutation,key_path,reason",
+    [
+        (("k_loe: 0.2", "k_loe: 1.7"), "events[2].k_loe", "<= 1.5"),
+        (("k_loe: 0.2", "k_lo: 0.2"), "events[2].k_lo", "unknown key"),
+        (("k_loe: 0.2", "k_loe: fast"), "events[2].k_loe", "expected a number"),
+        (("duration_s: 2.0", "duration_s: -1"), "duration_s", "> 0.0"),
+        (("name: t\n", ""), "name", "missing required key"),
+        (("kind: sine", "kind: sawtooth"), "reference.kind", "one of"),
+        (("omega_rad_s: 5.0", "omega_rad_s: .nan"), "reference.omega_rad_s", "finite"),
+        (("{t_s: 1.0, k_dft: 0.5}", "{t_s: 0.2, k_dft: 0.5}"), "events[1].t_s", "time order"),
+        (("{t_s: 1.0, k_dft: 0.5}", "{t_s: 1.0}"), "events[1]", "at least one"),
+        (("events:", "frame_loss: [1]\nevents:"), "frame_loss", "expected a number"),
+    ],
+)
+def test_bad_scenario_names_key_path(
+    tmp_path: Path, mutation: tuple[str, str], key_path: str, reason: str
+) -> None:
     old, new = mutation
     assert old in GOOD
     p = _write(tmp_path, GOOD.replace(old, new, 1))
@@ -88,19 +92,22 @@ def test_yaml_syntax_error_and_missing_file(tmp_path: Path) -> None:
         load_scenario(_write(tmp_path, "- 1\n- 2\n"))
 
 
-@pytest.mark.parametrize("text,key_path,reason", [
-    ("bus: {interface: udp_multicast, channel: 224.1.2.3}", "bus.channel", "239.0.0.0/8"),
-    ("bus: {hop_limit: 1}", "bus.hop_limit", "<= 0"),
-    ("bus: {interface: pcan}", "bus.interface", "one of"),
-    ("bus: {interface: socketcan, channel: ''}", "bus.channel", "interface"),
-    ("mode: oracle", "mode", "benchmarks only"),
-    ("watchdog: {timeout_cycles: 0}", "watchdog.timeout_cycles", ">= 1"),
-    ("watchdog: {failsafe: drift}", "watchdog.failsafe", "one of"),
-    ("ids: {controller_node: 2, emulator_node: 2}", "ids.emulator_node", "differ"),
-    ("tuning: {hysteresis: 2}", "tuning.hysteresis", "<= 1.0"),
-    ("rate_hz: true", "rate_hz", "expected a number"),
-    ("colour: blue", "colour", "unknown key"),
-])
+@pytest.mark.parametrize(
+    "text,key_path,reason",
+    [
+        ("bus: {interface: udp_multicast, channel: 224.1.2.3}", "bus.channel", "239.0.0.0/8"),
+        ("bus: {hop_limit: 1}", "bus.hop_limit", "<= 0"),
+        ("bus: {interface: pcan}", "bus.interface", "one of"),
+        ("bus: {interface: socketcan, channel: ''}", "bus.channel", "interface"),
+        ("mode: oracle", "mode", "benchmarks only"),
+        ("watchdog: {timeout_cycles: 0}", "watchdog.timeout_cycles", ">= 1"),
+        ("watchdog: {failsafe: drift}", "watchdog.failsafe", "one of"),
+        ("ids: {controller_node: 2, emulator_node: 2}", "ids.emulator_node", "differ"),
+        ("tuning: {hysteresis: 2}", "tuning.hysteresis", "<= 1.0"),
+        ("rate_hz: true", "rate_hz", "expected a number"),
+        ("colour: blue", "colour", "unknown key"),
+    ],
+)
 def test_bad_controller_config(tmp_path: Path, text: str, key_path: str, reason: str) -> None:
     with pytest.raises(ConfigError) as exc:
         load_controller_config(_write(tmp_path, text, "controller.yaml"))
@@ -115,13 +122,23 @@ def test_bad_params(tmp_path: Path) -> None:
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "ehpss_hil.cli", *args], capture_output=True,
-                          text=True, cwd=PROJECT_ROOT, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "ehpss_hil.cli", *args],
+        capture_output=True,
+        text=True,
+        cwd=PROJECT_ROOT,
+        check=False,
+    )
 
 
 def test_cli_check_config_ok_and_exit_2_on_broken_scenario(tmp_path: Path) -> None:
-    ok = _cli("check-config", *(str(p) for p in SCENARIOS), "configs/controller.yaml",
-              "configs/emulator.yaml", "configs/params.yaml")
+    ok = _cli(
+        "check-config",
+        *(str(p) for p in SCENARIOS),
+        "configs/controller.yaml",
+        "configs/emulator.yaml",
+        "configs/params.yaml",
+    )
     assert ok.returncode == 0, ok.stderr
     assert len(ok.stdout.strip().splitlines()) == len(SCENARIOS) + 3
     bad = _write(tmp_path, GOOD.replace("k_loe: 0.2", "k_loe: 7"))

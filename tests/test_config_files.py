@@ -38,16 +38,17 @@ HOSTILE: dict[str, bytes] = {
     "reader.yaml": b"name: x\x00\n",
     "bigint.yaml": b"name: x\nduration_s: " + b"9" * 5000 + b"\n",
     "date.yaml": b"name: 2024-13-45\n",
-    "events.yaml": b"name: x\nduration_s: 1\nevents:\n" + b"  - {t_s: 0.5, k_loe: 0.5}\n"
-    * (MAX_YAML_BYTES // 25),
+    "events.yaml": b"name: x\nduration_s: 1\nevents:\n"
+    + b"  - {t_s: 0.5, k_loe: 0.5}\n" * (MAX_YAML_BYTES // 25),
 }
 
 
 def _run_capped(argv: list[str]) -> tuple[int, str, float, int]:
     """Run a command; returns exit code, stderr, wall time (s) and peak RSS (bytes)."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            cwd=PROJECT_ROOT)
+    proc = subprocess.Popen(
+        argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=PROJECT_ROOT
+    )
     assert proc.stderr is not None
     err = proc.stderr.read()
     _, status, usage = os.wait4(proc.pid, 0)
@@ -63,8 +64,7 @@ def test_hostile_files_are_one_line_exit_2(tmp_path: Path) -> None:
         paths.append(str(tmp_path / name))
     os.mkfifo(tmp_path / "fifo.yaml")
     paths += [str(tmp_path / "fifo.yaml"), "/dev/zero", str(tmp_path)]
-    rc, err, wall, rss = _run_capped([sys.executable, "-m", "ehpss_hil.cli", "check-config",
-                                      *paths])
+    rc, err, wall, rss = _run_capped([sys.executable, "-m", "ehpss_hil.cli", "check-config", *paths])
     lines = err.strip().splitlines()
     assert rc == 2
     assert len(lines) == len(paths), err
@@ -84,27 +84,29 @@ def _write(tmp: Path, name: str, text: str) -> Path:
     return p
 
 
-@pytest.mark.parametrize("text,key_path", [
-    ("tuning: {epsilon0: 1.0e300}", "tuning.epsilon0"),
-    ("tuning: {guard_epsilon: 1.0e300}", "tuning.guard_epsilon"),
-    ("tuning: {position_guard_epsilon: 1.0e300}", "tuning.position_guard_epsilon"),
-    ("tuning: {nlms_c_fraction: 1.0e300}", "tuning.nlms_c_fraction"),
-    ("tuning: {dwell_s: 1.7e308}", "tuning.dwell_s"),
-    ("tuning: {warmup_s: 1.7e308}", "tuning.warmup_s"),
-    ("tuning: {k_loe_limits: [0.5]}", "tuning.k_loe_limits"),
-    ("tuning: {k_loe_limits: [1.0, 0.5]}", "tuning.k_loe_limits"),
-    ("tuning: {fixed_k_dft: [1, 0.5, 0, 0.2]}", "tuning.fixed_k_dft"),
-    ("tuning: {nlms_gain_per_ms: 1.5}", "tuning.nlms_gain_per_ms"),
-    ("stats_interval_s: 1.7e308", "stats_interval_s"),
-    ("reference: {amplitude_m: 1.0e-300}", "reference.amplitude_m"),
-    ("reference: {kind: ramp, rate_m_s: -1.0e-300}", "reference.rate_m_s"),
-    ("ids: {id_base: 0x6F0}", "ids.id_base"),
-    ("rt: {sensor_age_us: 600}", "rt.sensor_age_us"),
-    ("rate_hz: 1.0e400", "rate_hz"),
-    ("rate_hz: 99999999999999999999999999999999999999999999999999999999", "rate_hz"),
-])
-def test_controller_values_the_daemon_cannot_run(tmp_path: Path, text: str,
-                                                 key_path: str) -> None:
+@pytest.mark.parametrize(
+    "text,key_path",
+    [
+        ("tuning: {epsilon0: 1.0e300}", "tuning.epsilon0"),
+        ("tuning: {guard_epsilon: 1.0e300}", "tuning.guard_epsilon"),
+        ("tuning: {position_guard_epsilon: 1.0e300}", "tuning.position_guard_epsilon"),
+        ("tuning: {nlms_c_fraction: 1.0e300}", "tuning.nlms_c_fraction"),
+        ("tuning: {dwell_s: 1.7e308}", "tuning.dwell_s"),
+        ("tuning: {warmup_s: 1.7e308}", "tuning.warmup_s"),
+        ("tuning: {k_loe_limits: [0.5]}", "tuning.k_loe_limits"),
+        ("tuning: {k_loe_limits: [1.0, 0.5]}", "tuning.k_loe_limits"),
+        ("tuning: {fixed_k_dft: [1, 0.5, 0, 0.2]}", "tuning.fixed_k_dft"),
+        ("tuning: {nlms_gain_per_ms: 1.5}", "tuning.nlms_gain_per_ms"),
+        ("stats_interval_s: 1.7e308", "stats_interval_s"),
+        ("reference: {amplitude_m: 1.0e-300}", "reference.amplitude_m"),
+        ("reference: {kind: ramp, rate_m_s: -1.0e-300}", "reference.rate_m_s"),
+        ("ids: {id_base: 0x6F0}", "ids.id_base"),
+        ("rt: {sensor_age_us: 600}", "rt.sensor_age_us"),
+        ("rate_hz: 1.0e400", "rate_hz"),
+        ("rate_hz: 99999999999999999999999999999999999999999999999999999999", "rate_hz"),
+    ],
+)
+def test_controller_values_the_daemon_cannot_run(tmp_path: Path, text: str, key_path: str) -> None:
     p = _write(tmp_path, "controller.yaml", text + "\n")
     with pytest.raises(ConfigError) as exc:
         summarize(p)
@@ -112,11 +114,14 @@ def test_controller_values_the_daemon_cannot_run(tmp_path: Path, text: str,
     assert str(exc.value).startswith(f"{p}: {key_path}: ")
 
 
-@pytest.mark.parametrize("text,key_path", [
-    ("plant: {flow_gain_1_s3: 1.0e300}", "plant.flow_gain_1_s3"),
-    ("plant: {load_mass_kg: 1.0e-300}", "plant.load_mass_kg"),
-    ("controller: {k_p: 1000}", "controller"),
-])
+@pytest.mark.parametrize(
+    "text,key_path",
+    [
+        ("plant: {flow_gain_1_s3: 1.0e300}", "plant.flow_gain_1_s3"),
+        ("plant: {load_mass_kg: 1.0e-300}", "plant.load_mass_kg"),
+        ("controller: {k_p: 1000}", "controller"),
+    ],
+)
 def test_params_the_plant_cannot_run(tmp_path: Path, text: str, key_path: str) -> None:
     with pytest.raises(ConfigError) as exc:
         summarize(_write(tmp_path, "params.yaml", text + "\n"))
@@ -135,13 +140,12 @@ def test_scenario_duration_bounded_by_samples(tmp_path: Path) -> None:
 
 def _file_scenario(tmp: Path, csv: str, path: str = "traj.csv") -> Path:
     (tmp / "traj.csv").write_text(csv)
-    return _write(tmp, "s.yaml", "name: f\nduration_s: 0.5\n"
-                  f"reference: {{kind: file, path: {path}}}\n")
+    return _write(tmp, "s.yaml", f"name: f\nduration_s: 0.5\nreference: {{kind: file, path: {path}}}\n")
 
 
-def test_reference_file_loaded_once_relative_to_the_scenario(tmp_path: Path,
-                                                             monkeypatch: pytest.MonkeyPatch
-                                                             ) -> None:
+def test_reference_file_loaded_once_relative_to_the_scenario(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     sub = tmp_path / "sc"
     sub.mkdir()
     p = _file_scenario(sub, "0,0\n0.1,0.001\n1,0.001\n")
@@ -155,14 +159,17 @@ def test_reference_file_loaded_once_relative_to_the_scenario(tmp_path: Path,
     assert [blocks.at(k) for k in (0, 50, 150, 499)] == pytest.approx([0, 5e-4, 1e-3, 1e-3])
 
 
-@pytest.mark.parametrize("csv,reason", [
-    ("0\n1\n", "two columns"),
-    ("0,0\n0,0.001\n", "time must increase"),
-    ("0,0\n1,nan\n", "finite"),
-    ("0,0\n1,2\n", "above"),
-    ("", "no rows"),
-    ("t,x\n0,0\n", "not a CSV of numbers"),
-])
+@pytest.mark.parametrize(
+    "csv,reason",
+    [
+        ("0\n1\n", "two columns"),
+        ("0,0\n0,0.001\n", "time must increase"),
+        ("0,0\n1,nan\n", "finite"),
+        ("0,0\n1,2\n", "above"),
+        ("", "no rows"),
+        ("t,x\n0,0\n", "not a CSV of numbers"),
+    ],
+)
 def test_bad_reference_file(tmp_path: Path, csv: str, reason: str) -> None:
     p = _file_scenario(tmp_path, csv)
     with pytest.raises(ConfigError, match=reason) as exc:

@@ -55,19 +55,33 @@ CYCLES = 30
 #: keys naming files or the bus: kept at their (shipped) defaults, other tests cover them
 _SKIP = {"params", "dbc", "scenario", "log", "path", "channel", "interface", "base_dir"}
 
-_FLOAT_EXTREMES = [math.nan, math.inf, -math.inf, 1e300, -1e300, 1e-300, -1e-300, 1.7e308,
-                   -1.0, 0.0, 1e-9, 1e9]
+_FLOAT_EXTREMES = [
+    math.nan,
+    math.inf,
+    -math.inf,
+    1e300,
+    -1e300,
+    1e-300,
+    -1e-300,
+    1.7e308,
+    -1.0,
+    0.0,
+    1e-9,
+    1e9,
+]
 _JUNK = st.sampled_from(["x", "", [1], [], {"a": 1}, None, True, 2**70, -(2**63)])
 
 
 #: in-range values drawn nearer the shipped files' (a duration of 1e5 s is in range but over
 #: the sample cap at most rates; events after the end are refused): more documents are accepted
-_NEAR = {("Scenario", "duration_s"): st.floats(0.0005, 5.0),
-         ("Event", "t_s"): st.floats(0.0, 5.0)}
+_NEAR = {("Scenario", "duration_s"): st.floats(0.0005, 5.0), ("Event", "t_s"): st.floats(0.0, 5.0)}
 
-_EXTREME = st.one_of(st.sampled_from(_FLOAT_EXTREMES),
-                     st.sampled_from([-1, 0, 2**31, 2**64, 10**400]), _JUNK,
-                     st.lists(st.sampled_from(_FLOAT_EXTREMES), max_size=1))
+_EXTREME = st.one_of(
+    st.sampled_from(_FLOAT_EXTREMES),
+    st.sampled_from([-1, 0, 2**31, 2**64, 10**400]),
+    _JUNK,
+    st.lists(st.sampled_from(_FLOAT_EXTREMES), max_size=1),
+)
 
 
 def _float(meta: dict[str, Any]) -> st.SearchStrategy[float]:
@@ -75,8 +89,9 @@ def _float(meta: dict[str, Any]) -> st.SearchStrategy[float]:
     lo_f = -1e6 if lo is None else float(lo)
     hi_f = lo_f + 1e6 if hi is None else float(hi)
     ends = [hi_f] if meta.get("lo_open") else [lo_f, hi_f]
-    return st.one_of(st.floats(lo_f, hi_f, allow_nan=False, exclude_min=bool(meta.get("lo_open"))),
-                     st.sampled_from(ends))
+    return st.one_of(
+        st.floats(lo_f, hi_f, allow_nan=False, exclude_min=bool(meta.get("lo_open"))), st.sampled_from(ends)
+    )
 
 
 def _int(meta: dict[str, Any]) -> st.SearchStrategy[int]:
@@ -129,8 +144,7 @@ def documents(cls: type) -> st.SearchStrategy[dict[str, Any]]:
 def _leaves(doc: Any, prefix: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
     """Paths of every value in a document (mappings and lists included)."""
     out: list[tuple[Any, ...]] = [prefix] if prefix else []
-    items = doc.items() if isinstance(doc, dict) else enumerate(doc) if isinstance(doc, list) \
-        else ()
+    items = doc.items() if isinstance(doc, dict) else enumerate(doc) if isinstance(doc, list) else ()
     for k, v in items:
         out += _leaves(v, (*prefix, k))
     return out
@@ -163,8 +177,9 @@ def _ordered_events(doc: dict[str, Any]) -> dict[str, Any]:
     """Most generated event lists are out of time order; sort the numeric ones so that more
     scenarios reach the simulator."""
     ev = doc.get("events")
-    if isinstance(ev, list) and all(isinstance(e, dict) and isinstance(e.get("t_s"), float)
-                                    and math.isfinite(e["t_s"]) for e in ev):
+    if isinstance(ev, list) and all(
+        isinstance(e, dict) and isinstance(e.get("t_s"), float) and math.isfinite(e["t_s"]) for e in ev
+    ):
         doc = {**doc, "events": sorted(ev, key=lambda e: e["t_s"])}
     return doc
 
@@ -226,9 +241,16 @@ def _steps(cfg: ControllerConfig, params: Params) -> None:
         assert math.isfinite(cmd.current_a)
 
 
-_SETTINGS = settings(max_examples=150, deadline=None, derandomize=True,
-                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
-                                            HealthCheck.function_scoped_fixture])
+_SETTINGS = settings(
+    max_examples=150,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[
+        HealthCheck.too_slow,
+        HealthCheck.data_too_large,
+        HealthCheck.function_scoped_fixture,
+    ],
+)
 
 
 @_SETTINGS
@@ -274,6 +296,7 @@ def test_params_documents(tmp_path: Path, doc: dict[str, Any]) -> None:
 @pytest.mark.parametrize("cls", [ControllerConfig, EmulatorConfig, Params, Scenario])
 def test_every_number_has_finite_bounds(cls: type) -> None:
     """The schema bounds every numeric field on both sides (what the property relies on)."""
+
     def walk(c: type, prefix: str) -> list[str]:
         out: list[str] = []
         hints = get_type_hints(c)
@@ -283,8 +306,7 @@ def test_every_number_has_finite_bounds(cls: type) -> None:
             inner = get_args(args[0])[0] if get_origin(args[0]) is tuple else args[0]
             if dataclasses.is_dataclass(inner):
                 out += walk(typing.cast(type, inner), f"{prefix}{f.name}.")
-            elif inner in (int, float) and (f.metadata.get("min") is None
-                                            or f.metadata.get("max") is None):
+            elif inner in (int, float) and (f.metadata.get("min") is None or f.metadata.get("max") is None):
                 out.append(prefix + f.name)
         return out
 

@@ -55,7 +55,7 @@ def test_switches_are_bumpless(name: str) -> None:
     dz, du = np.abs(np.diff(d["z"])), np.abs(np.diff(d["u"]))
     normal = np.ones(len(dz), dtype=bool)
     for k in sw:
-        normal[max(k - 3, 0):k + 3] = False
+        normal[max(k - 3, 0) : k + 3] = False
     for k in sw:
         # no jump in z, nor in the PI output, beyond the largest ordinary one-sample change
         assert dz[k - 1] <= dz[normal].max()

@@ -83,8 +83,9 @@ def test_flow_gain_monitor_takes_its_constants_from_the_tuning() -> None:
 
     from ehpss_hil.control.tuning import ControlTuning
 
-    tun = replace(ControlTuning(), flow_gain_window_s=0.2, k_dft_limits=(0.0, 1.3),
-                  flow_gain_min_deviation=0.07)
+    tun = replace(
+        ControlTuning(), flow_gain_window_s=0.2, k_dft_limits=(0.0, 1.3), flow_gain_min_deviation=0.07
+    )
     mon = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3, tuning=tun)
     assert mon._d == math.exp(-TS / 0.2)
     assert mon.min_deviation == 0.07

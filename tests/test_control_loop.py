@@ -95,7 +95,7 @@ def test_model_position_integrates_spool() -> None:
 def test_fault_free_loop_tracks_reference_model() -> None:
     """PI + plant (one-sample delay, quantized frames, noise) follows y_m to ≤ 3 µm RMS."""
     r = run_scenario(replace(FAULT_FREE, duration_s=2.0), "nrc", PARAMS)
-    assert np.sqrt(np.mean(r.error_m ** 2)) <= 3e-6
+    assert np.sqrt(np.mean(r.error_m**2)) <= 3e-6
     quiet = run_scenario(replace(FAULT_FREE, duration_s=2.0, noise=Noise()), "nrc", PARAMS)
     e = quiet.error_m[200:]  # after the start-up transient of the sine
     assert np.max(np.abs(e)) <= 0.5e-6
@@ -153,9 +153,9 @@ def test_mmac_reanchors_x_hat_after_a_gap_and_only_then() -> None:
     assert c.pos_sup.active == 0 and len(j_before) == len(c.pos_bank.j)
 
 
-
-def _x_hat_per_sample(res: SimResult, slips: bool, samples_known: bool,
-                      observe: bool = False) -> dict[int, float]:
+def _x_hat_per_sample(
+    res: SimResult, slips: bool, samples_known: bool, observe: bool = False
+) -> dict[int, float]:
     """Feed a recorded fault-free run's sensor samples to a fresh mmac controller; with
     ``slips``, from 0.15 s on, every 50 samples in turn the way a realtime loop slips against
     the sensor's clock: a frame that came too late (a cycle without data, then that sample:
@@ -266,9 +266,9 @@ def test_mmac_through_sensor_blackouts_at_fault_onsets() -> None:
     stale k̂_LOE): θ̂_D 2–3 % off for seconds and 7.1 µm RMS."""
     sc = load_scenario(PROJECT_ROOT / "scenarios" / "extra" / "unseen-blackouts.yaml")
     res = run_scenario(sc, "mmac")
-    assert float(np.sqrt(np.mean(res.error_m ** 2))) < 2.5e-6
+    assert float(np.sqrt(np.mean(res.error_m**2))) < 2.5e-6
     for t0, t1 in ((2.1, 2.45), (2.6, 3.0)):  # after the blackouts at the LOE onset and later
-        kd = res.k_dft_hat[round(t0 / TS):round(t1 / TS)]
+        kd = res.k_dft_hat[round(t0 / TS) : round(t1 / TS)]
         assert float(np.max(np.abs(kd - 0.8))) < 0.006
 
 

@@ -28,13 +28,23 @@ UM = 1e-6
 @cache
 def _run(name: str, mode: str) -> tuple[SimResult, RunMetrics]:
     sub = "extra" if name.startswith("kq") else "envelope"
-    res = run_scenario(load_scenario(PROJECT_ROOT / "scenarios" / sub / f"{name}.yaml"), mode,
-                       PARAMS)
+    res = run_scenario(load_scenario(PROJECT_ROOT / "scenarios" / sub / f"{name}.yaml"), mode, PARAMS)
     return res, compute_metrics(res)
 
 
-@pytest.mark.parametrize("name", ["step-1mm", "step-0p3mm", "sine-1mm-40", "square-loe-hold",
-                                  "hold-drift", "climit-loe", "poweron-loe-drift", "kq-loss"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "step-1mm",
+        "step-0p3mm",
+        "sine-1mm-40",
+        "square-loe-hold",
+        "hold-drift",
+        "climit-loe",
+        "poweron-loe-drift",
+        "kq-loss",
+    ],
+)
 def test_mmac_does_no_harm(name: str) -> None:
     mm, nrc = _run(name, "mmac")[1], _run(name, "nrc")[1]
     assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
@@ -51,8 +61,7 @@ def test_fault_free_motion_with_the_spool_on_its_stop_is_not_a_fault(name: str) 
     assert abs(mm.rms_error_m - nrc.rms_error_m) <= 1 * UM
 
 
-@pytest.mark.parametrize("name", ["poweron-loe", "poweron-drift", "poweron-loe-drift",
-                                  "warmup-sensor-fail"])
+@pytest.mark.parametrize("name", ["poweron-loe", "poweron-drift", "poweron-loe-drift", "warmup-sensor-fail"])
 def test_faults_present_at_power_on_are_identified(name: str) -> None:
     mm, orc = _run(name, "mmac")[1], _run(name, "oracle")[1]
     assert mm.rms_error_m <= orc.rms_error_m + 5 * UM
@@ -79,8 +88,9 @@ def test_monitor_stays_quiet_where_the_models_explain_the_motion(name: str) -> N
     assert not res.fallback.any()
 
 
-def _feed(mon: HarmMonitor, n: int, used: float, prod: float, fresh: bool = True,
-          at_limit: bool = False) -> list[bool]:
+def _feed(
+    mon: HarmMonitor, n: int, used: float, prod: float, fresh: bool = True, at_limit: bool = False
+) -> list[bool]:
     return [mon.update(used, prod, fresh, at_limit) for _ in range(n)]
 
 
@@ -123,14 +133,20 @@ def test_setpoint_override_step_beyond_the_configured_reference(amplitude_m: flo
     from ehpss_hil.sim import lockstep
 
     sc = load_scenario(PROJECT_ROOT / "scenarios" / "envelope" / "step-1mm.yaml")
-    sc = replace(sc, reference=Reference(kind="step", amplitude_m=amplitude_m, start_s=0.2),
-                 duration_s=2.0)
+    sc = replace(sc, reference=Reference(kind="step", amplitude_m=amplitude_m, start_s=0.2), duration_s=2.0)
     final = {}
     for mode in ("nrc", "mmac"):
         ctrl = make_controller(mode, PARAMS, sc.sample_time_s, None, Reference())
         rows: list[tuple] = []
-        lockstep._loop(PlantEmulation(PARAMS, sc), ctrl, lockstep._transport("quantize"),
-                       sc.reference_samples().tolist(), 1, None, rows)
+        lockstep._loop(
+            PlantEmulation(PARAMS, sc),
+            ctrl,
+            lockstep._transport("quantize"),
+            sc.reference_samples().tolist(),
+            1,
+            None,
+            rows,
+        )
         x = np.array([r[0] for r in rows])
         assert np.abs(x).max() <= 1.02 * amplitude_m
         final[mode] = x[-1]
@@ -151,9 +167,12 @@ def test_leaving_the_fail_safe_mid_motion_with_a_drift_present() -> None:
     from ehpss_hil.scenario import Event, Reference
     from ehpss_hil.sim import lockstep
 
-    sc = replace(load_scenario(PROJECT_ROOT / "scenarios" / "fault-free.yaml"), duration_s=3.0,
-                 reference=Reference(kind="sine", amplitude_m=1e-3, omega_rad_s=5.0),
-                 events=(Event(t_s=0.3, k_dft=0.5),))
+    sc = replace(
+        load_scenario(PROJECT_ROOT / "scenarios" / "fault-free.yaml"),
+        duration_s=3.0,
+        reference=Reference(kind="sine", amplitude_m=1e-3, omega_rad_s=5.0),
+        events=(Event(t_s=0.3, k_dft=0.5),),
+    )
     off, back = 1000, 1500  # fail-safe (0 A, disabled) over [1.0, 1.5) s, then a reset
 
     class FailSafe:
@@ -179,11 +198,18 @@ def test_leaving_the_fail_safe_mid_motion_with_a_drift_present() -> None:
     for mode in ("nrc", "mmac"):
         ctrl = FailSafe(mode)
         rows: list[tuple] = []
-        lockstep._loop(PlantEmulation(PARAMS, sc), ctrl, lockstep._transport("quantize"),  # type: ignore[arg-type]
-                       sc.reference_samples().tolist(), 1, None, rows)
+        lockstep._loop(
+            PlantEmulation(PARAMS, sc),
+            ctrl,  # type: ignore[arg-type]  # a wrapper with LoopBase's interface
+            lockstep._transport("quantize"),
+            sc.reference_samples().tolist(),
+            1,
+            None,
+            rows,
+        )
         x = np.array([r[0] for r in rows])
-        e = (x - sc.reference_samples())[back + 500:]
-        err[mode] = float(np.sqrt(np.mean(e ** 2)))
+        e = (x - sc.reference_samples())[back + 500 :]
+        err[mode] = float(np.sqrt(np.mean(e**2)))
         if mode == "mmac":
             assert ctrl.inner.k_dft_hat == pytest.approx(0.5, abs=0.01)
     assert err["mmac"] < 0.05 * err["nrc"]

@@ -22,8 +22,9 @@ def _run(missing: set[int], n: int = 60) -> tuple[list[float], list[float], list
     """Per sample k: the commanded spool v and x̂ after the clock took sample k (or a dead cycle
     when k is missing), with commands computed as a sine and applied one sample later."""
     plant = PlantStepper(PARAMS, TS)
-    clock = SampleClock(ValvePredictor(PARAMS.plant, TS),
-                        ModelPosition(PARAMS.plant, TS, anchor_rate_1_s=0.0))
+    clock = SampleClock(
+        ValvePredictor(PARAMS.plant, TS), ModelPosition(PARAMS.plant, TS, anchor_rate_1_s=0.0)
+    )
     cmd = [2e-4 * math.sin(0.2 * k) for k in range(n)]
     applied_prev, last_seen = 0.0, -1
     vs, xs, gaps = [], [], []
@@ -32,8 +33,12 @@ def _run(missing: set[int], n: int = 60) -> tuple[list[float], list[float], list
             clock.dead_cycle(1.0)
             gaps.append(False)
         else:
-            m = Measurement(position_m=plant.position_m, spool_m=plant.spool_actual_m,
-                            coil_current_a=applied_prev, samples=k - last_seen if k else 0)
+            m = Measurement(
+                position_m=plant.position_m,
+                spool_m=plant.spool_actual_m,
+                coil_current_a=applied_prev,
+                samples=k - last_seen if k else 0,
+            )
             adv = clock.sample(m, 1.0, None)
             gaps.append(adv.gap)
             last_seen = k
@@ -61,8 +66,12 @@ def test_a_superseded_sample_observed_keeps_the_stream() -> None:
     clk = SampleClock(ValvePredictor(PARAMS.plant, TS), ModelPosition(PARAMS.plant, TS, 0.0))
     applied_prev, held = 0.0, None
     for k in range(40):
-        m = Measurement(position_m=plant.position_m, spool_m=plant.spool_actual_m,
-                        coil_current_a=applied_prev, samples=1 if k else 0)
+        m = Measurement(
+            position_m=plant.position_m,
+            spool_m=plant.spool_actual_m,
+            coil_current_a=applied_prev,
+            samples=1 if k else 0,
+        )
         ref.sample(m, 1.0, None)
         if k == 10:
             held = Measurement(m.position_m, m.spool_m, m.coil_current_a, samples=1)

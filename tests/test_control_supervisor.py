@@ -36,8 +36,13 @@ class FakeBank:
         self.reinit_from.append(source)
 
 
-def _sup(bank: FakeBank, *, warmup_s: float = 0.0, switch_confirm_s: float = 0.0,
-         dwell_s: float = ControlTuning().dwell_s) -> Supervisor:
+def _sup(
+    bank: FakeBank,
+    *,
+    warmup_s: float = 0.0,
+    switch_confirm_s: float = 0.0,
+    dwell_s: float = ControlTuning().dwell_s,
+) -> Supervisor:
     t = replace(ControlTuning(), warmup_s=warmup_s, switch_confirm_s=switch_confirm_s, dwell_s=dwell_s)
     return Supervisor(bank, t, TS)
 
@@ -61,7 +66,7 @@ def test_a_switch_needs_its_condition_to_hold_for_the_confirmation_time() -> Non
 def test_hysteresis_needs_relative_and_absolute_margin() -> None:
     bank = FakeBank([1.0, 0.5, 0.7, 0.7])
     sup = _sup(bank)
-    margin = (1 + 1 / 10) * 0.005 ** 2
+    margin = (1 + 1 / 10) * 0.005**2
     bank.j = [1.0, 0.8 - margin + 1e-9, 2.0, 2.0]  # just not good enough
     assert sup.update(1.0) == 0
     bank.j = [1.0, 0.8 - margin - 1e-9, 2.0, 2.0]

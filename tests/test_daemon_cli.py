@@ -55,10 +55,22 @@ def test_lockstep_controller_and_emulator_processes(tmp_path: Path) -> None:
         emu = None
         try:
             assert ctl.wait_for("(lockstep)"), ctl.text
-            emu = Proc(ns.prefix() + FIRMWARE_SIM + [
-                "-c", EMU_CFG, "--mode", "lockstep", "--duration", "0.5",
-                "--scenario", str(ROOT / "scenarios" / "case1-loe.yaml"),
-                "--summary-json", str(emu_json)])
+            emu = Proc(
+                ns.prefix()
+                + FIRMWARE_SIM
+                + [
+                    "-c",
+                    EMU_CFG,
+                    "--mode",
+                    "lockstep",
+                    "--duration",
+                    "0.5",
+                    "--scenario",
+                    str(ROOT / "scenarios" / "case1-loe.yaml"),
+                    "--summary-json",
+                    str(emu_json),
+                ]
+            )
             assert emu.wait() == 0, emu.text
             ctl.p.send_signal(signal.SIGTERM)
             assert ctl.wait() == 0, ctl.text
@@ -72,11 +84,15 @@ def test_lockstep_controller_and_emulator_processes(tmp_path: Path) -> None:
 
 
 def _start_pair(ns: PrivateNetns, tmp: Path) -> tuple[Proc, Proc]:
-    emu = Proc(ns.prefix() + FIRMWARE_SIM + ["-c", EMU_CFG, "--log", str(tmp / "emu.log"),
-                                             "--summary-json", str(tmp / "emu.json")])
+    emu = Proc(
+        ns.prefix()
+        + FIRMWARE_SIM
+        + ["-c", EMU_CFG, "--log", str(tmp / "emu.log"), "--summary-json", str(tmp / "emu.json")]
+    )
     assert emu.wait_for("realtime on"), emu.text
-    ctl = Proc(ns.prefix() + CONTROLLER + ["--log", str(tmp / "ctl.log"),
-                                           "--summary-json", str(tmp / "ctl.json")])
+    ctl = Proc(
+        ns.prefix() + CONTROLLER + ["--log", str(tmp / "ctl.log"), "--summary-json", str(tmp / "ctl.json")]
+    )
     assert ctl.wait_for("first sensor data: ACTIVE"), ctl.text + emu.text
     time.sleep(1.0)  # let them run (nothing below depends on how long)
     return emu, ctl
@@ -98,8 +114,11 @@ def test_realtime_sigterm_leaves_valve_at_zero(tmp_path: Path) -> None:
             ctl.kill()
             emu.kill()
     codec = FrameCodec()
-    cmds = [codec.classify(m) for m in read_log(tmp_path / "emu.log")
-            if m.arbitration_id == codec.can_id("VALVE_CMD")]
+    cmds = [
+        codec.classify(m)
+        for m in read_log(tmp_path / "emu.log")
+        if m.arbitration_id == codec.can_id("VALVE_CMD")
+    ]
     assert len(cmds) > 10
     last = cmds[-1].values
     assert last is not None and last["Enable"] == 0 and last["CurrentSetpoint"] == 0.0
@@ -139,8 +158,22 @@ def test_lockstep_processes_on_vcan0(tmp_path: Path) -> None:
     emu = None
     try:
         assert ctl.wait_for("(lockstep)", limit_s=300), ctl.text
-        emu = Proc([*FIRMWARE_SIM, "-c", EMU_CFG, *vcan, "--mode", "lockstep", "--duration",
-                    "0.05", "--lockstep-timeout", "120", "--summary-json", str(emu_json)])
+        emu = Proc(
+            [
+                *FIRMWARE_SIM,
+                "-c",
+                EMU_CFG,
+                *vcan,
+                "--mode",
+                "lockstep",
+                "--duration",
+                "0.05",
+                "--lockstep-timeout",
+                "120",
+                "--summary-json",
+                str(emu_json),
+            ]
+        )
         assert emu.wait(limit_s=300) == 0, emu.text
         ctl.p.send_signal(signal.SIGTERM)
         assert ctl.wait(limit_s=300) == 0, ctl.text

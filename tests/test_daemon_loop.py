@@ -57,9 +57,12 @@ class Rig(VirtualPair):
         super().__init__(name)
         self.tx = FrameCodec()
         self.ctrl = MiniPI()
-        self.loop = ControllerLoop(self.ctrl, FrameIO(self.bus, FrameCodec(), OWN_FRAMES),
-                                   Reference(kind="step", amplitude_m=1e-3),
-                                   LoopOptions(watchdog=wd or Watchdog()))
+        self.loop = ControllerLoop(
+            self.ctrl,
+            FrameIO(self.bus, FrameCodec(), OWN_FRAMES),
+            Reference(kind="step", amplitude_m=1e-3),
+            LoopOptions(watchdog=wd or Watchdog()),
+        )
 
     def sensors(self, position_m: float = 0.0) -> can.Message:
         pos = self.tx.encode("SENSOR_POS", {"Position": position_m, "Spool": 0.0})
@@ -147,8 +150,7 @@ def test_sensor_timeout_failsafe_within_3_cycles(rig: Rig) -> None:
     assert 1 <= n <= 3, n
     assert rig.loop.life.state is State.FAULT
     st = _status(rig)
-    assert st["State"] == int(State.FAULT) and st["FailsafeReason"] == int(
-        FailsafeReason.SENSOR_TIMEOUT)
+    assert st["State"] == int(State.FAULT) and st["FailsafeReason"] == int(FailsafeReason.SENSOR_TIMEOUT)
 
 
 def test_e2e_errors_failsafe_with_reason(rig: Rig) -> None:
@@ -171,8 +173,7 @@ def test_implausible_data_failsafe_with_reason(rig: Rig) -> None:
     counter = [rig.tx._tx_counter["SENSOR_POS"]]  # continue the sequence: only the range is bad
 
     def implausible() -> None:
-        raw = bytearray(msg.encode({"CRC": 0, "Counter": 0, "Position": 0.8, "Spool": 0.0},
-                                   strict=False))
+        raw = bytearray(msg.encode({"CRC": 0, "Counter": 0, "Position": 0.8, "Spool": 0.0}, strict=False))
         data = protect(raw, counter[0], rig.tx.data_ids("SENSOR_POS"))  # type: ignore[arg-type]
         counter[0] = (counter[0] + 1) & 0x0F
         rig.peer.send(can.Message(arbitration_id=pid, data=data, is_extended_id=False))
@@ -233,11 +234,15 @@ def test_lockstep_with_emulator_and_mmac() -> None:
     eb = can.Bus(interface="virtual", channel="daemon-lockstep")
     cb = can.Bus(interface="virtual", channel="daemon-lockstep")
     try:
-        emu = EmulatorProcess(PlantEmulation(params, sc), FrameIO(eb, FrameCodec(), EMU_FRAMES),
-                              EmulatorOptions())
-        loop = ControllerLoop(make_controller("mmac", params, 1e-3, None, sc.reference),
-                              FrameIO(cb, FrameCodec(), OWN_FRAMES), sc.reference,
-                              LoopOptions(lockstep_idle_s=0.5))
+        emu = EmulatorProcess(
+            PlantEmulation(params, sc), FrameIO(eb, FrameCodec(), EMU_FRAMES), EmulatorOptions()
+        )
+        loop = ControllerLoop(
+            make_controller("mmac", params, 1e-3, None, sc.reference),
+            FrameIO(cb, FrameCodec(), OWN_FRAMES),
+            sc.reference,
+            LoopOptions(lockstep_idle_s=0.5),
+        )
         th = threading.Thread(target=loop.run_lockstep, args=(StopFlag(), sc.n_samples))
         th.start()
         assert emu.run_lockstep(StopFlag(), sc.n_samples)
@@ -294,8 +299,9 @@ class IndexedPI(MiniPI):
     """MiniPI reporting nine model slots (like mmac: 4 spool + 5 position)."""
 
     def status(self) -> ControllerStatus:
-        return ControllerStatus(mode=self.mode, index={s: 0.1 * s for s in range(9)},
-                                theta={s: 1.0 for s in range(9)})
+        return ControllerStatus(
+            mode=self.mode, index={s: 0.1 * s for s in range(9)}, theta={s: 1.0 for s in range(9)}
+        )
 
 
 def test_status_frames_one_per_cycle_at_their_rates() -> None:
@@ -324,8 +330,7 @@ def test_status_frames_one_per_cycle_at_their_rates() -> None:
             per_cycle.append(names)
         assert max(len(n) for n in per_cycle) == 1
         count = {p: sum(n.count(p) for n in per_cycle) for p in periodic}
-        assert count == {"CTRL_STATUS": 50, "CTRL_INDEX": 450, "CTRL_STATS": 10,
-                         "HEARTBEAT_CTRL": 10}
+        assert count == {"CTRL_STATUS": 50, "CTRL_INDEX": 450, "CTRL_STATS": 10, "HEARTBEAT_CTRL": 10}
         assert slots[:18] == [*range(9), *range(9)]
     finally:
         r.close()
@@ -334,8 +339,9 @@ def test_status_frames_one_per_cycle_at_their_rates() -> None:
 def _lockstep_run(rig: Rig, feed: Any) -> list[dict[str, Any]]:
     """Run the lockstep loop until the bus is idle for 0.3 s while ``feed()`` sends frames;
     returns the VALVE_CMDs it answered with."""
-    loop = ControllerLoop(rig.ctrl, rig.loop.io, Reference(kind="step", amplitude_m=1e-3),
-                          LoopOptions(lockstep_idle_s=0.3))
+    loop = ControllerLoop(
+        rig.ctrl, rig.loop.io, Reference(kind="step", amplitude_m=1e-3), LoopOptions(lockstep_idle_s=0.3)
+    )
     rig.loop = loop
     th = threading.Thread(target=loop.run_lockstep, args=(StopFlag(),))
     th.start()
@@ -348,12 +354,14 @@ def _lockstep_run(rig: Rig, feed: Any) -> list[dict[str, Any]]:
 def test_lockstep_answers_a_duplicate_pair_never(rig: Rig) -> None:
     """A repeated sensor pair (same bytes) is counted REPEATED and gets no cycle: the law steps
     and answers once per distinct pair."""
+
     def feed() -> None:
         for i in range(3):
             pos = rig.sensors(1e-4 * i)
             if i == 1:
                 rig.peer.send(pos)  # the same frames again
                 rig.peer.send(rig.tx.encode("SENSOR_AUX", {"CoilCurrent": 1e-5}, counter=1))
+
     cmds = _lockstep_run(rig, feed)
     assert len(cmds) == 3 and rig.ctrl.steps == 3
     assert [c["CycleCount"] for c in cmds] == [0, 1, 2]
@@ -363,6 +371,7 @@ def test_lockstep_answers_a_duplicate_pair_never(rig: Rig) -> None:
 def test_lockstep_steps_over_lost_sensor_samples(rig: Rig) -> None:
     """Two sensor samples lost on the way (the counter jumps by 3): the law steps twice without
     data before the cycle, so the reference stays on the plant's sample clock."""
+
     def feed() -> None:
         rig.sensors()
         rig.sensors()
@@ -370,6 +379,7 @@ def test_lockstep_steps_over_lost_sensor_samples(rig: Rig) -> None:
             rig.tx.skip("SENSOR_POS")
             rig.tx.skip("SENSOR_AUX")
         rig.sensors(3e-4)
+
     cmds = _lockstep_run(rig, feed)
     assert len(cmds) == 3 and rig.ctrl.steps == 5
     assert [c["CycleCount"] for c in cmds] == [0, 1, 4]
@@ -383,9 +393,11 @@ def test_send_together_encodes_first_and_keeps_order() -> None:
     rx = can.Bus(interface="virtual", channel="together")
     try:
         io = FrameIO(tx, FrameCodec(), ("SENSOR_POS", "SENSOR_AUX"))
-        n = io.send_together(("SENSOR_POS", {"Position": 1e-3, "Spool": 2e-6}),
-                             ("SENSOR_AUX", {"LoadPressure": float("nan")}),  # not encodable
-                             ("SENSOR_AUX", {"LoadPressure": 1e5, "CoilCurrent": 0.01}))
+        n = io.send_together(
+            ("SENSOR_POS", {"Position": 1e-3, "Spool": 2e-6}),
+            ("SENSOR_AUX", {"LoadPressure": float("nan")}),  # not encodable
+            ("SENSOR_AUX", {"LoadPressure": 1e5, "CoilCurrent": 0.01}),
+        )
         assert n == 2 and io.tx_errors == 1
         assert io.sent == {"SENSOR_POS": 1, "SENSOR_AUX": 1}
         codec = FrameCodec()

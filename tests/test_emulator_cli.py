@@ -57,8 +57,11 @@ def test_realtime_emulator_and_client_processes(tmp_path: Path) -> None:
         emu = None
         try:
             assert client.wait_for("ready"), client.text
-            emu = Proc(ns.prefix() + FIRMWARE_SIM + [
-                "-c", EMU_CFG, "--log", str(log), "--summary-json", str(summary)])
+            emu = Proc(
+                ns.prefix()
+                + FIRMWARE_SIM
+                + ["-c", EMU_CFG, "--log", str(log), "--summary-json", str(summary)]
+            )
             assert client.wait() == 0, client.text
             emu.p.send_signal(signal.SIGTERM)
             assert emu.wait() == 0, emu.text
@@ -74,6 +77,7 @@ def test_realtime_emulator_and_client_processes(tmp_path: Path) -> None:
     assert s["commands_accepted"] >= 1  # (how many arrive in time is not asserted: no timing)
     assert s["received_by_verdict"]["CRC_ERROR"] == 1  # the client's one corrupted command
     from ehpss_hil.canlog import read_log
+
     ids = {m.arbitration_id for m in read_log(log)}
     assert {0x110, 0x111, 0x120} <= ids  # sensor frames sent and commands received, logged
 
@@ -86,9 +90,11 @@ def test_lockstep_emulator_and_client_processes(tmp_path: Path) -> None:
         emu = None
         try:
             assert client.wait_for("ready"), client.text
-            emu = Proc(ns.prefix() + FIRMWARE_SIM + [
-                "-c", EMU_CFG, "--mode", "lockstep", "--duration", "0.5",
-                "--summary-json", str(summary)])
+            emu = Proc(
+                ns.prefix()
+                + FIRMWARE_SIM
+                + ["-c", EMU_CFG, "--mode", "lockstep", "--duration", "0.5", "--summary-json", str(summary)]
+            )
             assert emu.wait() == 0, emu.text
             assert client.wait() == 0, client.text
         finally:

@@ -30,12 +30,14 @@ class Rig(VirtualPair):
         self.proc = EmulatorProcess(
             PlantEmulation(load_params(), Scenario(name="t", duration_s=10.0)),
             FrameIO(self.bus, FrameCodec(), OWN_FRAMES),
-            EmulatorOptions(command_timeout_s=0.010, **opts))  # type: ignore[arg-type]
+            EmulatorOptions(command_timeout_s=0.010, **opts),  # type: ignore[arg-type]
+        )
 
     def cmd(self, current_a: float, enable: int = 1) -> can.Message:
         self.cycle = (self.cycle + 1) & 0xFFFF
-        msg = self.codec.encode("VALVE_CMD", {"CurrentSetpoint": current_a, "Enable": enable,
-                                              "CycleCount": self.cycle})
+        msg = self.codec.encode(
+            "VALVE_CMD", {"CurrentSetpoint": current_a, "Enable": enable, "CycleCount": self.cycle}
+        )
         self.peer.send(msg)
         return msg
 
@@ -90,8 +92,19 @@ def test_command_timeout_counts_periods(rig: Rig) -> None:
 def _raw_cmd(rig: Rig, current_a: float, counter: int) -> bytes:
     """A correctly protected VALVE_CMD with any current (bypasses the encoder's range check)."""
     msg = rig.codec.message("VALVE_CMD")
-    data = bytearray(msg.encode({"CRC": 0, "Counter": 0, "Enable": 1, "CurrentSetpoint": current_a,
-                                 "SensorCounterEcho": 0, "CycleCount": 0}, strict=False))
+    data = bytearray(
+        msg.encode(
+            {
+                "CRC": 0,
+                "Counter": 0,
+                "Enable": 1,
+                "CurrentSetpoint": current_a,
+                "SensorCounterEcho": 0,
+                "CycleCount": 0,
+            },
+            strict=False,
+        )
+    )
     return protect(data, counter, rig.codec.data_ids("VALVE_CMD"))  # type: ignore[arg-type]
 
 
@@ -172,8 +185,10 @@ def test_skipped_periods_advance_the_plant_without_frames(rig: Rig) -> None:
     for m, d in rig.received():
         if d.name in ("SENSOR_POS", "SENSOR_AUX"):
             got.setdefault(d.name, []).append((m.data[1] & 0x0F, d.verdict))
-    assert got == {"SENSOR_POS": [(3, Verdict.OK_SOME_LOST)],  # the first pair had counter 0
-                   "SENSOR_AUX": [(3, Verdict.OK_SOME_LOST)]}
+    assert got == {
+        "SENSOR_POS": [(3, Verdict.OK_SOME_LOST)],  # the first pair had counter 0
+        "SENSOR_AUX": [(3, Verdict.OK_SOME_LOST)],
+    }
     for _ in range(3):
         ref.measure()
         ref.advance(i_a)
@@ -192,8 +207,9 @@ def test_a_second_commander_centres_the_valve_until_one_is_left(rig: Rig) -> Non
     seen = []
     for k in range(40):
         rig.cmd(2e-4)
-        rig.peer.send(rogue.encode("VALVE_CMD", {"CurrentSetpoint": 0.5, "Enable": 1,
-                                                 "CycleCount": 40000 + k}))
+        rig.peer.send(
+            rogue.encode("VALVE_CMD", {"CurrentSetpoint": 0.5, "Enable": 1, "CycleCount": 40000 + k})
+        )
         applied, aux = rig.step()
         seen.append((applied, aux["CommandConflict"]))
     assert all(a != 0.5 for a, _ in seen)  # the rogue's 0.5 A is never applied

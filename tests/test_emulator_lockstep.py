@@ -27,15 +27,19 @@ Law = Callable[[dict[str, float], int], float]
 
 def _scenario(loss: float = 0.0, delay: int = 1) -> Scenario:
     return Scenario(
-        name="lockstep-test", duration_s=N * 1e-3, sample_time_s=1e-3, seed=7,
-        noise=Noise(position_m=1e-6, spool_m=1.5e-6, pressure_pa=1e4), frame_loss=loss,
+        name="lockstep-test",
+        duration_s=N * 1e-3,
+        sample_time_s=1e-3,
+        seed=7,
+        noise=Noise(position_m=1e-6, spool_m=1.5e-6, pressure_pa=1e4),
+        frame_loss=loss,
         transport_delay_samples=delay,
-        events=(Event(t_s=EVENT_K[0] * 1e-3, k_loe=0.5), Event(t_s=EVENT_K[1] * 1e-3, k_dft=0.8)))
+        events=(Event(t_s=EVENT_K[0] * 1e-3, k_loe=0.5), Event(t_s=EVENT_K[1] * 1e-3, k_dft=0.8)),
+    )
 
 
 #: coil currents of the size the loop uses (~0.1 mA moves the piston ~1 mm at 5 rad/s)
-RECORDED = 1e-4 * np.sin(2 * np.pi * np.arange(N) / 60.0) + 2e-5 * np.random.default_rng(3).normal(
-    size=N)
+RECORDED = 1e-4 * np.sin(2 * np.pi * np.arange(N) / 60.0) + 2e-5 * np.random.default_rng(3).normal(size=N)
 
 
 def recorded_law(pos: dict[str, float], idx: int) -> float:
@@ -88,8 +92,11 @@ def _offline(sc: Scenario, law: Law) -> tuple[list[dict[str, float]], list[int]]
         lost_s, lost_c = emu.frame_lost(0), emu.frame_lost(1)
         if not lost_s:
             q = codec.quantize("SENSOR_POS", {"Position": y.position_m, "Spool": y.spool_m})
-            q.update(codec.quantize("SENSOR_AUX", {"LoadPressure": y.load_pressure_pa,
-                                                   "CoilCurrent": y.coil_current_a}))
+            q.update(
+                codec.quantize(
+                    "SENSOR_AUX", {"LoadPressure": y.load_pressure_pa, "CoilCurrent": y.coil_current_a}
+                )
+            )
             sent.append(q)
             ks.append(k)
             u = codec.quantize("VALVE_CMD", {"CurrentSetpoint": law(q, idx)})["CurrentSetpoint"]
@@ -101,15 +108,18 @@ def _offline(sc: Scenario, law: Law) -> tuple[list[dict[str, float]], list[int]]
     return sent, ks
 
 
-def _run(buses: tuple[can.BusABC, can.BusABC], sc: Scenario, law: Law,
-         truth: bool = False) -> tuple[EmulatorProcess, list[can.Message]]:
+def _run(
+    buses: tuple[can.BusABC, can.BusABC], sc: Scenario, law: Law, truth: bool = False
+) -> tuple[EmulatorProcess, list[can.Message]]:
     emu_bus, client_bus = buses
     frames: list[can.Message] = []
     th = threading.Thread(target=_client, args=(client_bus, law, frames))
     th.start()
-    proc = EmulatorProcess(PlantEmulation(load_params(), sc),
-                           FrameIO(emu_bus, FrameCodec(), OWN_FRAMES),
-                           EmulatorOptions(truth=truth, lockstep_timeout_s=5.0))
+    proc = EmulatorProcess(
+        PlantEmulation(load_params(), sc),
+        FrameIO(emu_bus, FrameCodec(), OWN_FRAMES),
+        EmulatorOptions(truth=truth, lockstep_timeout_s=5.0),
+    )
     assert proc.run_lockstep(StopFlag(), N)
     th.join()
     return proc, frames
@@ -129,10 +139,10 @@ def _sensor_values(frames: list[can.Message]) -> list[dict[str, float]]:
     return out
 
 
-@pytest.mark.parametrize("law,loss", [(recorded_law, 0.0), (p_law, 0.05)],
-                         ids=["recorded-current", "p-law-5pct-loss"])
-def test_lockstep_equals_offline(buses: tuple[can.BusABC, can.BusABC], law: Law,
-                                 loss: float) -> None:
+@pytest.mark.parametrize(
+    "law,loss", [(recorded_law, 0.0), (p_law, 0.05)], ids=["recorded-current", "p-law-5pct-loss"]
+)
+def test_lockstep_equals_offline(buses: tuple[can.BusABC, can.BusABC], law: Law, loss: float) -> None:
     sc = _scenario(loss)
     proc, frames = _run(buses, sc, law)
     expected, ks = _offline(sc, law)

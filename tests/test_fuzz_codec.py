@@ -24,10 +24,19 @@ def _frames() -> st.SearchStrategy[can.Message]:
     ids = st.one_of(st.sampled_from(_OUR_IDS), st.integers(0, 0x7FF), st.integers(0, 0x1FFFFFFF))
     return st.builds(
         lambda i, dlc, data, ext, rtr: can.Message(
-            arbitration_id=i if (ext or i <= 0x7FF) else i & 0x7FF, data=data[:dlc], dlc=dlc,
-            is_extended_id=ext, is_remote_frame=rtr, check=False),
-        ids, st.integers(0, 8), st.binary(min_size=8, max_size=8), st.booleans(),
-        st.booleans() | st.just(False))
+            arbitration_id=i if (ext or i <= 0x7FF) else i & 0x7FF,
+            data=data[:dlc],
+            dlc=dlc,
+            is_extended_id=ext,
+            is_remote_frame=rtr,
+            check=False,
+        ),
+        ids,
+        st.integers(0, 8),
+        st.binary(min_size=8, max_size=8),
+        st.booleans(),
+        st.booleans() | st.just(False),
+    )
 
 
 @settings(max_examples=1500, deadline=None)
@@ -47,10 +56,14 @@ def test_random_frames_never_escape_and_are_all_counted(frames: list[can.Message
 
 
 @settings(max_examples=1500, deadline=None)
-@given(st.sampled_from([n for n in _REF.names if _REF.data_ids(n) is not None]),
-       st.binary(min_size=8, max_size=8), st.integers(0, 15))
-def test_valid_crc_random_payload_is_plausible_or_out_of_range(name: str, payload: bytes,
-                                                                counter: int) -> None:
+@given(
+    st.sampled_from([n for n in _REF.names if _REF.data_ids(n) is not None]),
+    st.binary(min_size=8, max_size=8),
+    st.integers(0, 15),
+)
+def test_valid_crc_random_payload_is_plausible_or_out_of_range(
+    name: str, payload: bytes, counter: int
+) -> None:
     """A correctly protected frame with arbitrary content: decoded and range-checked, no crash."""
     rx = _RX
     rx.reset_rx()

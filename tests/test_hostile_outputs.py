@@ -60,9 +60,13 @@ def test_unwritable_folder_is_one_line_exit_2_and_nothing_left(tmp_path: Path) -
     with pytest.raises(OutputError) as e:
         prepare_run_dir(blocker / "run")
     assert e.value.exit_code == 2 and "\n" not in str(e.value)
-    r = subprocess.run([*EHPSS_HIL, "log", "-i", "virtual", "-c", "x", "-o",
-                        str(blocker / "bus.log"), "--duration", "0.1"], cwd=ROOT,
-                       capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [*EHPSS_HIL, "log", "-i", "virtual", "-c", "x", "-o", str(blocker / "bus.log"), "--duration", "0.1"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 2, r.stderr
     assert r.stderr.strip().count("\n") == 0 and "cannot write the log" in r.stderr
     assert r.stdout == ""
@@ -72,8 +76,11 @@ def test_bad_lines_are_skipped_and_counted(tmp_path: Path) -> None:
     log = tmp_path / "x.log"
     with CandumpLogger(log) as lg:
         for i in range(5):
-            lg.log(can.Message(arbitration_id=0x110, data=bytes([i] * 8), is_extended_id=False,
-                               timestamp=100.0 + i))
+            lg.log(
+                can.Message(
+                    arbitration_id=0x110, data=bytes([i] * 8), is_extended_id=False, timestamp=100.0 + i
+                )
+            )
     with open(log, "ab") as fh:  # garbage, then a last line cut in its data
         fh.write(b"garbage\n(0000000105.000000) can0 110#0102")
     bad = BadLines()
@@ -82,8 +89,7 @@ def test_bad_lines_are_skipped_and_counted(tmp_path: Path) -> None:
     assert bad.count == 2 and "x.log:6" in bad.text()
 
 
-@pytest.mark.skipif(tmpfs_unavailable_reason() is not None,
-                    reason=str(tmpfs_unavailable_reason()))
+@pytest.mark.skipif(tmpfs_unavailable_reason() is not None, reason=str(tmpfs_unavailable_reason()))
 @pytest.mark.parametrize("reserve", [0, 64 * 1024])
 def test_full_disk_whole_lines_exact_counts_no_tmp(tmp_path: Path, reserve: int) -> None:
     """reserve 0: the writes fail with ENOSPC (cut back to the last newline); 64 KiB: the
@@ -92,8 +98,11 @@ def test_full_disk_whole_lines_exact_counts_no_tmp(tmp_path: Path, reserve: int)
         log = fs / "bus.log"
         lg = CandumpLogger(log, disk_reserve_bytes=reserve)
         for i in range(20_000):
-            lg.log(can.Message(arbitration_id=0x110, data=bytes(8), is_extended_id=False,
-                               timestamp=100.0 + i * 1e-3))
+            lg.log(
+                can.Message(
+                    arbitration_id=0x110, data=bytes(8), is_extended_id=False, timestamp=100.0 + i * 1e-3
+                )
+            )
         s = lg.close()
         raw = log.read_bytes()
         side = read_sidecar(log)
@@ -107,8 +116,9 @@ def test_full_disk_whole_lines_exact_counts_no_tmp(tmp_path: Path, reserve: int)
             assert len(list(reader)) == s.written
 
 
-def test_run_without_a_namespace_says_so(monkeypatch: pytest.MonkeyPatch,
-                                         capsys: pytest.CaptureFixture[str]) -> None:
+def test_run_without_a_namespace_says_so(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     monkeypatch.setattr(orchestrate, "netns_unavailable_reason", lambda: "not root")
     monkeypatch.setattr(orchestrate, "multicast_route_reason", lambda group="": "no route")
     with pytest.raises(BusUnavailableError):
@@ -119,10 +129,24 @@ def test_run_without_a_namespace_says_so(monkeypatch: pytest.MonkeyPatch,
 
 def test_run_on_a_missing_interface_exits_3(tmp_path: Path) -> None:
     sc = ROOT / "scenarios" / "case1-loe.yaml"
-    r = subprocess.run([*EHPSS_HIL, "run", str(sc), "--interface", "socketcan", "--channel",
-                        "vcan97", "--out", str(tmp_path / "run")], cwd=ROOT,
-                       capture_output=True, text=True, timeout=120,
-                       env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    r = subprocess.run(
+        [
+            *EHPSS_HIL,
+            "run",
+            str(sc),
+            "--interface",
+            "socketcan",
+            "--channel",
+            "vcan97",
+            "--out",
+            str(tmp_path / "run"),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
     assert r.returncode == 3, r.stderr
     assert r.stderr.strip().count("\n") == 0 and "vcan97" in r.stderr
     assert json.loads((tmp_path / "run" / MANIFEST).read_text())["tool"] == "ehpss-hil run"

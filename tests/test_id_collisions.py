@@ -36,8 +36,7 @@ def _exchange(io: FrameIO, peer: can.BusABC) -> list[int]:
     for k in range(5):
         io.send("VALVE_CMD", {"CurrentSetpoint": 1e-3, "Enable": 1, "CycleCount": k})
         io.send("HEARTBEAT_CTRL", {"NmtState": 5})
-        peer.send(other.encode("VALVE_CMD", {"CurrentSetpoint": 0.5, "Enable": 1,
-                                             "CycleCount": 900 + k}))
+        peer.send(other.encode("VALVE_CMD", {"CurrentSetpoint": 0.5, "Enable": 1, "CycleCount": 900 + k}))
         peer.send(emu.encode("SENSOR_POS", {"Position": 0.0, "Spool": 0.0}))
     peer.send(other.encode("CTRL_STATUS", {"State": 2}))
     return [m.arbitration_id for m in io.drain()]
@@ -64,8 +63,13 @@ def test_echoes_are_told_from_foreign_frames_where_the_bus_loops_back() -> None:
         got = _exchange(io, peer)
         assert got == [io.codec.can_id("SENSOR_POS")] * 5
         # our 10 echoes (5 VALVE_CMD, 5 identical heartbeats) are not collisions; theirs are
-        assert io.collisions.by_name == {"VALVE_CMD": 5, "CTRL_STATUS": 1, "CTRL_INDEX": 0,
-                                         "CTRL_STATS": 0, "HEARTBEAT_CTRL": 0}
+        assert io.collisions.by_name == {
+            "VALVE_CMD": 5,
+            "CTRL_STATUS": 1,
+            "CTRL_INDEX": 0,
+            "CTRL_STATS": 0,
+            "HEARTBEAT_CTRL": 0,
+        }
         assert io.received == 11
     finally:
         bus.shutdown()
@@ -85,7 +89,6 @@ def test_sent_frames_ring() -> None:
 
 
 # ---- the controller's reaction ---------------------------------------------------------------
-
 
 
 class HoldLaw:
@@ -108,27 +111,30 @@ class Rig(VirtualPair):
     """The controller loop (with the daemon's rate check), the emulator's frames from the peer
     and a rogue transmitter with counters of its own."""
 
-    def __init__(self, name: str, wd: Watchdog | None = None,
-                 setpoint: SetpointPolicy | None = None) -> None:
+    def __init__(self, name: str, wd: Watchdog | None = None, setpoint: SetpointPolicy | None = None) -> None:
         super().__init__(name)
         self.tx, self.rogue = FrameCodec(), FrameCodec()
         codec = FrameCodec()
         limit_sensor_rate(codec, load_params().plant.piston_speed_max_m_s, 1e-3)
-        self.loop = ControllerLoop(HoldLaw(), FrameIO(self.bus, codec, OWN_FRAMES),
-                                   Reference(kind="step", amplitude_m=1e-3),
-                                   LoopOptions(watchdog=wd or Watchdog(),
-                                               setpoint=setpoint or SetpointPolicy()))
+        self.loop = ControllerLoop(
+            HoldLaw(),
+            FrameIO(self.bus, codec, OWN_FRAMES),
+            Reference(kind="step", amplitude_m=1e-3),
+            LoopOptions(watchdog=wd or Watchdog(), setpoint=setpoint or SetpointPolicy()),
+        )
         self.rogue_cycle = 40000
 
     def sensors(self, position_m: float = 0.0, conflict: int = 0) -> None:
         self.peer.send(self.tx.encode("SENSOR_POS", {"Position": position_m, "Spool": 0.0}))
-        self.peer.send(self.tx.encode("SENSOR_AUX", {"CoilCurrent": 1e-3,
-                                                     "CommandConflict": conflict}))
+        self.peer.send(self.tx.encode("SENSOR_AUX", {"CoilCurrent": 1e-3, "CommandConflict": conflict}))
 
     def rogue_command(self) -> None:
         self.rogue_cycle += 1
-        self.peer.send(self.rogue.encode("VALVE_CMD", {"CurrentSetpoint": 0.5, "Enable": 1,
-                                                       "CycleCount": self.rogue_cycle}))
+        self.peer.send(
+            self.rogue.encode(
+                "VALVE_CMD", {"CurrentSetpoint": 0.5, "Enable": 1, "CycleCount": self.rogue_cycle}
+            )
+        )
 
     def cycle(self) -> dict[str, Any]:
         """One cycle; its VALVE_CMD."""

@@ -49,8 +49,13 @@ def test_watchdog_counts_skipped_periods() -> None:
 
 
 def test_starvation_is_a_loop_overrun_and_blocks_recovery() -> None:
-    cfg = Watchdog(timeout_cycles=10, recovery_cycles=5, auto_recover=True,
-                   starvation_window_cycles=100, starvation_late_fraction=0.25)
+    cfg = Watchdog(
+        timeout_cycles=10,
+        recovery_cycles=5,
+        auto_recover=True,
+        starvation_window_cycles=100,
+        starvation_late_fraction=0.25,
+    )
     wd = SensorWatchdog(cfg)
     for k in range(1000):  # every 5th cycle late (20 %): never starved
         assert not wd.update(True, late=k % 5 == 0)

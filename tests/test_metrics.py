@@ -14,19 +14,35 @@ from ehpss_hil.sim.result import N_SLOTS, SimResult
 TS = 1e-3
 
 
-def _result(err: np.ndarray, events: tuple[float, ...], sp: np.ndarray | None = None,
-            ps: np.ndarray | None = None) -> SimResult:
+def _result(
+    err: np.ndarray, events: tuple[float, ...], sp: np.ndarray | None = None, ps: np.ndarray | None = None
+) -> SimResult:
     n = len(err)
     z = np.zeros(n)
     sp = sp if sp is not None else np.full(n, -1, dtype=np.int64)
     ps = ps if ps is not None else sp.copy()
     return SimResult(
-        scenario="syn", controller="test", ts_s=TS, event_times_s=events,
+        scenario="syn",
+        controller="test",
+        ts_s=TS,
+        event_times_s=events,
         t_s=np.arange(n, dtype=np.float64) * TS,
-        x_d_m=z, y_m_m=z.copy(), x_true_m=err, y_s_m=z, spool_m=z, current_a=z,
-        active_spool=sp, active_position=ps, k_loe_hat=z + 1, k_dft_hat=z + 1,
-        index=np.full((n, N_SLOTS), np.nan), true_k_loe=z + 1, true_k_q=z + 1, true_k_dft=z + 1,
-        fresh=np.ones(n, dtype=bool))
+        x_d_m=z,
+        y_m_m=z.copy(),
+        x_true_m=err,
+        y_s_m=z,
+        spool_m=z,
+        current_a=z,
+        active_spool=sp,
+        active_position=ps,
+        k_loe_hat=z + 1,
+        k_dft_hat=z + 1,
+        index=np.full((n, N_SLOTS), np.nan),
+        true_k_loe=z + 1,
+        true_k_q=z + 1,
+        true_k_dft=z + 1,
+        fresh=np.ones(n, dtype=bool),
+    )
 
 
 def test_rms_prefault_peak_and_recovery() -> None:
@@ -36,7 +52,7 @@ def test_rms_prefault_peak_and_recovery() -> None:
     e[530:540] = -19e-6  # inside the band
     e[1500] = -80e-6  # event at 1.5 s: one bad sample → recovery 1 ms
     m = compute_metrics(_result(e, (0.5, 1.5)))
-    assert m.rms_error_m == pytest.approx(np.sqrt(np.mean(e ** 2)))
+    assert m.rms_error_m == pytest.approx(np.sqrt(np.mean(e**2)))
     assert m.pre_fault_max_m == pytest.approx(5e-6)
     ev0, ev1 = m.events
     assert (ev0.t_s, ev0.peak_error_m, ev0.recovery_s) == (0.5, pytest.approx(50e-6), 0.03)
@@ -59,8 +75,7 @@ def test_never_recovered_is_inf_and_null_in_json() -> None:
     assert math.isinf(m.events[0].recovery_s)
     row = json.loads(json.dumps(m.to_json()))
     assert row["events"][0]["recovery_s"] is None
-    assert set(row) == {"scenario", "controller", "rms_error_m", "pre_fault_max_m", "switches",
-                        "events"}
+    assert set(row) == {"scenario", "controller", "rms_error_m", "pre_fault_max_m", "switches", "events"}
     assert set(row["events"][0]) == {"t_s", "peak_error_m", "recovery_s", "active_model"}
 
 

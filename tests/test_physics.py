@@ -58,10 +58,12 @@ def test_fault_free_loop_stable_with_unit_dc_gain() -> None:
 
 def test_loe_slows_the_dominant_real_pole() -> None:
     """Losing effectiveness moves the slow real pole (−284 rad/s fault-free) toward the origin."""
+
     def slow_pole(k_loe: float) -> float:
         eig = np.linalg.eigvals(closed_loop_matrices(PARAMS, k_loe=k_loe)[0])
         real = eig[np.abs(eig.imag) < 1e-6].real
         return float(real[real < -10].max())  # the real pole other than the integrator's ≈ −1
+
     p1, p05, p02 = slow_pole(1.0), slow_pole(0.5), slow_pole(0.2)
     assert p1 == pytest.approx(-284.2, abs=0.5)
     assert p1 < p05 < p02 < 0

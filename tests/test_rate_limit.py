@@ -51,7 +51,9 @@ def test_random_positions_rarely_pass() -> None:
 def test_classify_counts_a_jump_as_out_of_range() -> None:
     tx, rx = FrameCodec(), FrameCodec()
     rx.limit_rate("SENSOR_POS", "Position", STEP)
-    verdicts = [rx.classify(tx.encode("SENSOR_POS", {"Position": p, "Spool": 0.0})).verdict
-                for p in (0.001, 0.00101, 0.4, 0.00102, 0.00103)]
+    verdicts = [
+        rx.classify(tx.encode("SENSOR_POS", {"Position": p, "Spool": 0.0})).verdict
+        for p in (0.001, 0.00101, 0.4, 0.00102, 0.00103)
+    ]
     assert verdicts == [Verdict.OK, Verdict.OK, Verdict.OUT_OF_RANGE, Verdict.OK, Verdict.OK]
     assert rx.counts_by_name["SENSOR_POS"][Verdict.OUT_OF_RANGE] == 1

@@ -33,16 +33,25 @@ def test_every_receiver_counts_each_frame_under_its_verdict() -> None:
     assert codec.consumed == 3000 and all(n > 0 for n in codec.by_verdict.values())
     for t in (ctrl, emu):  # each receiver saw every kind of bad frame among its own IDs
         assert 0 < t.consumed < 3000
-        for v in ("OK", "OK_SOME_LOST", "REPEATED", "WRONG_SEQUENCE", "CRC_ERROR", "BAD_DLC",
-                  "UNKNOWN_ID", "OUT_OF_RANGE"):
+        for v in (
+            "OK",
+            "OK_SOME_LOST",
+            "REPEATED",
+            "WRONG_SEQUENCE",
+            "CRC_ERROR",
+            "BAD_DLC",
+            "UNKNOWN_ID",
+            "OUT_OF_RANGE",
+        ):
             assert t.by_verdict[v] > 0, (t.target, v)
 
 
 def test_fuzzer_is_seeded() -> None:
     a = FrameFuzzer(FrameCodec(), seed=5).crafted(200)
     b = FrameFuzzer(FrameCodec(), seed=5).crafted(200)
-    assert [(f.msg.arbitration_id, bytes(f.msg.data), f.expected) for f in a] == \
-        [(f.msg.arbitration_id, bytes(f.msg.data), f.expected) for f in b]
+    assert [(f.msg.arbitration_id, bytes(f.msg.data), f.expected) for f in a] == [
+        (f.msg.arbitration_id, bytes(f.msg.data), f.expected) for f in b
+    ]
 
 
 class _AcceptsDuplicates(FrameCodec):
@@ -75,15 +84,24 @@ def _frames() -> st.SearchStrategy[can.Message]:
     ids = st.one_of(st.sampled_from(_IDS), st.integers(0, 0x7FF), st.integers(0, 0x1FFFFFFF))
     return st.builds(
         lambda i, dlc, data, ext: can.Message(
-            arbitration_id=i if (ext or i <= 0x7FF) else i & 0x7FF, data=data[:dlc], dlc=dlc,
-            is_extended_id=ext, check=False),
-        ids, st.integers(0, 8), st.binary(min_size=8, max_size=8), st.booleans())
+            arbitration_id=i if (ext or i <= 0x7FF) else i & 0x7FF,
+            data=data[:dlc],
+            dlc=dlc,
+            is_extended_id=ext,
+            check=False,
+        ),
+        ids,
+        st.integers(0, 8),
+        st.binary(min_size=8, max_size=8),
+        st.booleans(),
+    )
 
 
 @settings(max_examples=150, deadline=None)
 @given(st.lists(_frames(), min_size=1, max_size=10))
-def test_random_frames_through_both_loops(loops: tuple[Receiver, Receiver],
-                                          frames: list[can.Message]) -> None:
+def test_random_frames_through_both_loops(
+    loops: tuple[Receiver, Receiver], frames: list[can.Message]
+) -> None:
     for rx in loops:
         t = rx.feed([FuzzFrame(m, None) for m in frames])
         assert t.crashes == 0 and t.acted_on_bad == 0, t.examples

@@ -30,8 +30,7 @@ def test_stray_datagrams_are_counted_and_no_process_ends(tmp_path: Path) -> None
     assert r.sent == 2 * len(KINDS)
     assert r.alive == {"logger": True, "controller": True, "emulator": True}
     assert r.exits == {"emulator": 0, "controller": 0, "logger": 0}
-    assert r.counted == dict.fromkeys(("controller", "emulator", "logger", "controller log"),
-                                      r.sent)
+    assert r.counted == dict.fromkeys(("controller", "emulator", "logger", "controller log"), r.sent)
     assert r.ok
 
 

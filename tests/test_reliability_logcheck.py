@@ -87,8 +87,9 @@ def _controller_log(tmp: Path, fresh: list[bool], enable: list[bool]) -> LogFile
         pos = tx.encode("SENSOR_POS", {"Position": 1e-4 * i, "Spool": 0.0}).data
         if f:
             lines.append(_line(CODEC.can_id("SENSOR_POS"), bytes(pos)))
-        cmd = rx.encode("VALVE_CMD", {"CurrentSetpoint": 1e-4 if en else 0.0,
-                                      "Enable": int(en), "CycleCount": i}).data
+        cmd = rx.encode(
+            "VALVE_CMD", {"CurrentSetpoint": 1e-4 if en else 0.0, "Enable": int(en), "CycleCount": i}
+        ).data
         lines.append(_line(CODEC.can_id("VALVE_CMD"), bytes(cmd)))
     p = tmp / "ctl.log"
     p.write_text("".join(lines))
@@ -116,8 +117,14 @@ def test_emulator_timeout_and_zero_current_from_a_log(tmp_path: Path) -> None:
             cmd = rx.encode("VALVE_CMD", {"CurrentSetpoint": 2e-4, "Enable": 1}).data
             lines.append(_line(CODEC.can_id("VALVE_CMD"), bytes(cmd)))
         since = max(0, k - 9)
-        aux = tx.encode("SENSOR_AUX", {"LoadPressure": 0.0, "CmdTimeout": int(since >= 10),
-                                       "CoilCurrent": 2e-4 if since <= 10 else 0.0}).data
+        aux = tx.encode(
+            "SENSOR_AUX",
+            {
+                "LoadPressure": 0.0,
+                "CmdTimeout": int(since >= 10),
+                "CoilCurrent": 2e-4 if since <= 10 else 0.0,
+            },
+        ).data
         lines.append(_line(CODEC.can_id("SENSOR_AUX"), bytes(aux)))
     p = tmp_path / "emu.log"
     p.write_text("".join(lines))

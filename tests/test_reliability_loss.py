@@ -32,22 +32,33 @@ def _scenario(tmp: Path, extra: str, events: str = "") -> Path:
 
 
 def test_directional_keys_override_frame_loss_top_level_and_in_events(tmp_path: Path) -> None:
-    sc = load_scenario(_scenario(tmp_path, "sensor_frame_loss: 0.2\n",
-                                 "  - {t_s: 3.0, frame_loss: 0.1}\n"
-                                 "  - {t_s: 3.5, command_frame_loss: 0.3}\n"))
+    sc = load_scenario(
+        _scenario(
+            tmp_path,
+            "sensor_frame_loss: 0.2\n",
+            "  - {t_s: 3.0, frame_loss: 0.1}\n  - {t_s: 3.5, command_frame_loss: 0.3}\n",
+        )
+    )
     assert [loss for _, _, loss in sc.fault_timeline()] == [
-        FrameLoss(0.2, 0.0), FrameLoss(0.2, 0.0), FrameLoss(0.2, 0.0), FrameLoss(0.2, 0.0),
-        FrameLoss(0.1, 0.1), FrameLoss(0.1, 0.3)]
+        FrameLoss(0.2, 0.0),
+        FrameLoss(0.2, 0.0),
+        FrameLoss(0.2, 0.0),
+        FrameLoss(0.2, 0.0),
+        FrameLoss(0.1, 0.1),
+        FrameLoss(0.1, 0.3),
+    ]
 
 
-@pytest.mark.parametrize("extra,events,key", [
-    ("sensor_frame_loss: 1.5\n", "", "sensor_frame_loss"),
-    ("command_frame_loss: -0.1\n", "", "command_frame_loss"),
-    ("", "  - {t_s: 3.0, sensor_frame_loss: 2}\n", "events[3].sensor_frame_loss"),
-    ("", "  - {t_s: 3.0, command_frame_loss: lots}\n", "events[3].command_frame_loss"),
-])
-def test_bad_loss_values_name_the_key_path(tmp_path: Path, extra: str, events: str,
-                                           key: str) -> None:
+@pytest.mark.parametrize(
+    "extra,events,key",
+    [
+        ("sensor_frame_loss: 1.5\n", "", "sensor_frame_loss"),
+        ("command_frame_loss: -0.1\n", "", "command_frame_loss"),
+        ("", "  - {t_s: 3.0, sensor_frame_loss: 2}\n", "events[3].sensor_frame_loss"),
+        ("", "  - {t_s: 3.0, command_frame_loss: lots}\n", "events[3].command_frame_loss"),
+    ],
+)
+def test_bad_loss_values_name_the_key_path(tmp_path: Path, extra: str, events: str, key: str) -> None:
     with pytest.raises(ConfigError) as exc:
         load_scenario(_scenario(tmp_path, extra, events))
     assert exc.value.key_path == key
@@ -87,8 +98,7 @@ def test_case1_five_percent_loss_each_direction_at_most_twice_lossless() -> None
 
 @pytest.mark.skipif(NETNS_SKIP is not None, reason=f"cross-process test: {NETNS_SKIP}")
 @pytest.mark.parametrize("direction", ["sensor", "command"])
-def test_processes_lose_one_direction_and_trip_only_on_real_timeouts(tmp_path: Path,
-                                                                      direction: str) -> None:
+def test_processes_lose_one_direction_and_trip_only_on_real_timeouts(tmp_path: Path, direction: str) -> None:
     """30 % loss in one direction, realtime processes, the shipped 3-cycle watchdog: with sensor
     loss it must trip (three samples in a row are lost every few hundred ms); either way every
     trip must follow a real timeout and every real timeout must trip."""

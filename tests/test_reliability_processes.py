@@ -20,8 +20,7 @@ pytestmark = pytest.mark.skipif(SKIP is not None, reason=str(SKIP))
 
 
 @pytest.mark.parametrize("victim", ["emulator", "controller"])
-def test_kill9_survivor_reaches_safe_state_and_keeps_a_complete_log(tmp_path: Path,
-                                                                    victim: str) -> None:
+def test_kill9_survivor_reaches_safe_state_and_keeps_a_complete_log(tmp_path: Path, victim: str) -> None:
     r = kill_trial(tmp_path, 0, victim, random.Random(7 if victim == "emulator" else 8))
     assert not r.error, r.error
     limits = configured_limits()
@@ -65,14 +64,21 @@ def test_duplicates_reordering_bursts_counted_and_never_acted_on_twice(tmp_path:
     assert r.controller_exit == 0
 
 
-def test_bad_configs_and_scenarios_exit_2_naming_the_key_and_stay_off_the_bus(
-        tmp_path: Path) -> None:
-    wanted = {("controller", "watchdog.timeout_cycles"), ("controller", "bus.channel"),
-              ("controller", "mode"), ("controller", "log.path"), ("controller", "dbc"),
-              ("emulator", "command_timeout_s"), ("emulator", "scenario"),
-              ("emulator", "truth"), ("scenario", "events[1].k_loe"),
-              ("scenario", "sensor_frame_loss"), ("scenario", "events[3].command_frame_loss"),
-              ("scenario", "typo_key")}
+def test_bad_configs_and_scenarios_exit_2_naming_the_key_and_stay_off_the_bus(tmp_path: Path) -> None:
+    wanted = {
+        ("controller", "watchdog.timeout_cycles"),
+        ("controller", "bus.channel"),
+        ("controller", "mode"),
+        ("controller", "log.path"),
+        ("controller", "dbc"),
+        ("emulator", "command_timeout_s"),
+        ("emulator", "scenario"),
+        ("emulator", "truth"),
+        ("scenario", "events[1].k_loe"),
+        ("scenario", "sensor_frame_loss"),
+        ("scenario", "events[3].command_frame_loss"),
+        ("scenario", "typo_key"),
+    }
     muts = [m for m in mutations(tmp_path) if (m.target, m.key_path) in wanted]
     muts = [m for m in muts if m.why != "type" or m.key_path in ("truth", "typo_key")]
     assert {(m.target, m.key_path) for m in muts} == wanted
@@ -84,7 +90,6 @@ def test_bad_configs_and_scenarios_exit_2_naming_the_key_and_stay_off_the_bus(
 
 def test_a_valid_config_does_reach_the_bus(tmp_path: Path) -> None:
     """The control for the test above: the same harness sees frames when a process runs."""
-    (result,), frames = run_bad_inputs(tmp_path, [Mutation("controller", ("rate_hz",), 500.0,
-                                                            "valid")])
+    (result,), frames = run_bad_inputs(tmp_path, [Mutation("controller", ("rate_hz",), 500.0, "valid")])
     assert result.exit_code == 0 and not result.ok
     assert frames > 0

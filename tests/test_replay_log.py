@@ -28,8 +28,7 @@ def short_case3() -> Scenario:
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("replay")
-    return {m: write_lockstep_log(short_case3(), m, d / m / "run.log")
-            for m in ("mmac", "mmac-paper", "nrc")}
+    return {m: write_lockstep_log(short_case3(), m, d / m / "run.log") for m in ("mmac", "mmac-paper", "nrc")}
 
 
 @pytest.mark.parametrize("mode", ["mmac", "mmac-paper", "nrc"])
@@ -39,8 +38,9 @@ def test_same_config_is_bit_identical(logs: dict[str, Path], mode: str) -> None:
     assert res.cycles == 1000 and res.identical, res.first
 
 
-def test_other_mode_reports_first_divergence(logs: dict[str, Path],
-                                             capsys: pytest.CaptureFixture[str]) -> None:
+def test_other_mode_reports_first_divergence(
+    logs: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
     p = argparse.ArgumentParser()
     replay.add_arguments(p)
     assert replay.run(p.parse_args([str(logs["mmac"]), "--mode", "nrc"])) == 1
@@ -60,9 +60,12 @@ def test_tampered_command_is_pinpointed(logs: dict[str, Path], tmp_path: Path) -
                 if n == 400:
                     v = signal_values(codec.message("VALVE_CMD"), msg.data)
                     v["CurrentSetpoint"] += 1e-3
-                    msg = codec.encode("VALVE_CMD", {k: v[k] for k in (
-                        "CurrentSetpoint", "Enable", "SensorCounterEcho", "CycleCount")},
-                        timestamp_s=msg.timestamp, counter=msg.data[1] & 0xF)
+                    msg = codec.encode(
+                        "VALVE_CMD",
+                        {k: v[k] for k in ("CurrentSetpoint", "Enable", "SensorCounterEcho", "CycleCount")},
+                        timestamp_s=msg.timestamp,
+                        counter=msg.data[1] & 0xF,
+                    )
                 n += 1
             lg.log(msg)
     res = replay.replay_log(out, mode="nrc", scenario=None)
@@ -89,13 +92,20 @@ def test_skipped_periods_replay_bit_identical(tmp_path: Path) -> None:
     eb = can.Bus(interface="virtual", channel="replay-skips")
     cb = can.Bus(interface="virtual", channel="replay-skips")
     try:
-        emu = EmulatorProcess(PlantEmulation(params, sc), FrameIO(eb, FrameCodec(), EMU_FRAMES),
-                              EmulatorOptions())
-        logger = CandumpLogger(out, iface="vcan0", sidecar={"scenario": str(
-            PROJECT_ROOT / "scenarios" / "case3-combined.yaml"), "rate_hz": 1000.0})
-        loop = ControllerLoop(make_controller("mmac", params, 1e-3, None, sc.reference),
-                              FrameIO(cb, FrameCodec(), OWN_FRAMES, logger), sc.reference,
-                              LoopOptions())
+        emu = EmulatorProcess(
+            PlantEmulation(params, sc), FrameIO(eb, FrameCodec(), EMU_FRAMES), EmulatorOptions()
+        )
+        logger = CandumpLogger(
+            out,
+            iface="vcan0",
+            sidecar={"scenario": str(PROJECT_ROOT / "scenarios" / "case3-combined.yaml"), "rate_hz": 1000.0},
+        )
+        loop = ControllerLoop(
+            make_controller("mmac", params, 1e-3, None, sc.reference),
+            FrameIO(cb, FrameCodec(), OWN_FRAMES, logger),
+            sc.reference,
+            LoopOptions(),
+        )
         k = 0
         while emu.periods < sc.n_samples - 3:
             skipped = 2 if k % 97 == 50 else 0  # an overrun now and then: 2 periods slept through
@@ -119,14 +129,19 @@ LOSSY = PROJECT_ROOT / "scenarios" / "extra" / "unseen-frameloss2pct.yaml"
 def _lossy(sensor: float, command: float) -> Scenario:
     """2 % loss scenario cut to 1.2 s, with the given loss per direction."""
     sc = load_scenario(LOSSY)
-    return replace(sc, duration_s=1.2, frame_loss=0.0, sensor_frame_loss=sensor,
-                   command_frame_loss=command, events=tuple(e for e in sc.events if e.t_s <= 1.2))
+    return replace(
+        sc,
+        duration_s=1.2,
+        frame_loss=0.0,
+        sensor_frame_loss=sensor,
+        command_frame_loss=command,
+        events=tuple(e for e in sc.events if e.t_s <= 1.2),
+    )
 
 
 @pytest.mark.parametrize("mode", ["nrc", "smac", "mmac-paper", "mmac"])
 @pytest.mark.parametrize(("sensor", "command"), [(0.05, 0.0), (0.0, 0.05), (0.03, 0.03)])
-def test_lossy_lockstep_logs_replay_exactly(tmp_path: Path, mode: str, sensor: float,
-                                            command: float) -> None:
+def test_lossy_lockstep_logs_replay_exactly(tmp_path: Path, mode: str, sensor: float, command: float) -> None:
     """Lost sensor frames (a cycle without data, then a sample count of 2 from the E2E counter)
     and lost VALVE_CMDs (a CycleCount gap: cycles that ran, commands that never arrived) replay
     bit for bit; before the one driver 3025 / 1037 of 3500 cycles diverged."""
@@ -189,10 +204,10 @@ def test_python_can_formats_replay_exactly(tmp_path: Path, suffix: str) -> None:
     assert res.identical, (res.divergent, res.first)
 
 
-@pytest.mark.parametrize(("name", "data"), [("broken.blf", b"LOGG" + b"\x00" * 60),
-                                            ("frames.xyz", b"hello")])
-def test_unreadable_log_is_one_line_exit_2(tmp_path: Path, name: str, data: bytes,
-                                          capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize(("name", "data"), [("broken.blf", b"LOGG" + b"\x00" * 60), ("frames.xyz", b"hello")])
+def test_unreadable_log_is_one_line_exit_2(
+    tmp_path: Path, name: str, data: bytes, capsys: pytest.CaptureFixture[str]
+) -> None:
     from ehpss_hil.cli import main
 
     (tmp_path / name).write_bytes(data)

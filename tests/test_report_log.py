@@ -71,8 +71,15 @@ def test_report_writes_metrics_markdown_and_pngs(bench_log: Path, tmp_path: Path
     md = (out / "report.md").read_text()
     assert "RMS error" in md and "![error](figures/error.png)" in md
     pngs = sorted((out / "figures").glob("*.png"))
-    assert {p.stem for p in pngs} == {"overview", "position", "error", "current", "models",
-                                      "estimates", "index"}
+    assert {p.stem for p in pngs} == {
+        "overview",
+        "position",
+        "error",
+        "current",
+        "models",
+        "estimates",
+        "index",
+    }
     for p in pngs:
         data = p.read_bytes()
         assert data.startswith(PNG_MAGIC) and len(data) > 10_000
@@ -119,8 +126,9 @@ def test_reference_from_a_scenario_name(tmp_path: Path) -> None:
     """firmware-sim writes only the scenario's name: it is looked up in scenarios/."""
     sc, ref, ts = reference_of({"scenario": "case2-drift"}, tmp_path)
     assert sc is not None and sc.name == "case2-drift" and ts == sc.sample_time_s
-    sc, ref, ts = reference_of({"config": {"reference": {"kind": "sine", "amplitude_m": 0.002},
-                                           "rate_hz": 2000}}, tmp_path)
+    sc, ref, ts = reference_of(
+        {"config": {"reference": {"kind": "sine", "amplitude_m": 0.002}, "rate_hz": 2000}}, tmp_path
+    )
     assert sc is None and ref is not None and ref.amplitude_m == 0.002 and ts == 0.0005
 
 
@@ -132,11 +140,11 @@ def test_reference_from_a_run_directory(bench_log: Path, tmp_path: Path) -> None
         for msg in read_log(bench_log):
             lg.log(msg)
     assert not load_log_run(log).has_reference
-    (tmp_path / "run.json").write_text(json.dumps(
-        {"scenario_path": str(PROJECT_ROOT / "scenarios" / "case1-loe.yaml")}))
+    (tmp_path / "run.json").write_text(
+        json.dumps({"scenario_path": str(PROJECT_ROOT / "scenarios" / "case1-loe.yaml")})
+    )
     run = load_log_run(log)
     assert run.has_reference and run.scenario is not None and run.scenario.name == "case1-loe"
     assert any("run.json" in n for n in run.notes)
-    _, ref, ts = reference_of({"config": str(PROJECT_ROOT / "configs" / "controller.yaml")},
-                              tmp_path)
+    _, ref, ts = reference_of({"config": str(PROJECT_ROOT / "configs" / "controller.yaml")}, tmp_path)
     assert ref is not None and ts == pytest.approx(1e-3)

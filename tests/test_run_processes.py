@@ -21,8 +21,7 @@ from ehpss_hil.scenario import load_scenario
 from ehpss_hil.sim.lockstep import run_scenario
 
 NETNS_SKIP = netns_unavailable_reason()
-pytestmark = pytest.mark.skipif(NETNS_SKIP is not None,
-                                reason=f"cross-process test: {NETNS_SKIP}")
+pytestmark = pytest.mark.skipif(NETNS_SKIP is not None, reason=f"cross-process test: {NETNS_SKIP}")
 
 DRIFT = short_scenario_yaml("short-drift", 0.8, "{t_s: 0.3, k_dft: 0.5}")
 
@@ -34,11 +33,9 @@ def scenario(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return p
 
 
-def test_lockstep_run_gives_the_simulation_commands_and_metrics(scenario: Path,
-                                                                tmp_path: Path) -> None:
+def test_lockstep_run_gives_the_simulation_commands_and_metrics(scenario: Path, tmp_path: Path) -> None:
     out = tmp_path / "lockstep"
-    check_exit_codes(execute(RunPlan(scenario_path=scenario, mode="mmac", out_dir=out,
-                                     lockstep=True)))
+    check_exit_codes(execute(RunPlan(scenario_path=scenario, mode="mmac", out_dir=out, lockstep=True)))
     row = metrics_from_run(out)
     sim = run_scenario(load_scenario(scenario), "mmac")
     logged = load_log_run(out / "bus.log")
@@ -48,7 +45,7 @@ def test_lockstep_run_gives_the_simulation_commands_and_metrics(scenario: Path,
     # command k is applied over [k+1, k+2) (one sample of transport delay, the scenario's):
     # the sim's applied current one sample later, bit for bit
     assert sim.current_a[0] == 0.0
-    assert np.array_equal(cmd[:n], sim.current_a[1:n + 1])
+    assert np.array_equal(cmd[:n], sim.current_a[1 : n + 1])
     sim_rms = float(np.sqrt(np.mean((sim.x_true_m - sim.y_m_m) ** 2)))
     assert row["rms_error_m"] == pytest.approx(sim_rms, rel=0.02, abs=0.05e-6)  # truth: 0.1 µm LSB
     assert row["rms_error_m"] < 5e-6
@@ -66,10 +63,8 @@ def test_lockstep_run_gives_the_simulation_commands_and_metrics(scenario: Path,
     assert ctl.has_reference and ctl.result.ts_s == 1e-3 and ctl.result.controller == "mmac"
 
 
-@pytest.mark.parametrize(("mode", "bound_m", "above"), [("mmac", 15e-6, False),
-                                                        ("nrc", 100e-6, True)])
-def test_realtime_drift_run(scenario: Path, tmp_path: Path, mode: str, bound_m: float,
-                            above: bool) -> None:
+@pytest.mark.parametrize(("mode", "bound_m", "above"), [("mmac", 15e-6, False), ("nrc", 100e-6, True)])
+def test_realtime_drift_run(scenario: Path, tmp_path: Path, mode: str, bound_m: float, above: bool) -> None:
     """Sensor gain 0.5 at 0.3 s: ``mmac`` stays within 15 µm RMS on the real-time bus (0.67–2.9
     µm measured, offline 0.64; in this 0.8 s run a start-up stall of a loaded host alone adds up
     to ~3 µm; the failures this guards against gave 28–263 µm: x̂ off the sensor's sample clock,
@@ -85,8 +80,12 @@ def test_realtime_drift_run(scenario: Path, tmp_path: Path, mode: str, bound_m: 
         # not judged — the fail-safe and no-runaway behaviour is what the stall tests assert)
         if not above:
             import warnings
-            warnings.warn(f"realtime drift run did not keep time ({kept!r}): RMS "
-                          f"{row['rms_error_m'] * 1e6:.1f} um not judged", stacklevel=1)
+
+            warnings.warn(
+                f"realtime drift run did not keep time ({kept!r}): RMS "
+                f"{row['rms_error_m'] * 1e6:.1f} um not judged",
+                stacklevel=1,
+            )
             return
     assert (row["rms_error_m"] > bound_m) if above else (row["rms_error_m"] < bound_m), row
 

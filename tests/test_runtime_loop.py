@@ -51,13 +51,13 @@ def test_overrun_counted_skips_ahead_never_bursts() -> None:
     clock = FakeClock()
     t = _timer(clock)
     t0 = clock.t
-    t.wait()                     # cycle 1 at t0 + 1 ms
-    clock.t += 3.5e-3            # this cycle overruns by 2.5 periods
-    lateness = t.wait()          # runs at once, on the latest grid point (t0 + 4 ms)
+    t.wait()  # cycle 1 at t0 + 1 ms
+    clock.t += 3.5e-3  # this cycle overruns by 2.5 periods
+    lateness = t.wait()  # runs at once, on the latest grid point (t0 + 4 ms)
     assert t.overruns == 1 and t.skipped == 2
     assert lateness == pytest.approx(0.5e-3)
     n_sleeps = len(clock.sleeps)
-    t.wait()                     # the next one sleeps to t0 + 5 ms: no catch-up burst
+    t.wait()  # the next one sleeps to t0 + 5 ms: no catch-up burst
     assert len(clock.sleeps) == n_sleeps + 1
     assert clock.t == pytest.approx(t0 + 5e-3)
 
@@ -66,7 +66,7 @@ def test_overrun_warning_at_most_once_a_second(caplog: pytest.LogCaptureFixture)
     clock = FakeClock()
     t = _timer(clock)
     with caplog.at_level(logging.WARNING, logger="ehpss_hil.runtime.deadline"):
-        for _ in range(3000):    # 3000 overrunning cycles of 1.5 ms = 4.5 s
+        for _ in range(3000):  # 3000 overrunning cycles of 1.5 ms = 4.5 s
             t.wait()
             clock.t += 1.5e-3
     assert t.overruns >= 2999
@@ -109,6 +109,7 @@ def test_rt_cpu_and_timer_slack_apply() -> None:
     options are applied) as well as the calling one."""
     import os
     import threading
+
     before = os.sched_getaffinity(0)
     cpu = min(before)
     started, release = threading.Event(), threading.Event()
@@ -187,6 +188,7 @@ def test_wake_starts_the_cycle_early_and_keeps_the_grid() -> None:
                 return True
             clock.t += timeout_s
             return False
+
         return wake
 
     assert t.wait(frames_at(0.3e-3)) == pytest.approx(-0.7e-3)  # 0.3 ms into period 1

@@ -25,8 +25,9 @@ def _assert_identical(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> Non
 
 
 def test_same_scenario_and_seed_is_bit_identical() -> None:
-    sc = replace(LOSSY, duration_s=1.0, frame_loss=0.05,
-                 events=(Event(t_s=0.3, k_loe=0.5), Event(t_s=0.6, k_dft=0.0)))
+    sc = replace(
+        LOSSY, duration_s=1.0, frame_loss=0.05, events=(Event(t_s=0.3, k_loe=0.5), Event(t_s=0.6, k_dft=0.0))
+    )
     r1 = run_scenario(sc, "mmac", PARAMS)
     r2 = run_scenario(sc, "mmac", PARAMS)
     _assert_identical(r1.arrays(), r2.arrays())
@@ -36,8 +37,12 @@ def test_same_scenario_and_seed_is_bit_identical() -> None:
 
 
 def test_quantize_and_frames_transports_are_identical() -> None:
-    sc = replace(LOSSY, duration_s=0.4, frame_loss=0.05,
-                 events=(Event(t_s=0.15, k_loe=0.5), Event(t_s=0.25, k_dft=0.6)))
+    sc = replace(
+        LOSSY,
+        duration_s=0.4,
+        frame_loss=0.05,
+        events=(Event(t_s=0.15, k_loe=0.5), Event(t_s=0.25, k_dft=0.6)),
+    )
     q = run_scenario(sc, "mmac", PARAMS, transport="quantize")
     f = run_scenario(sc, "mmac", PARAMS, transport="frames")
     _assert_identical(q.arrays(), f.arrays())

@@ -67,8 +67,17 @@ def test_case4_disturbance() -> None:
     _events_ok("case4-disturbance")
 
 
-@pytest.mark.parametrize("name", ["unseen-loe35", "unseen-drift1p4", "unseen-combined",
-                                  "unseen-noise1pct", "unseen-frameloss2pct", "unseen-blackouts"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "unseen-loe35",
+        "unseen-drift1p4",
+        "unseen-combined",
+        "unseen-noise1pct",
+        "unseen-frameloss2pct",
+        "unseen-blackouts",
+    ],
+)
 def test_unseen_faults(name: str) -> None:
     assert metrics(name, "mmac").rms_error_m <= 20 * UM
 

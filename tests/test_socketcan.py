@@ -47,10 +47,12 @@ def test_socketcan_bus_applies_the_projects_filters(vcan0: str) -> None:
     rx = open_bus(cfg, can_filters=filters)
     tx = open_bus(cfg)
     try:
-        sent = [codec.encode("SENSOR_POS", {"Position": 1e-3, "Spool": 2e-4}),
-                codec.encode("VALVE_CMD", {"CurrentSetpoint": 1e-4, "Enable": 1}),
-                codec.encode("SENSOR_AUX", {"CoilCurrent": 1e-4}),
-                codec.encode("HEARTBEAT_EMU", {"NmtState": 5})]
+        sent = [
+            codec.encode("SENSOR_POS", {"Position": 1e-3, "Spool": 2e-4}),
+            codec.encode("VALVE_CMD", {"CurrentSetpoint": 1e-4, "Enable": 1}),
+            codec.encode("SENSOR_AUX", {"CoilCurrent": 1e-4}),
+            codec.encode("HEARTBEAT_EMU", {"NmtState": 5}),
+        ]
         for m in sent:
             tx.send(m)
         got: list[can.Message] = []
@@ -74,8 +76,11 @@ def test_controller_and_emulator_processes_on_vcan0(vcan0: str, tmp_path: Path) 
     sc = tmp_path / "short.yaml"
     sc.write_text(SHORT)
     out = tmp_path / "run"
-    res = execute(RunPlan(scenario_path=sc, mode="mmac", out_dir=out, interface="socketcan",
-                          channel=vcan0, lockstep=True))
+    res = execute(
+        RunPlan(
+            scenario_path=sc, mode="mmac", out_dir=out, interface="socketcan", channel=vcan0, lockstep=True
+        )
+    )
     check_exit_codes(res)
     row = metrics_from_run(out)
     assert row["unavailable"] == []

@@ -59,19 +59,18 @@ def _check(pair: Pair) -> list[str]:
         n0 = resumed_at(cmds, s)
         before = [st for st in stats if st.t < s.t_stop]
         faulted = before[-1].reason if before and before[-1].state == "FAULT" else None
-        allowed = {"LOOP_OVERRUN"} if s.who == "controller" else {"SENSOR_TIMEOUT",
-                                                                   "LOOP_OVERRUN"}
+        allowed = {"LOOP_OVERRUN"} if s.who == "controller" else {"SENSOR_TIMEOUT", "LOOP_OVERRUN"}
         if faulted is not None:
             allowed.add(faulted)  # already in fail-safe when it stopped: the reason stays
         # statuses from the stop (emulator) resp. from the first cycle after it (controller)
         lo = s.t_stop if s.who == "emulator" else -1.0
-        seq = [st for st in stats if (st.t > lo if s.who == "emulator" else st.n > n0)
-               and st.t < end_t]
-        first_active = next((k for k, st in enumerate(seq)
-                             if st.state == "ACTIVE" and st.n > n0), len(seq))
+        seq = [st for st in stats if (st.t > lo if s.who == "emulator" else st.n > n0) and st.t < end_t]
+        first_active = next((k for k, st in enumerate(seq) if st.state == "ACTIVE" and st.n > n0), len(seq))
         faults = [st for st in seq[:first_active] if st.state == "FAULT"]
-        line = (f"{s.who} {s.t_cont - s.t_stop:.3f} s: statuses "
-                f"{[f'{st.state}/{st.reason}' for st in seq[:first_active + 1]][:4]}")
+        line = (
+            f"{s.who} {s.t_cont - s.t_stop:.3f} s: statuses "
+            f"{[f'{st.state}/{st.reason}' for st in seq[: first_active + 1]][:4]}"
+        )
         report.append(line)
         assert faults, f"no fail-safe before controlling again: {line}"
         assert {st.reason for st in faults} <= allowed, line
@@ -144,8 +143,16 @@ def test_a_cpu_hog_beside_the_controller(tmp_path: Path, mode: str) -> None:
     xs = truth(tmp_path / "emu.log")
     t_active = next(c.t for c in cmds if c.enable)
     dev = max(abs(x - x_d(cmds, t)) for t, x in xs if t > t_active)
-    print(json.dumps({"mode": mode, "max_dev_mm": round(dev * 1e3, 3), "fault_reasons":
-                      sorted(reasons), "skipped_periods": ctl.get("skipped_periods"),
-                      "watchdog_trips": ctl.get("watchdog_trips"),
-                      "stale_frames": ctl.get("stale_frames")}))
+    print(
+        json.dumps(
+            {
+                "mode": mode,
+                "max_dev_mm": round(dev * 1e3, 3),
+                "fault_reasons": sorted(reasons),
+                "skipped_periods": ctl.get("skipped_periods"),
+                "watchdog_trips": ctl.get("watchdog_trips"),
+                "stale_frames": ctl.get("stale_frames"),
+            }
+        )
+    )
     assert dev <= 1e-3

@@ -53,8 +53,7 @@ def main() -> int:
                 if answered == 10 and not a.no_bad:
                     data = bytearray(codec.encode("VALVE_CMD", {"CurrentSetpoint": u}).data)
                     data[0] ^= 0xFF
-                    bus.send(can.Message(arbitration_id=own, data=bytes(data),
-                                         is_extended_id=False))
+                    bus.send(can.Message(arbitration_id=own, data=bytes(data), is_extended_id=False))
                     bad += 1
     finally:
         bus.shutdown()

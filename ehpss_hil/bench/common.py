@@ -13,12 +13,15 @@ import numpy as np
 def percentiles_us(samples_s: np.ndarray) -> dict[str, float]:
     """p50/p99/p99.9/max of durations given in seconds, returned in microseconds."""
     if len(samples_s) == 0:
-        return {"p50_us": float("nan"), "p99_us": float("nan"), "p999_us": float("nan"),
-                "max_us": float("nan")}
+        return {
+            "p50_us": float("nan"),
+            "p99_us": float("nan"),
+            "p999_us": float("nan"),
+            "max_us": float("nan"),
+        }
     us = np.asarray(samples_s) * 1e6
     p50, p99, p999 = np.percentile(us, [50, 99, 99.9])
-    return {"p50_us": float(p50), "p99_us": float(p99), "p999_us": float(p999),
-            "max_us": float(us.max())}
+    return {"p50_us": float(p50), "p99_us": float(p99), "p999_us": float(p999), "max_us": float(us.max())}
 
 
 def write_json(path: str | Path | None, payload: Any) -> None:

@@ -22,8 +22,14 @@ NAME = "control"
 HELP = "control quality of nrc/smac/mmac-paper/mmac/oracle against the docs/design.md §11 targets"
 
 SHIPPED = ("fault-free", "case1-loe", "case2-drift", "case3-combined", "case4-disturbance")
-UNSEEN = ("unseen-loe35", "unseen-drift1p4", "unseen-combined", "unseen-noise1pct",
-          "unseen-frameloss2pct", "unseen-blackouts")
+UNSEEN = (
+    "unseen-loe35",
+    "unseen-drift1p4",
+    "unseen-combined",
+    "unseen-noise1pct",
+    "unseen-frameloss2pct",
+    "unseen-blackouts",
+)
 KQ = "kq-loss"
 #: scenarios/envelope/: steps, waves, fast and large motions, power-on faults, faults while
 #: holding still, a current limit, a quiet run (the "do no harm" family)
@@ -69,16 +75,22 @@ def _ms(v: float) -> str:
 
 
 def _fault_free(t: Table) -> list[Verdict]:
-    return [Verdict(f"fault-free RMS, {m}", _um(t["fault-free", m].rms_error_m), "≤ 3 µm",
-                    t["fault-free", m].rms_error_m <= 3e-6) for m in MODES]
+    return [
+        Verdict(
+            f"fault-free RMS, {m}",
+            _um(t["fault-free", m].rms_error_m),
+            "≤ 3 µm",
+            t["fault-free", m].rms_error_m <= 3e-6,
+        )
+        for m in MODES
+    ]
 
 
 def _vs_oracle(t: Table) -> list[Verdict]:
     out = []
     for sc in ("case1-loe", "case3-combined"):
         mm, orc = t[sc, "mmac"].rms_error_m, t[sc, "oracle"].rms_error_m
-        out.append(Verdict(f"{sc} mmac RMS", _um(mm), f"≤ oracle + 5 = {_um(orc + 5e-6)}",
-                           mm <= orc + 5e-6))
+        out.append(Verdict(f"{sc} mmac RMS", _um(mm), f"≤ oracle + 5 = {_um(orc + 5e-6)}", mm <= orc + 5e-6))
     return out
 
 
@@ -86,17 +98,25 @@ def _case2(t: Table) -> list[Verdict]:
     m = t["case2-drift", "mmac"]
     fail_peak = m.events[-1].peak_error_m if m.events else math.nan
     other = min(t["case2-drift", "smac"].rms_error_m, t["case2-drift", "mmac-paper"].rms_error_m)
-    return [Verdict("case2-drift mmac RMS", _um(m.rms_error_m), "≤ 10 µm", m.rms_error_m <= 1e-5),
-            Verdict("case2-drift peak after sensor failure", _um(fail_peak), "≤ 10 µm",
-                    fail_peak <= 1e-5),
-            Verdict("case2-drift mmac vs best of smac/mmac-paper",
-                    f"{other / m.rms_error_m:.3g}× better", "≥ 2×", other >= 2 * m.rms_error_m)]
+    return [
+        Verdict("case2-drift mmac RMS", _um(m.rms_error_m), "≤ 10 µm", m.rms_error_m <= 1e-5),
+        Verdict("case2-drift peak after sensor failure", _um(fail_peak), "≤ 10 µm", fail_peak <= 1e-5),
+        Verdict(
+            "case2-drift mmac vs best of smac/mmac-paper",
+            f"{other / m.rms_error_m:.3g}× better",
+            "≥ 2×",
+            other >= 2 * m.rms_error_m,
+        ),
+    ]
 
 
 def _case4(t: Table) -> list[Verdict]:
     mm, nrc = t["case4-disturbance", "mmac"].rms_error_m, t["case4-disturbance", "nrc"].rms_error_m
-    return [Verdict("case4-disturbance mmac RMS", _um(mm), f"≤ 100 µm and < nrc {_um(nrc)}",
-                    mm <= 1e-4 and mm < nrc)]
+    return [
+        Verdict(
+            "case4-disturbance mmac RMS", _um(mm), f"≤ 100 µm and < nrc {_um(nrc)}", mm <= 1e-4 and mm < nrc
+        )
+    ]
 
 
 def _others(t: Table) -> list[Verdict]:
@@ -104,8 +124,11 @@ def _others(t: Table) -> list[Verdict]:
     for sc in ("fault-free", "case1-loe", "case3-combined", "case4-disturbance"):
         mm = t[sc, "mmac"].rms_error_m
         best = min(t[sc, "smac"].rms_error_m, t[sc, "mmac-paper"].rms_error_m)
-        out.append(Verdict(f"{sc} mmac vs better of smac/mmac-paper", _um(mm),
-                           f"≤ {_um(best)} + 2 µm", mm <= best + 2e-6))
+        out.append(
+            Verdict(
+                f"{sc} mmac vs better of smac/mmac-paper", _um(mm), f"≤ {_um(best)} + 2 µm", mm <= best + 2e-6
+            )
+        )
     return out
 
 
@@ -118,29 +141,52 @@ def _recovery(t: Table, scenarios: tuple[str, ...]) -> list[Verdict]:
             if math.isfinite(eo.recovery_s) and em.recovery_s > worst_rec:
                 worst_rec, where = em.recovery_s, f"{sc} @ {em.t_s:g} s"
             worst_sw = max(worst_sw, em.switches)
-    return [Verdict(f"worst mmac recovery where oracle recovers ({where or 'all events'})",
-                    _ms(worst_rec), "≤ 20 ms", worst_rec <= 0.02),
-            Verdict("most mmac switches in one fault event", str(worst_sw), "≤ 10", worst_sw <= 10)]
+    return [
+        Verdict(
+            f"worst mmac recovery where oracle recovers ({where or 'all events'})",
+            _ms(worst_rec),
+            "≤ 20 ms",
+            worst_rec <= 0.02,
+        ),
+        Verdict("most mmac switches in one fault event", str(worst_sw), "≤ 10", worst_sw <= 10),
+    ]
 
 
 def _unseen(t: Table) -> list[Verdict]:
-    return [Verdict(f"{sc} mmac RMS", _um(t[sc, "mmac"].rms_error_m), "≤ 20 µm",
-                    t[sc, "mmac"].rms_error_m <= 2e-5) for sc in UNSEEN if (sc, "mmac") in t]
+    return [
+        Verdict(
+            f"{sc} mmac RMS", _um(t[sc, "mmac"].rms_error_m), "≤ 20 µm", t[sc, "mmac"].rms_error_m <= 2e-5
+        )
+        for sc in UNSEEN
+        if (sc, "mmac") in t
+    ]
 
 
 def _kq(t: Table) -> list[Verdict]:
     if (KQ, "mmac") not in t:
         return []
     mm, nrc = t[KQ, "mmac"].rms_error_m, t[KQ, "nrc"].rms_error_m
-    return [Verdict("k_Q loss mmac RMS (goal: no worse than nrc)",
-                    f"{_um(mm)} ({mm / nrc:.2g}× nrc {_um(nrc)})", "≤ nrc (goal)", mm <= nrc)]
+    return [
+        Verdict(
+            "k_Q loss mmac RMS (goal: no worse than nrc)",
+            f"{_um(mm)} ({mm / nrc:.2g}× nrc {_um(nrc)})",
+            "≤ nrc (goal)",
+            mm <= nrc,
+        )
+    ]
 
 
 def _speed(t: Table) -> list[Verdict]:
     sp = sorted(m.speed for (sc, mode), m in t.items() if mode == "mmac" and m.speed > 0)
     med = sp[len(sp) // 2] if sp else 0.0
-    return [Verdict("mmac sim speed (median run, loop CPU time on one core)",
-                    f"{med:.0f}× real time", f"≥ {SPEED_TARGET:.0f}×", med >= SPEED_TARGET)]
+    return [
+        Verdict(
+            "mmac sim speed (median run, loop CPU time on one core)",
+            f"{med:.0f}× real time",
+            f"≥ {SPEED_TARGET:.0f}×",
+            med >= SPEED_TARGET,
+        )
+    ]
 
 
 def _no_harm(t: Table) -> list[Verdict]:
@@ -152,10 +198,14 @@ def _no_harm(t: Table) -> list[Verdict]:
         mm, nrc = t[sc, "mmac"], t[sc, "nrc"]
         lim = NO_HARM_RATIO * nrc.rms_error_m + NO_HARM_RMS_M
         plim = nrc.max_error_m + NO_HARM_PEAK_M
-        out.append(Verdict(f"no harm: {sc} mmac RMS / worst",
-                           f"{_um(mm.rms_error_m)} / {_um(mm.max_error_m)}",
-                           f"≤ {_um(lim)} / {_um(plim)}",
-                           mm.rms_error_m <= lim and mm.max_error_m <= plim))
+        out.append(
+            Verdict(
+                f"no harm: {sc} mmac RMS / worst",
+                f"{_um(mm.rms_error_m)} / {_um(mm.max_error_m)}",
+                f"≤ {_um(lim)} / {_um(plim)}",
+                mm.rms_error_m <= lim and mm.max_error_m <= plim,
+            )
+        )
     return out
 
 
@@ -166,18 +216,27 @@ def _envelope(t: Table, envelope: dict[str, str]) -> list[Verdict]:
         mm = t[sc, "mmac"]
         if kind == "fault-free":
             ref = t[sc, "nrc"].rms_error_m
-            out.append(Verdict(f"fault-free {sc} mmac RMS", _um(mm.rms_error_m),
-                               f"≤ nrc + 1 = {_um(ref + FAULT_FREE_RMS_M)}",
-                               mm.rms_error_m <= ref + FAULT_FREE_RMS_M))
+            out.append(
+                Verdict(
+                    f"fault-free {sc} mmac RMS",
+                    _um(mm.rms_error_m),
+                    f"≤ nrc + 1 = {_um(ref + FAULT_FREE_RMS_M)}",
+                    mm.rms_error_m <= ref + FAULT_FREE_RMS_M,
+                )
+            )
         elif kind == "power-on":
             ref = t[sc, "oracle"].rms_error_m
-            out.append(Verdict(f"power-on {sc} mmac RMS", _um(mm.rms_error_m),
-                               f"≤ oracle + 5 = {_um(ref + POWER_ON_RMS_M)}",
-                               mm.rms_error_m <= ref + POWER_ON_RMS_M))
+            out.append(
+                Verdict(
+                    f"power-on {sc} mmac RMS",
+                    _um(mm.rms_error_m),
+                    f"≤ oracle + 5 = {_um(ref + POWER_ON_RMS_M)}",
+                    mm.rms_error_m <= ref + POWER_ON_RMS_M,
+                )
+            )
     if QUIET in envelope:
         sw = t[QUIET, "mmac"].switches
-        out.append(Verdict(f"{QUIET} mmac switches", str(sw), f"≤ {QUIET_SWITCHES}",
-                           sw <= QUIET_SWITCHES))
+        out.append(Verdict(f"{QUIET} mmac switches", str(sw), f"≤ {QUIET_SWITCHES}", sw <= QUIET_SWITCHES))
     return out
 
 
@@ -186,9 +245,19 @@ def verdicts(t: Table, envelope: dict[str, str] | None = None) -> list[Verdict]:
     ("do no harm") targets; ``envelope``: envelope scenario name → ``fault-free``,
     ``power-on`` or ``other``."""
     env = envelope or {}
-    return (_fault_free(t) + _vs_oracle(t) + _case2(t) + _case4(t) + _others(t)
-            + _recovery(t, SHIPPED[1:] + UNSEEN) + _unseen(t) + _kq(t) + _speed(t)
-            + _envelope(t, env) + _no_harm(t))
+    return (
+        _fault_free(t)
+        + _vs_oracle(t)
+        + _case2(t)
+        + _case4(t)
+        + _others(t)
+        + _recovery(t, SHIPPED[1:] + UNSEEN)
+        + _unseen(t)
+        + _kq(t)
+        + _speed(t)
+        + _envelope(t, env)
+        + _no_harm(t)
+    )
 
 
 def envelope_kinds(paths: list[Path]) -> dict[str, str]:
@@ -224,14 +293,18 @@ def _progress() -> Callable[[int, int], None] | None:
     def show(done: int, total: int) -> None:
         sys.stderr.write(f"\r  {done}/{total} runs" + ("\n" if done == total else ""))
         sys.stderr.flush()
+
     return show
 
 
 def run(args: argparse.Namespace) -> int:
     sdir = PROJECT_ROOT / "scenarios"
     env_paths = sorted((sdir / ENVELOPE_DIR).glob("*.yaml"))
-    paths = scenario_paths([sdir / f"{n}.yaml" for n in SHIPPED]
-                           + [sdir / "extra" / f"{n}.yaml" for n in (*UNSEEN, KQ)] + env_paths)
+    paths = scenario_paths(
+        [sdir / f"{n}.yaml" for n in SHIPPED]
+        + [sdir / "extra" / f"{n}.yaml" for n in (*UNSEEN, KQ)]
+        + env_paths
+    )
     jobs = [Job(p, m) for p in paths for m in MODES]
     t0 = time.perf_counter()
     outcomes = run_campaign(jobs, args.jobs, progress=_progress())
@@ -240,9 +313,12 @@ def run(args: argparse.Namespace) -> int:
     vs = verdicts(table, envelope_kinds(env_paths))
     print(format_verdicts(vs))
     simulated = sum(o.metrics.duration_s for o in outcomes)
-    print(f"\n{len(jobs)} runs, {simulated:.0f} s simulated in {wall:.1f} s wall on "
-          f"{min(args.jobs, len(jobs))} process(es): {wall / simulated * 1e3:.1f} ms wall per "
-          f"simulated second ({simulated / wall:.0f}× real time)")
-    write_json(args.json, {"rows": [o.metrics.to_json() for o in outcomes],
-                           "targets": [v.__dict__ for v in vs]})
+    print(
+        f"\n{len(jobs)} runs, {simulated:.0f} s simulated in {wall:.1f} s wall on "
+        f"{min(args.jobs, len(jobs))} process(es): {wall / simulated * 1e3:.1f} ms wall per "
+        f"simulated second ({simulated / wall:.0f}× real time)"
+    )
+    write_json(
+        args.json, {"rows": [o.metrics.to_json() for o in outcomes], "targets": [v.__dict__ for v in vs]}
+    )
     return 0 if all(v.ok is not False for v in vs) else 1

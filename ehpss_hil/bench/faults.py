@@ -41,14 +41,17 @@ from ..reliability.table import (
 from .common import finite_json, write_json
 
 NAME = "faults"
-HELP = ("reliability suite: fuzzing, frame loss, duplicates, kill -9, SIGTERM, bad configs, "
-        "stray datagrams, foreign files in --out, full disk, a second transmitter")
+HELP = (
+    "reliability suite: fuzzing, frame loss, duplicates, kill -9, SIGTERM, bad configs, "
+    "stray datagrams, foreign files in --out, full disk, a second transmitter"
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--trials", type=int, default=10, help="kill -9 trials (default 10)")
-    p.add_argument("--quick", action="store_true",
-                   help="small counts, short runs, a quarter of the bad keys (< 1 min)")
+    p.add_argument(
+        "--quick", action="store_true", help="small counts, short runs, a quarter of the bad keys (< 1 min)"
+    )
     p.add_argument("--seed", type=int, default=1, help="seed of fuzzing and fault timing")
     p.add_argument("--out", type=Path, help="keep the trial directories here")
     p.add_argument("--json", metavar="FILE", help="write every result as JSON")
@@ -65,26 +68,31 @@ def _victims(n: int, rng: random.Random) -> list[str]:
     return v
 
 
-def _process_sections(a: argparse.Namespace, out: Path, rng: random.Random,
-                      rows: list[Row], s: Summary, raw: dict[str, Any]) -> None:
+def _process_sections(
+    a: argparse.Namespace, out: Path, rng: random.Random, rows: list[Row], s: Summary, raw: dict[str, Any]
+) -> None:
     q = a.quick
     _say("frame loss across processes ...")
     if q:
         pl = loss.processes_loss(out / "loss", levels=(0.2,), lossless=False, duration_s=1.0)
     else:
         pl = loss.processes_loss(out / "loss")
-        pl.append(loss.process_loss(out / "loss" / "deploy-sensor-0.2", "sensor", 0.2,
-                                    timeout_cycles=loss.configured_timeout_cycles()))
+        pl.append(
+            loss.process_loss(
+                out / "loss" / "deploy-sensor-0.2",
+                "sensor",
+                0.2,
+                timeout_cycles=loss.configured_timeout_cycles(),
+            )
+        )
     rows += loss_rows(pl, s)
     _say("duplicated / reordered / burst sensor frames ...")
     n_dup = 1 if q else max(1, a.trials // 5)
-    dups = [duplicates.dup_trial(out / f"dup-{i}", 500 if q else 2000, a.seed + i)
-            for i in range(n_dup)]
+    dups = [duplicates.dup_trial(out / f"dup-{i}", 500 if q else 2000, a.seed + i) for i in range(n_dup)]
     rows += dup_rows(dups, s)
     n_kill = min(a.trials, 2) if q else a.trials
     _say(f"kill -9: {n_kill} trials ...")
-    ks = [kills.kill_trial(out / f"kill-{i}", i, v, rng)
-          for i, v in enumerate(_victims(n_kill, rng))]
+    ks = [kills.kill_trial(out / f"kill-{i}", i, v, rng) for i, v in enumerate(_victims(n_kill, rng))]
     rows += kill_rows(ks, s)
     _say("SIGTERM during a run ...")
     firsts = ["controller"] if q else ["controller", "emulator"]
@@ -96,13 +104,13 @@ def _process_sections(a: argparse.Namespace, out: Path, rng: random.Random,
         muts = muts[::4]
     bad, frames = badinput.run_bad_inputs(out / "bad", muts)
     rows += bad_rows(bad, frames, s)
-    raw.update(process_loss=pl, duplicates=dups, kills=ks, sigterm=ts, bad_inputs=bad,
-               bad_input_bus_frames=frames)
+    raw.update(
+        process_loss=pl, duplicates=dups, kills=ks, sigterm=ts, bad_inputs=bad, bad_input_bus_frames=frames
+    )
     _hostile_section(q, out, rows, s, raw)
 
 
-def _hostile_section(q: bool, out: Path, rows: list[Row], s: Summary,
-                     raw: dict[str, Any]) -> None:
+def _hostile_section(q: bool, out: Path, rows: list[Row], s: Summary, raw: dict[str, Any]) -> None:
     _say("stray datagrams, foreign files in --out, full disk ...")
     st = stray.stray_trial(out / "stray", rounds=2 if q else 10)
     fo = hostile.foreign_files_trial(out / "hostile", hostile.short_scenario(out / "short.yaml"))
@@ -141,14 +149,23 @@ def run(args: argparse.Namespace) -> int:
     s.add(rows)
     wall = time.monotonic() - t0
     mode = "quick" if args.quick else "full"
-    print(f"ehpss-hil bench faults ({mode}, {args.trials} kill trials requested, seed "
-          f"{args.seed}, wall {wall:.0f} s)")
+    print(
+        f"ehpss-hil bench faults ({mode}, {args.trials} kill trials requested, seed "
+        f"{args.seed}, wall {wall:.0f} s)"
+    )
     print(format_table(rows))
     print(s.line())
-    write_json(args.json, finite_json({
-        "summary": dataclasses.asdict(s), "wall_s": wall,
-        "rows": [dataclasses.asdict(r) for r in rows],
-        "results": {k: _jsonable(v) for k, v in raw.items()}}))
+    write_json(
+        args.json,
+        finite_json(
+            {
+                "summary": dataclasses.asdict(s),
+                "wall_s": wall,
+                "rows": [dataclasses.asdict(r) for r in rows],
+                "results": {k: _jsonable(v) for k, v in raw.items()},
+            }
+        ),
+    )
     return 0 if s.ok else 1
 
 

@@ -44,9 +44,15 @@ def measure(rate_hz: float, periods: int = 3000) -> dict[str, Any]:
         meas.samples = 1 if k else 0
         t0 = perf()
         cmd = ctrl.step(meas)
-        codec.encode("VALVE_CMD", {"CurrentSetpoint": max(-1.0, min(1.0, cmd.current_a)),
-                                   "Enable": 1, "SensorCounterEcho": k & 0x0F,
-                                   "CycleCount": k & 0xFFFF})
+        codec.encode(
+            "VALVE_CMD",
+            {
+                "CurrentSetpoint": max(-1.0, min(1.0, cmd.current_a)),
+                "Enable": 1,
+                "SensorCounterEcho": k & 0x0F,
+                "CycleCount": k & 0xFFFF,
+            },
+        )
         return perf() - t0
 
     for k in range(500):  # past the controller's warm-up
@@ -87,6 +93,7 @@ def steal_fraction(before: tuple[int, ...] | None, after: tuple[int, ...] | None
     if before is None or after is None:
         return None
     user, nice, system, _idle, _iowait, irq, softirq, steal = (
-        a - b for a, b in zip(after[:8], before[:8], strict=True))
+        a - b for a, b in zip(after[:8], before[:8], strict=True)
+    )
     wanted = user + nice + system + irq + softirq + steal
     return steal / wanted if wanted > 0 else None

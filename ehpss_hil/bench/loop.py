@@ -58,25 +58,44 @@ def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, 
     ctrl_args, emu_args = _VARIANTS[variant]
     d = out / variant
     before = hostref.cpu_times()
-    res = execute(RunPlan(scenario_path=sc, mode="mmac", out_dir=d, bus_logger=False,
-                          extra_controller_args=ctrl_args, extra_emulator_args=emu_args,
-                          auto_recover=True, watchdog_cycles=10, truth=False))
+    res = execute(
+        RunPlan(
+            scenario_path=sc,
+            mode="mmac",
+            out_dir=d,
+            bus_logger=False,
+            extra_controller_args=ctrl_args,
+            extra_emulator_args=emu_args,
+            auto_recover=True,
+            watchdog_cycles=10,
+            truth=False,
+        )
+    )
     steal = hostref.steal_fraction(before, hostref.cpu_times())
     check_exit_codes(res)
     c = json.loads((d / "controller-summary.json").read_text())
     e = json.loads((d / "emulator-summary.json").read_text())
     st = c["stats"]
-    rejected = sum(n for v, n in c["received_by_verdict"].items()
-                   if v not in ("OK", "OK_SOME_LOST"))
-    return {"variant": variant, "rate_hz": rate, "seconds": seconds, "cycles": c["cycles"],
-            "compute_s": st["compute_s"], "lateness_s": st["lateness_s"],
-            "latency_s": st["latency_s"], "overruns": st["overruns"],
-            "overrun_ratio": st["overruns"] / max(c["cycles"], 1), "rejected_frames": rejected,
-            "watchdog_trips": c["watchdog_trips"], "max_rss_bytes": c.get("max_rss_bytes"),
-            "woken_by_sensor": c.get("woken_by_sensor", 0),
-            "skipped_periods": c.get("skipped_periods", 0),
-            "emulator_overruns": e["stats"]["overruns"],
-            "emulator_lateness_s": e["stats"]["lateness_s"], "host_steal_fraction": steal}
+    rejected = sum(n for v, n in c["received_by_verdict"].items() if v not in ("OK", "OK_SOME_LOST"))
+    return {
+        "variant": variant,
+        "rate_hz": rate,
+        "seconds": seconds,
+        "cycles": c["cycles"],
+        "compute_s": st["compute_s"],
+        "lateness_s": st["lateness_s"],
+        "latency_s": st["latency_s"],
+        "overruns": st["overruns"],
+        "overrun_ratio": st["overruns"] / max(c["cycles"], 1),
+        "rejected_frames": rejected,
+        "watchdog_trips": c["watchdog_trips"],
+        "max_rss_bytes": c.get("max_rss_bytes"),
+        "woken_by_sensor": c.get("woken_by_sensor", 0),
+        "skipped_periods": c.get("skipped_periods", 0),
+        "emulator_overruns": e["stats"]["overruns"],
+        "emulator_lateness_s": e["stats"]["lateness_s"],
+        "host_steal_fraction": steal,
+    }
 
 
 def _us(d: dict[str, float]) -> str:
@@ -86,41 +105,50 @@ def _us(d: dict[str, float]) -> str:
 def _print_host(ref: dict[str, Any]) -> None:
     a, b = ref["after_sleep_s"], ref["back_to_back_s"]
     print(f"{'host':<7} {'mmac step + encode, slept':<28} {_us(a)}  (no bus, no peer)")
-    print(f"{'host':<7} {'mmac step + encode, hot':<28} {_us(b)}  cold/hot p99 "
-          f"{a['p99'] / b['p99']:.1f}×")
+    print(f"{'host':<7} {'mmac step + encode, hot':<28} {_us(b)}  cold/hot p99 {a['p99'] / b['p99']:.1f}×")
     if a["p99"] > 1e-4:
-        print(f"{'host':<7} this host cannot meet compute p99 ≤ 100 µs with this code: the step and "
-              f"encode alone take {a['p99'] * 1e6:.0f} µs at p99 after a sleep "
-              "(docs/runtime.md: 'The host's share')")
+        print(
+            f"{'host':<7} this host cannot meet compute p99 ≤ 100 µs with this code: the step and "
+            f"encode alone take {a['p99'] * 1e6:.0f} µs at p99 after a sleep "
+            "(docs/runtime.md: 'The host's share')"
+        )
 
 
 def _print(rows: list[dict[str, Any]]) -> None:
-    print(f"{'variant':<7} {'figure':<28} {'p50 µs':>8} {'p99 µs':>8} {'p99.9 µs':>8} "
-          f"{'max µs':>8}  target")
+    print(f"{'variant':<7} {'figure':<28} {'p50 µs':>8} {'p99 µs':>8} {'p99.9 µs':>8} {'max µs':>8}  target")
     for r in rows:
         ov_target = 1e-4 if r["rate_hz"] <= 1000 else 1e-3
-        lines = [("controller compute", r["compute_s"], "p99 ≤ 100 µs", r["compute_s"]["p99"] <= 1e-4),
-                 ("controller wake-up lateness", r["lateness_s"], "p99 ≤ 150 µs (RT)",
-                  r["lateness_s"]["p99"] <= 150e-6),
-                 ("sensor→command latency", r["latency_s"], "p99 ≤ 300 µs",
-                  r["latency_s"]["p99"] <= 300e-6),
-                 ("emulator wake-up lateness", r["emulator_lateness_s"], "", None)]
+        lines = [
+            ("controller compute", r["compute_s"], "p99 ≤ 100 µs", r["compute_s"]["p99"] <= 1e-4),
+            (
+                "controller wake-up lateness",
+                r["lateness_s"],
+                "p99 ≤ 150 µs (RT)",
+                r["lateness_s"]["p99"] <= 150e-6,
+            ),
+            ("sensor→command latency", r["latency_s"], "p99 ≤ 300 µs", r["latency_s"]["p99"] <= 300e-6),
+            ("emulator wake-up lateness", r["emulator_lateness_s"], "", None),
+        ]
         for label, d, target, ok in lines:
             verdict = "" if ok is None else ("PASS" if ok else "FAIL")
             print(f"{r['variant']:<7} {label:<28} {_us(d)}  {target} {verdict}")
         rss = (r["max_rss_bytes"] or 0) / 2**20
-        print(f"{r['variant']:<7} overruns {r['overruns']} / {r['cycles']} cycles = "
-              f"{r['overrun_ratio']:.2e} (target ≤ {ov_target:g}: "
-              f"{'PASS' if r['overrun_ratio'] <= ov_target else 'FAIL'}), skipped periods "
-              f"{r['skipped_periods']}, cycles started by the sensor pair {r['woken_by_sensor']}; "
-              f"emulator overruns "
-              f"{r['emulator_overruns']}; rejected frames {r['rejected_frames']}; watchdog trips "
-              f"{r['watchdog_trips']} (incl. the one at the end); controller peak RSS {rss:.1f} MiB "
-              f"(≤ 100 MB: {'PASS' if rss * 2**20 <= 100e6 else 'FAIL'})")
+        print(
+            f"{r['variant']:<7} overruns {r['overruns']} / {r['cycles']} cycles = "
+            f"{r['overrun_ratio']:.2e} (target ≤ {ov_target:g}: "
+            f"{'PASS' if r['overrun_ratio'] <= ov_target else 'FAIL'}), skipped periods "
+            f"{r['skipped_periods']}, cycles started by the sensor pair {r['woken_by_sensor']}; "
+            f"emulator overruns "
+            f"{r['emulator_overruns']}; rejected frames {r['rejected_frames']}; watchdog trips "
+            f"{r['watchdog_trips']} (incl. the one at the end); controller peak RSS {rss:.1f} MiB "
+            f"(≤ 100 MB: {'PASS' if rss * 2**20 <= 100e6 else 'FAIL'})"
+        )
         steal = r.get("host_steal_fraction")
         if steal is not None:
-            print(f"{r['variant']:<7} host steal time during the run: {100 * steal:.1f} % of the "
-                  "time this VM wanted a CPU (the hypervisor ran another guest)")
+            print(
+                f"{r['variant']:<7} host steal time during the run: {100 * steal:.1f} % of the "
+                "time this VM wanted a CPU (the hypervisor ran another guest)"
+            )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -26,10 +26,11 @@ from .common import finite_json, write_json
 NAME = "soak"
 HELP = "long run of both processes at 1 kHz: RSS and counters at start and end"
 
-_STATUS_KEYS = ("VmRSS", "VmHWM", "Threads", "voluntary_ctxt_switches",
-                "nonvoluntary_ctxt_switches")
-_COUNTERS = re.compile(r"cycles (\d+), state (\w+), overruns (\d+), rejected frames (\d+), "
-                       r"fail-safe cycles (\d+)")
+_STATUS_KEYS = ("VmRSS", "VmHWM", "Threads", "voluntary_ctxt_switches", "nonvoluntary_ctxt_switches")
+_COUNTERS = re.compile(
+    r"cycles (\d+), state (\w+), overruns (\d+), rejected frames (\d+), "
+    r"fail-safe cycles (\d+)"
+)
 #: RSS growth from start to end treated as "no growth" (kB): allocator noise, not a leak
 GROWTH_LIMIT_KB = 2048
 RSS_LIMIT_B = 100e6
@@ -37,8 +38,12 @@ RSS_LIMIT_B = 100e6
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seconds", type=float, default=600.0, help="soak duration (s)")
-    p.add_argument("--warmup", type=float, default=10.0,
-                   help="seconds after ACTIVE before the start sample (imports, first GC)")
+    p.add_argument(
+        "--warmup",
+        type=float,
+        default=10.0,
+        help="seconds after ACTIVE before the start sample (imports, first GC)",
+    )
     p.add_argument("--interval", type=float, default=10.0, help="sampling interval (s)")
     p.add_argument("--out", type=Path, help="keep the run directory here")
     p.add_argument("--json", metavar="FILE", help="write the samples and counters as JSON")
@@ -59,8 +64,16 @@ def proc_sample(pid: int) -> dict[str, float]:
 
 
 def _controller_counters(text: str) -> list[dict[str, Any]]:
-    return [{"cycles": int(m[1]), "state": m[2], "overruns": int(m[3]), "rejected": int(m[4]),
-             "failsafe_cycles": int(m[5])} for m in _COUNTERS.finditer(text)]
+    return [
+        {
+            "cycles": int(m[1]),
+            "state": m[2],
+            "overruns": int(m[3]),
+            "rejected": int(m[4]),
+            "failsafe_cycles": int(m[5]),
+        }
+        for m in _COUNTERS.finditer(text)
+    ]
 
 
 def _soak(out: Path, seconds: float, warmup: float, interval: float) -> dict[str, Any]:
@@ -85,39 +98,62 @@ def _soak(out: Path, seconds: float, warmup: float, interval: float) -> dict[str
             time.sleep(min(interval, seconds - now))
         exits = {name: c.terminate() for name, c in procs.items()}
         text = ctl.text()
-    summaries = {n: json.loads((out / f"{n}.json").read_text()) for n in procs
-                 if (out / f"{n}.json").exists()}
-    return {"seconds": seconds, "samples": samples, "exits": exits,
-            "controller_counters": _controller_counters(text), "summaries": summaries}
+    summaries = {
+        n: json.loads((out / f"{n}.json").read_text()) for n in procs if (out / f"{n}.json").exists()
+    }
+    return {
+        "seconds": seconds,
+        "samples": samples,
+        "exits": exits,
+        "controller_counters": _controller_counters(text),
+        "summaries": summaries,
+    }
 
 
 def _print(r: dict[str, Any]) -> bool:
     ok = all(v == 0 for v in r["exits"].values())
-    print(f"{'process':<10} {'when':<6} {'t s':>6} {'VmRSS MiB':>10} {'VmHWM MiB':>10} "
-          f"{'threads':>7} {'CPU s':>8} {'vol cs':>9} {'invol cs':>9}")
+    print(
+        f"{'process':<10} {'when':<6} {'t s':>6} {'VmRSS MiB':>10} {'VmHWM MiB':>10} "
+        f"{'threads':>7} {'CPU s':>8} {'vol cs':>9} {'invol cs':>9}"
+    )
     for name, ss in r["samples"].items():
         for when, s in (("start", ss[0]), ("end", ss[-1])):
-            print(f"{name:<10} {when:<6} {s['t_s']:6.0f} {s['VmRSS'] / 1024:10.2f} "
-                  f"{s['VmHWM'] / 1024:10.2f} {s['Threads']:7.0f} {s['cpu_s']:8.1f} "
-                  f"{s['voluntary_ctxt_switches']:9.0f} {s['nonvoluntary_ctxt_switches']:9.0f}")
+            print(
+                f"{name:<10} {when:<6} {s['t_s']:6.0f} {s['VmRSS'] / 1024:10.2f} "
+                f"{s['VmHWM'] / 1024:10.2f} {s['Threads']:7.0f} {s['cpu_s']:8.1f} "
+                f"{s['voluntary_ctxt_switches']:9.0f} {s['nonvoluntary_ctxt_switches']:9.0f}"
+            )
         growth = ss[-1]["VmRSS"] - ss[0]["VmRSS"]
         peak = max(s["VmRSS"] for s in ss)
         verdict = growth <= GROWTH_LIMIT_KB and (name != "controller" or peak * 1024 <= RSS_LIMIT_B)
         ok &= verdict
-        print(f"{name:<10} RSS growth start→end {growth / 1024:+.2f} MiB (≤ "
-              f"{GROWTH_LIMIT_KB / 1024:g} MiB), peak {peak / 1024:.2f} MiB"
-              f"{' (controller ≤ 100 MB)' if name == 'controller' else ''}: "
-              f"{'PASS' if verdict else 'FAIL'}")
+        print(
+            f"{name:<10} RSS growth start→end {growth / 1024:+.2f} MiB (≤ "
+            f"{GROWTH_LIMIT_KB / 1024:g} MiB), peak {peak / 1024:.2f} MiB"
+            f"{' (controller ≤ 100 MB)' if name == 'controller' else ''}: "
+            f"{'PASS' if verdict else 'FAIL'}"
+        )
     cc = r["controller_counters"]
     for when, c in (("first", cc[0]), ("last", cc[-1])) if cc else ():
         print(f"controller counters ({when} log line): {c}")
     for name, s in r["summaries"].items():
-        keys = ("cycles", "state", "watchdog_trips", "failsafe_cycles", "skipped_periods",
-                "periods", "command_timeouts", "commands_accepted", "tx_errors", "frames_received")
+        keys = (
+            "cycles",
+            "state",
+            "watchdog_trips",
+            "failsafe_cycles",
+            "skipped_periods",
+            "periods",
+            "command_timeouts",
+            "commands_accepted",
+            "tx_errors",
+            "frames_received",
+        )
         figures = {k: s[k] for k in keys if k in s}
         figures["overruns"] = s.get("stats", {}).get("overruns")
-        figures["rejected"] = sum(n for v, n in s.get("received_by_verdict", {}).items()
-                                  if v not in ("OK", "OK_SOME_LOST"))
+        figures["rejected"] = sum(
+            n for v, n in s.get("received_by_verdict", {}).items() if v not in ("OK", "OK_SOME_LOST")
+        )
         print(f"{name} at the end: {figures}")
     print(f"exit codes {r['exits']}: {'PASS' if ok else 'FAIL'}")
     return ok

@@ -84,13 +84,17 @@ class LineDrops:
         now = time.monotonic()
         if now >= self._next_warn_s:
             self._next_warn_s = now + self.WARN_INTERVAL_S
-            _log.warning("candump log %s: cannot write (%s%s): %d lines dropped so far; "
-                         "control continues, the count goes to the sidecar", self.path, reason,
-                         f": {detail}" if detail else "", self.by_reason[reason])
+            _log.warning(
+                "candump log %s: cannot write (%s%s): %d lines dropped so far; "
+                "control continues, the count goes to the sidecar",
+                self.path,
+                reason,
+                f": {detail}" if detail else "",
+                self.by_reason[reason],
+            )
 
     def resumed(self) -> None:
         """Lines are written again after a failure: say so once."""
         if self.failing:
             self.failing = False
-            _log.warning("candump log %s: writing again (%d lines dropped so far)", self.path,
-                         self.total)
+            _log.warning("candump log %s: writing again (%d lines dropped so far)", self.path, self.total)

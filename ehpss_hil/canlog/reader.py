@@ -26,9 +26,11 @@ from .sidecar import sidecar_path
 from .writer import CAN_ERR_BUSERROR, CAN_ERR_FLAG
 
 #: ``(sec.usec) iface ID#DATA`` | ``ID#R[dlc]`` | ``ID##<flags>DATA`` (candump -L), optional R/T
-_LINE = re.compile(r"\((\d+\.\d+)\) (\S+) ([0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})#"
-                   r"(R\d?|#[0-9A-Fa-f](?:[0-9A-Fa-f]{2}){0,64}|(?:[0-9A-Fa-f]{2}){0,8})"
-                   r"(?: [RrTt])?")
+_LINE = re.compile(
+    r"\((\d+\.\d+)\) (\S+) ([0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})#"
+    r"(R\d?|#[0-9A-Fa-f](?:[0-9A-Fa-f]{2}){0,64}|(?:[0-9A-Fa-f]{2}){0,8})"
+    r"(?: [RrTt])?"
+)
 
 
 @dataclass
@@ -68,12 +70,19 @@ def parse_line(line: str) -> can.Message | None:
     data = body[2:] if fd else body
     remote = data[:1] in ("R", "r")
     try:
-        return can.Message(timestamp=float(ts), arbitration_id=can_id & 0x1FFFFFFF,
-                           is_extended_id=len(ident) > 3, is_remote_frame=remote, is_fd=fd,
-                           bitrate_switch=bool(flags & 1), error_state_indicator=bool(flags & 2),
-                           dlc=int(data[1:] or 0) if remote else len(data) // 2,
-                           data=None if remote else bytes.fromhex(data),
-                           channel=int(chan) if chan.isdigit() else chan, check=True)
+        return can.Message(
+            timestamp=float(ts),
+            arbitration_id=can_id & 0x1FFFFFFF,
+            is_extended_id=len(ident) > 3,
+            is_remote_frame=remote,
+            is_fd=fd,
+            bitrate_switch=bool(flags & 1),
+            error_state_indicator=bool(flags & 2),
+            dlc=int(data[1:] or 0) if remote else len(data) // 2,
+            data=None if remote else bytes.fromhex(data),
+            channel=int(chan) if chan.isdigit() else chan,
+            check=True,
+        )
     except ValueError:
         return None
 
@@ -108,14 +117,15 @@ def log_files(path: str | os.PathLike[str]) -> list[Path]:
         return [p]
     numbered = []
     for q in p.parent.glob(p.name + ".*"):
-        tail = q.name[len(p.name) + 1:]
+        tail = q.name[len(p.name) + 1 :]
         if tail.isdigit():
             numbered.append((int(tail), q))
     return [q for _, q in sorted(numbered, reverse=True)] + ([p] if p.exists() else [])
 
 
-def read_log(path: str | os.PathLike[str], rotated: bool = True,
-             bad: BadLines | None = None) -> Iterator[can.Message]:
+def read_log(
+    path: str | os.PathLike[str], rotated: bool = True, bad: BadLines | None = None
+) -> Iterator[can.Message]:
     """Frames of a candump ``-L`` log (timestamps in s), as python-can's reader gives them.
 
     With ``rotated`` the whole rotation set is read, oldest file first. Lines that are no frame
@@ -141,8 +151,7 @@ def is_candump(path: str | os.PathLike[str]) -> bool:
     return len(parts) > 1 and (parts[-1] == "log" or (parts[-1].isdigit() and "log" in parts))
 
 
-def read_frames(path: str | os.PathLike[str], bad: BadLines | None = None
-                ) -> Iterator[can.Message]:
+def read_frames(path: str | os.PathLike[str], bad: BadLines | None = None) -> Iterator[can.Message]:
     """The frames of any log python-can reads: candump ``-L`` files (``*.log``, rotation set
     included) through :func:`read_log`, every other format (``.asc``, ``.blf``, ``.csv``,
     ``.trc``, …) through :class:`can.LogReader`. A file python-can cannot read, or whose data
@@ -158,8 +167,7 @@ def read_frames(path: str | os.PathLike[str], bad: BadLines | None = None
     try:
         yield from reader
     except Exception as exc:  # a foreign file: whatever its reader raises is bad input
-        raise LogError(f"{p}: unreadable {p.suffix or 'log'} data ({type(exc).__name__}: "
-                       f"{exc})") from exc
+        raise LogError(f"{p}: unreadable {p.suffix or 'log'} data ({type(exc).__name__}: {exc})") from exc
     finally:
         reader.stop()
 
@@ -174,9 +182,12 @@ def read_sidecar(path: str | os.PathLike[str]) -> dict[str, Any] | None:
     return data if isinstance(data, dict) else None
 
 
-def decode_log(path: str | os.PathLike[str], codec: FrameCodec | None = None,
-               rotated: bool = True,
-               bad: BadLines | None = None) -> dict[str, dict[str, np.ndarray]]:
+def decode_log(
+    path: str | os.PathLike[str],
+    codec: FrameCodec | None = None,
+    rotated: bool = True,
+    bad: BadLines | None = None,
+) -> dict[str, dict[str, np.ndarray]]:
     """Decode a log with the DBC into per-frame-name arrays, in file order.
 
     Each frame name maps to ``{"t_s": timestamps (s), <signal>: physical values (SI), …}``.

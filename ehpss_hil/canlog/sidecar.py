@@ -24,8 +24,10 @@ from typing import Any
 
 from .. import DEFAULT_DBC, __version__
 
-DEFAULT_CLOCK = ("msg.timestamp as given by python-can: wall clock, seconds since the Unix epoch "
-                 "(time.time() for frames the process builds)")
+DEFAULT_CLOCK = (
+    "msg.timestamp as given by python-can: wall clock, seconds since the Unix epoch "
+    "(time.time() for frames the process builds)"
+)
 
 
 @dataclass
@@ -47,8 +49,13 @@ class FileRecord:
 
     def as_dict(self, name: str) -> dict[str, Any]:
         """JSON form, with the file's current name."""
-        return {"name": name, "lines": self.lines, "bytes": self.bytes,
-                "first_t_s": self.first_t_s, "last_t_s": self.last_t_s}
+        return {
+            "name": name,
+            "lines": self.lines,
+            "bytes": self.bytes,
+            "first_t_s": self.first_t_s,
+            "last_t_s": self.last_t_s,
+        }
 
 
 def sidecar_path(log_path: str | os.PathLike[str]) -> Path:
@@ -87,8 +94,9 @@ def jsonable(obj: Any) -> Any:
     return str(obj)
 
 
-def build_sidecar(log_path: Path, iface: str, caller: dict[str, Any] | None, max_bytes: int,
-                  backups: int, queue_lines: int) -> dict[str, Any]:
+def build_sidecar(
+    log_path: Path, iface: str, caller: dict[str, Any] | None, max_bytes: int, backups: int, queue_lines: int
+) -> dict[str, Any]:
     """The initial sidecar mapping (counts and files are filled in by the writer)."""
     meta: dict[str, Any] = jsonable(dict(caller or {}))
     dbc = meta.get("dbc")
@@ -96,18 +104,24 @@ def build_sidecar(log_path: Path, iface: str, caller: dict[str, Any] | None, max
     dbc_path = str(dbc_path) if dbc_path else str(DEFAULT_DBC)
     clock = meta.get("clock")
     now = time.time()
-    meta.update({
-        "format": "candump -L",
-        "log": log_path.name,
-        "iface": iface,
-        "versions": {"ehpss-hil": __version__, "python-can": _version("python-can"),
-                     "cantools": _version("cantools"), "python": platform.python_version()},
-        "dbc": {"path": dbc_path, "sha256": file_sha256(dbc_path)},
-        "start_time_s": now,
-        "start_time_utc": dt.datetime.fromtimestamp(now, dt.UTC).isoformat(),
-        "clock": clock if clock else DEFAULT_CLOCK,
-        "rotation": {"max_bytes": max_bytes, "backups": backups, "queue_lines": queue_lines},
-    })
+    meta.update(
+        {
+            "format": "candump -L",
+            "log": log_path.name,
+            "iface": iface,
+            "versions": {
+                "ehpss-hil": __version__,
+                "python-can": _version("python-can"),
+                "cantools": _version("cantools"),
+                "python": platform.python_version(),
+            },
+            "dbc": {"path": dbc_path, "sha256": file_sha256(dbc_path)},
+            "start_time_s": now,
+            "start_time_utc": dt.datetime.fromtimestamp(now, dt.UTC).isoformat(),
+            "clock": clock if clock else DEFAULT_CLOCK,
+            "rotation": {"max_bytes": max_bytes, "backups": backups, "queue_lines": queue_lines},
+        }
+    )
     return meta
 
 

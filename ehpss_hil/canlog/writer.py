@@ -124,10 +124,16 @@ class CandumpLogger:
     a signal handler of the owning process (it also runs at interpreter exit).
     """
 
-    def __init__(self, path: str | os.PathLike[str], iface: str = "can0",
-                 max_bytes: int = 256 * 2**20, backups: int = 5, queue_lines: int = 200_000,
-                 sidecar: dict[str, Any] | None = None,
-                 disk_reserve_bytes: int = DISK_RESERVE_BYTES) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        iface: str = "can0",
+        max_bytes: int = 256 * 2**20,
+        backups: int = 5,
+        queue_lines: int = 200_000,
+        sidecar: dict[str, Any] | None = None,
+        disk_reserve_bytes: int = DISK_RESERVE_BYTES,
+    ) -> None:
         if not iface or any(c.isspace() for c in iface):
             raise ValueError(f"iface must be a non-empty name without spaces, got {iface!r}")
         if max_bytes < 4 * MAX_LINE_BYTES:
@@ -168,8 +174,7 @@ class CandumpLogger:
             if not existed:
                 self.path.unlink(missing_ok=True)
             raise
-        self._thread = threading.Thread(target=self._run, name=f"candump:{self.path.name}",
-                                        daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"candump:{self.path.name}", daemon=True)
         self._thread.start()
         atexit.register(self.close)
 
@@ -183,10 +188,20 @@ class CandumpLogger:
                 else:
                     self._overflow += 1
             return
-        self._queue.append((msg.timestamp or 0.0, msg.arbitration_id, msg.is_extended_id,
-                            msg.is_remote_frame, msg.is_error_frame, msg.is_fd,
-                            msg.bitrate_switch, msg.error_state_indicator, msg.dlc,
-                            bytes(msg.data)))
+        self._queue.append(
+            (
+                msg.timestamp or 0.0,
+                msg.arbitration_id,
+                msg.is_extended_id,
+                msg.is_remote_frame,
+                msg.is_error_frame,
+                msg.is_fd,
+                msg.bitrate_switch,
+                msg.error_state_indicator,
+                msg.dlc,
+                bytes(msg.data),
+            )
+        )
 
     def kick(self) -> None:
         """The caller is about to be idle (a loop between cycles): wake the writer now when at
@@ -251,7 +266,7 @@ class CandumpLogger:
         start = 0
         for i, item in enumerate(batch):
             line = format_line(item, self.iface).encode("ascii")
-            if (self.backups > 0 and size + len(line) > self.max_bytes and size > 0):
+            if self.backups > 0 and size + len(line) > self.max_bytes and size > 0:
                 self._flush_chunk(chunk, batch[start:i])
                 self._rotate()
                 chunk, size, start = [], 0, i
@@ -339,7 +354,7 @@ class CandumpLogger:
             return
         prefix = self.path.name + "."
         for p in self.path.parent.iterdir():
-            if p.name.startswith(prefix) and p.name[len(prefix):].isdigit():
+            if p.name.startswith(prefix) and p.name[len(prefix) :].isdigit():
                 p.unlink()
 
     # ---- shutdown ------------------------------------------------------------------------
@@ -363,10 +378,15 @@ class CandumpLogger:
             with self._drop_lock:
                 self._late += leftover
             self._close_file()
-            summary = LogSummary(str(self.path), self._written, self.dropped, self._discarded,
-                                 [str(self._file_name(i)) for i in
-                                  range(len(self._records) - 1, -1, -1)], self._error,
-                                 self.dropped_by_reason())
+            summary = LogSummary(
+                str(self.path),
+                self._written,
+                self.dropped,
+                self._discarded,
+                [str(self._file_name(i)) for i in range(len(self._records) - 1, -1, -1)],
+                self._error,
+                self.dropped_by_reason(),
+            )
             self._write_sidecar("closed")
             self._summary = summary
             atexit.unregister(self.close)
@@ -394,12 +414,16 @@ class CandumpLogger:
         """Write the sidecar (keeping room for its later updates); an error is raised when
         ``strict``, else recorded in :attr:`LogSummary.error`."""
         self._meta["status"] = status
-        self._meta["counts"] = {"written": self._written, "dropped": self.dropped,
-                                "discarded_by_rotation": self._discarded}
+        self._meta["counts"] = {
+            "written": self._written,
+            "dropped": self.dropped,
+            "discarded_by_rotation": self._discarded,
+        }
         if self.dropped:
             self._meta["counts"]["dropped_by_reason"] = self.dropped_by_reason()
-        self._meta["files"] = [rec.as_dict(self._file_name(i).name) for i, rec in
-                               reversed(list(enumerate(self._records)))]
+        self._meta["files"] = [
+            rec.as_dict(self._file_name(i).name) for i, rec in reversed(list(enumerate(self._records)))
+        ]
         self._meta["error"] = self._error
         if status == "closed":
             self._meta["end_time_s"] = time.time()

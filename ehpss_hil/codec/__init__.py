@@ -3,5 +3,4 @@
 from .e2e import CounterCheck, E2EState, SampleCount, counter_steps
 from .frames import Decoded, FrameCodec, Verdict
 
-__all__ = ["CounterCheck", "Decoded", "E2EState", "FrameCodec", "SampleCount", "Verdict",
-           "counter_steps"]
+__all__ = ["CounterCheck", "Decoded", "E2EState", "FrameCodec", "SampleCount", "Verdict", "counter_steps"]

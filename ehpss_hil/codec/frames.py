@@ -107,8 +107,13 @@ class FrameCodec:
     name) and the receive counter checks (one per CAN ID) and counts every verdict.
     """
 
-    def __init__(self, dbc_path: str | Path | None = None, id_base: int = DBC_ID_BASE,
-                 node_ids: dict[str, int] | None = None, max_delta_counter: int = 3) -> None:
+    def __init__(
+        self,
+        dbc_path: str | Path | None = None,
+        id_base: int = DBC_ID_BASE,
+        node_ids: dict[str, int] | None = None,
+        max_delta_counter: int = 3,
+    ) -> None:
         path = Path(dbc_path) if dbc_path is not None else DEFAULT_DBC
         try:
             db = cantools.database.load_file(str(path))
@@ -128,19 +133,33 @@ class FrameCodec:
             else:
                 can_id = msg.frame_id - DBC_ID_BASE + id_base
                 if not 0 <= can_id <= MAX_STANDARD_ID:
-                    raise FrameIdError(f"id_base 0x{id_base:X} puts {msg.name} at 0x{can_id:X}, "
-                                       "outside the 11-bit ID range")
+                    raise FrameIdError(
+                        f"id_base 0x{id_base:X} puts {msg.name} at 0x{can_id:X}, outside the 11-bit ID range"
+                    )
             bounds = tuple(_bounds(s) for s in msg.signals if s.name not in ("CRC", "Counter"))
             zeros = {s.name: 0 for s in msg.signals if s.multiplexer_ids is None}
             conv = {s.name: s.conversion for s in msg.signals}
             data_ids = _data_ids(msg)
             e2e = frozenset(("CRC", "Counter") if data_ids is not None else ())
-            spec = _Spec(msg, msg.name, msg.length, can_id, data_ids, bounds,
-                         {b[0]: b[1:] for b in bounds}, zeros, conv, BitLayout.of(msg, e2e), e2e)
+            spec = _Spec(
+                msg,
+                msg.name,
+                msg.length,
+                can_id,
+                data_ids,
+                bounds,
+                {b[0]: b[1:] for b in bounds},
+                zeros,
+                conv,
+                BitLayout.of(msg, e2e),
+                e2e,
+            )
             if can_id in self._by_id:
                 cls = FrameIdError if id_base != DBC_ID_BASE else FrameError
-                raise cls(f"id_base 0x{id_base:X} gives {msg.name} and "
-                          f"{self._by_id[can_id].msg.name} the same ID 0x{can_id:X}")
+                raise cls(
+                    f"id_base 0x{id_base:X} gives {msg.name} and "
+                    f"{self._by_id[can_id].msg.name} the same ID 0x{can_id:X}"
+                )
             self._by_name[msg.name] = spec
             self._by_id[can_id] = spec
         self.max_delta_counter = max_delta_counter
@@ -218,8 +237,9 @@ class FrameCodec:
             pass
         return self.check_plausible(spec.name, values)
 
-    def encode(self, name: str, values: dict[str, Any], timestamp_s: float = 0.0,
-               counter: int | None = None) -> can.Message:
+    def encode(
+        self, name: str, values: dict[str, Any], timestamp_s: float = 0.0, counter: int | None = None
+    ) -> can.Message:
         """Encode ``values`` (physical units) into a protected frame; advances the TX counter.
 
         Raises :class:`FrameError` for an unknown name or a non-finite/out-of-range value.
@@ -237,8 +257,13 @@ class FrameCodec:
                 counter = self._tx_counter[name]
                 self._tx_counter[name] = (counter + 1) & 0x0F
             data = protect(bytearray(data), counter, spec.data_ids)
-        return can.Message(arbitration_id=spec.can_id, data=data, is_extended_id=False,
-                           dlc=spec.length, timestamp=timestamp_s)
+        return can.Message(
+            arbitration_id=spec.can_id,
+            data=data,
+            is_extended_id=False,
+            dlc=spec.length,
+            timestamp=timestamp_s,
+        )
 
     def skip(self, name: str) -> None:
         """Advance ``name``'s TX counter without a frame: one that was sent and lost on the
@@ -285,8 +310,13 @@ class FrameCodec:
     def _classify(self, frame: can.Message) -> Decoded:
         ts = frame.timestamp
         spec = self._by_id.get(frame.arbitration_id)
-        if (spec is None or frame.is_extended_id or frame.is_remote_frame or frame.is_error_frame
-                or frame.is_fd):
+        if (
+            spec is None
+            or frame.is_extended_id
+            or frame.is_remote_frame
+            or frame.is_error_frame
+            or frame.is_fd
+        ):
             return Decoded(Verdict.UNKNOWN_ID, None, None, ts)
         name = spec.name
         data = frame.data
@@ -303,8 +333,9 @@ class FrameCodec:
                 rate = self._rate.get(spec.can_id)
                 if rate is not None:
                     rate[1].interrupt()
-                return Decoded(Verdict.REPEATED if state is E2EState.REPEATED
-                               else Verdict.WRONG_SEQUENCE, name, None, ts)
+                return Decoded(
+                    Verdict.REPEATED if state is E2EState.REPEATED else Verdict.WRONG_SEQUENCE, name, None, ts
+                )
             verdict = Verdict.OK if state is E2EState.OK else Verdict.OK_SOME_LOST
         else:
             verdict = Verdict.OK
@@ -349,5 +380,9 @@ def _values(spec: _Spec, data: bytes | bytearray) -> dict[str, Any]:
             return spec.layout.decode(data)
         except LayoutMiss:
             pass
-    return spec.msg.decode(bytes(data), decode_choices=False,  # type: ignore[return-value]
-                           scaling=True, allow_truncated=False)
+    return spec.msg.decode(
+        bytes(data),
+        decode_choices=False,  # type: ignore[return-value]
+        scaling=True,
+        allow_truncated=False,
+    )

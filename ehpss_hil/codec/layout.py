@@ -35,8 +35,10 @@ class LayoutMiss(Exception):
 
 
 _IDENTITY, _LINEAR_INT, _LINEAR = 0, 1, 2
-_FLOAT_FORMATS = {32: (struct.Struct("<f"), struct.Struct("<I")),
-                  64: (struct.Struct("<d"), struct.Struct("<Q"))}
+_FLOAT_FORMATS = {
+    32: (struct.Struct("<f"), struct.Struct("<I")),
+    64: (struct.Struct("<d"), struct.Struct("<Q")),
+}
 
 # name, big-endian, shift, mask, sign bit (0: unsigned or float), float formats or None,
 # conversion kind, scale, offset, raw is float (no rounding)
@@ -47,8 +49,9 @@ def _conversion(conv: BaseConversion) -> tuple[int, Any, Any] | None:
     """(kind, scale, offset) of a numeric conversion; named choices use their inner numeric one
     (decode with ``decode_choices=False`` and numeric encode go through it, as in cantools)."""
     if isinstance(conv, NamedSignalConversion):  # the inner conversion, built as cantools does
-        conv = BaseConversion.factory(scale=conv.scale, offset=conv.offset, choices=None,
-                                      is_float=conv.is_float)
+        conv = BaseConversion.factory(
+            scale=conv.scale, offset=conv.offset, choices=None, is_float=conv.is_float
+        )
     if type(conv) is IdentityConversion:
         return _IDENTITY, 1, 0
     if type(conv) is LinearIntegerConversion:
@@ -75,8 +78,7 @@ def _field(sig: Any, n_bits: int) -> _Field | None:
     if shift < 0 or shift + sig.length > n_bits:
         return None
     sign = 1 << (sig.length - 1) if sig.is_signed and floats is None else 0
-    return (sig.name, big, shift, (1 << sig.length) - 1, sign, floats, *conv,
-            bool(sig.conversion.is_float))
+    return (sig.name, big, shift, (1 << sig.length) - 1, sign, floats, *conv, bool(sig.conversion.is_float))
 
 
 class _Node:
@@ -94,7 +96,8 @@ class _Node:
         self.muxes = muxes
         self.pack: _Pack = _cached("pack", fields, None, lambda: _compile_pack(fields, None))
         self.unpack: Callable[[int, int, dict[str, Any]], None] = _cached(
-            "unpack", fields, None, lambda: _compile_unpack(fields))
+            "unpack", fields, None, lambda: _compile_unpack(fields)
+        )
 
 
 def _build(msg: DbcMessage, n_bits: int, parent: str | None, mux_id: int | None) -> _Node | None:
@@ -152,8 +155,7 @@ def _compile(name: str, args: str, body: list[str], env: dict[str, Any]) -> Any:
     return env[name]
 
 
-def _cached(kind: str, fields: tuple[_Field, ...], default: int | None,
-            make: Callable[[], Any]) -> Any:
+def _cached(kind: str, fields: tuple[_Field, ...], default: int | None, make: Callable[[], Any]) -> Any:
     key = (kind, repr(fields), default)
     fn = _COMPILED.get(key)
     if fn is None:
@@ -169,11 +171,12 @@ def _compile_pack(fields: tuple[_Field, ...], default: int | None) -> _Pack:
     conversion as constants (what a per-field interpreter would look up every frame)."""
     env: dict[str, Any] = {"Miss": LayoutMiss, "num": (int, float)}
     body = ["get = values.get"]
-    for i, (name, big, shift, mask, sign, floats, kind, scale, offset, raw_float) in \
-            enumerate(fields):
+    for i, (name, big, shift, mask, sign, floats, kind, scale, offset, raw_float) in enumerate(fields):
         env[f"N{i}"], env[f"S{i}"], env[f"O{i}"] = name, scale, offset
-        body += [f"v = get(N{i})" if default is None else f"v = get(N{i}, {default!r})",
-                 f"if not isinstance(v, num): raise Miss(N{i})"]
+        body += [
+            f"v = get(N{i})" if default is None else f"v = get(N{i}, {default!r})",
+            f"if not isinstance(v, num): raise Miss(N{i})",
+        ]
         body += _raw_lines(kind, raw_float, i)
         if floats is not None:
             env[f"FP{i}"], env[f"FU{i}"] = floats[0].pack, floats[1].unpack
@@ -212,8 +215,7 @@ class BitLayout:
 
     __slots__ = ("_big", "_const", "_length", "_pack_root", "_root", "_zero", "name")
 
-    def __init__(self, root: _Node, length: int, name: str,
-                 zero: frozenset[str] = frozenset()) -> None:
+    def __init__(self, root: _Node, length: int, name: str, zero: frozenset[str] = frozenset()) -> None:
         self._root = root
         self._length = length
         self.name = name
@@ -287,4 +289,5 @@ class BitLayout:
 
 def _has_big(node: _Node) -> bool:
     return any(f[1] for f in node.fields) or any(
-        _has_big(c) for _, children in node.muxes for c in children.values())
+        _has_big(c) for _, children in node.muxes for c in children.values()
+    )

@@ -45,8 +45,7 @@ class RateLimit:
     """The rate check of one signal of one E2E-protected frame ID (see the module docstring):
     :meth:`check` per frame that passed E2E and the range check."""
 
-    __slots__ = ("_anchor", "_anchor_counter", "_candidate", "_candidate_counter", "rejected",
-                 "step_m")
+    __slots__ = ("_anchor", "_anchor_counter", "_candidate", "_candidate_counter", "rejected", "step_m")
 
     def __init__(self, step_m: float) -> None:
         """``step_m``: the largest plausible change per sample period (m)."""
@@ -74,10 +73,11 @@ class RateLimit:
         becomes the reference. A rejected one is remembered: the next reading close to it is
         accepted (a new level)."""
         anchor, cand = self._anchor, self._candidate
-        ok = (anchor is None
-              or self._near(value, anchor, counter_steps(counter, self._anchor_counter))
-              or (cand is not None
-                  and self._near(value, cand, counter_steps(counter, self._candidate_counter))))
+        ok = (
+            anchor is None
+            or self._near(value, anchor, counter_steps(counter, self._anchor_counter))
+            or (cand is not None and self._near(value, cand, counter_steps(counter, self._candidate_counter)))
+        )
         if ok:
             self._anchor, self._anchor_counter, self._candidate = value, counter, None
         else:

@@ -31,8 +31,12 @@ def _kind(data: Any, path: Path) -> str:
             return "scenario"
         if "plant" in data or ("controller" in data and "bus" not in data):
             return "params"
-        if "command_timeout_s" in data or "truth" in data or "fault_inject" in data \
-                or "emulator" in path.name:
+        if (
+            "command_timeout_s" in data
+            or "truth" in data
+            or "fault_inject" in data
+            or "emulator" in path.name
+        ):
             return "emulator"
     return "controller"
 
@@ -93,23 +97,31 @@ def _summarize(path: Path) -> str:
     if kind == "scenario":
         s = load_scenario(path, data)
         _prepare_scenario(s, load_params())
-        return (f"scenario {s.name}: {s.duration_s:g} s at {1 / s.sample_time_s:g} Hz, "
-                f"{s.reference.kind} {s.reference.amplitude_m * 1e3:g} mm, {len(s.events)} events, "
-                f"loss {_loss_text(s)}, delay {s.transport_delay_samples}")
+        return (
+            f"scenario {s.name}: {s.duration_s:g} s at {1 / s.sample_time_s:g} Hz, "
+            f"{s.reference.kind} {s.reference.amplitude_m * 1e3:g} mm, {len(s.events)} events, "
+            f"loss {_loss_text(s)}, delay {s.transport_delay_samples}"
+        )
     if kind == "params":
         p = load_params(path)  # (few bytes: read again rather than a second entry point)
         _prepare_scenario(Scenario(name="check", duration_s=1.0), p)
-        return (f"params: K_c {p.plant.velocity_gain_1_s:.4g} 1/s, K_f {p.controller.k_f:g}, "
-                f"K_p {p.controller.k_p:g}, K_i {p.controller.k_i:g}, K_a {p.controller.k_a:g}")
+        return (
+            f"params: K_c {p.plant.velocity_gain_1_s:.4g} 1/s, K_f {p.controller.k_f:g}, "
+            f"K_p {p.controller.k_p:g}, K_i {p.controller.k_i:g}, K_a {p.controller.k_a:g}"
+        )
     if kind == "emulator":
         e = load_emulator_config(path, data)
         _prepare_emulator(path, e)
-        return (f"emulator: {e.bus.interface}:{e.bus.channel} at {e.rate_hz:g} Hz, {e.mode}, "
-                f"command timeout {e.command_timeout_s * 1e3:g} ms, truth {e.truth}")
+        return (
+            f"emulator: {e.bus.interface}:{e.bus.channel} at {e.rate_hz:g} Hz, {e.mode}, "
+            f"command timeout {e.command_timeout_s * 1e3:g} ms, truth {e.truth}"
+        )
     c = load_controller_config(path, data)
     _prepare_controller(path, c)
-    return (f"controller: {c.bus.interface}:{c.bus.channel} at {c.rate_hz:g} Hz, mode {c.mode}, "
-            f"watchdog {c.watchdog.timeout_cycles} cycles -> {c.watchdog.failsafe}")
+    return (
+        f"controller: {c.bus.interface}:{c.bus.channel} at {c.rate_hz:g} Hz, mode {c.mode}, "
+        f"watchdog {c.watchdog.timeout_cycles} cycles -> {c.watchdog.failsafe}"
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -31,10 +31,12 @@ MODES = ("nrc", "mmac")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="output directory")
-    p.add_argument("--scenario", type=Path,
-                   default=PROJECT_ROOT / "scenarios" / "case3-combined.yaml")
-    p.add_argument("--lockstep", action="store_true",
-                   help="emulator advances one period per command (deterministic) instead of real time")
+    p.add_argument("--scenario", type=Path, default=PROJECT_ROOT / "scenarios" / "case3-combined.yaml")
+    p.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="emulator advances one period per command (deterministic) instead of real time",
+    )
 
 
 def _um(v: Any) -> str:
@@ -51,24 +53,26 @@ def _line(label: str, mode: str, row: dict[str, Any], extra: str = "") -> str:
     ev = row.get("events") or []
     peaks = " ".join(_um(e["peak_error_m"]).strip() for e in ev)
     rec = " ".join(_ms(e["recovery_s"]) for e in ev)
-    return (f"{label:<22} {mode:<6} {_um(row.get('rms_error_m'))} {_um(row.get('pre_fault_max_m'))} "
-            f"{row.get('switches', '—'):>8}  {peaks:<16} {rec:<12} {extra}")
+    return (
+        f"{label:<22} {mode:<6} {_um(row.get('rms_error_m'))} {_um(row.get('pre_fault_max_m'))} "
+        f"{row.get('switches', '—'):>8}  {peaks:<16} {rec:<12} {extra}"
+    )
 
 
 def _hil(args: argparse.Namespace) -> dict[str, tuple[dict[str, Any], str]]:
     out: dict[str, tuple[dict[str, Any], str]] = {}
     for mode in MODES:
         d = args.out / mode
-        print(f"running {args.scenario.name} with {mode}: firmware-sim + controller + logger ...",
-              flush=True)
-        res = execute(RunPlan(scenario_path=args.scenario, mode=mode, out_dir=d,
-                              lockstep=args.lockstep))
+        print(f"running {args.scenario.name} with {mode}: firmware-sim + controller + logger ...", flush=True)
+        res = execute(RunPlan(scenario_path=args.scenario, mode=mode, out_dir=d, lockstep=args.lockstep))
         check_exit_codes(res)
         row = metrics_from_run(d, plot=(mode == "mmac"))
         summ = json.loads((d / "controller-summary.json").read_text())
-        extra = (f"watchdog trips {summ.get('watchdog_trips')} (incl. the emulator's stop at "
-                 f"the end), overruns {summ.get('stats', {}).get('overruns')}, skipped periods "
-                 f"{summ.get('skipped_periods', 0)}")
+        extra = (
+            f"watchdog trips {summ.get('watchdog_trips')} (incl. the emulator's stop at "
+            f"the end), overruns {summ.get('stats', {}).get('overruns')}, skipped periods "
+            f"{summ.get('skipped_periods', 0)}"
+        )
         out[mode] = (row, extra)
     return out
 
@@ -85,8 +89,10 @@ def run(args: argparse.Namespace) -> int:
     except BusUnavailableError as exc:
         print(f"two-process run not possible here: {exc}\n(showing the offline simulation only)")
     kind = "lockstep" if args.lockstep else "real time"
-    print(f"\n{'run':<22} {'mode':<6} {'RMS µm':>9} {'pre µm':>9} {'switches':>8}  "
-          f"{'peaks µm':<16} {'recov ms':<12}")
+    print(
+        f"\n{'run':<22} {'mode':<6} {'RMS µm':>9} {'pre µm':>9} {'switches':>8}  "
+        f"{'peaks µm':<16} {'recov ms':<12}"
+    )
     for mode in MODES:
         if mode in hil:
             row, extra = hil[mode]
@@ -94,8 +100,10 @@ def run(args: argparse.Namespace) -> int:
         sim = compute_metrics(run_scenario(sc, mode)).to_json()
         print(_line("offline lockstep sim", mode, sim))
     if hil:
-        print(f"\nlogs: {args.out}/<mode>/bus.log (candump -L; also controller.log, emulator.log), "
-              f"metrics: {args.out}/<mode>/metrics.json")
+        print(
+            f"\nlogs: {args.out}/<mode>/bus.log (candump -L; also controller.log, emulator.log), "
+            f"metrics: {args.out}/<mode>/metrics.json"
+        )
         print(f"report + figures: {args.out}/mmac/report/report.md, {args.out}/mmac/report/figures/")
-        print("replay: ehpss-hil replay " f"{args.out}/mmac/controller.log")
+        print(f"replay: ehpss-hil replay {args.out}/mmac/controller.log")
     return 0

@@ -37,15 +37,26 @@ _CLOCKS = {
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``ehpss-hil log``."""
-    p.add_argument("-i", "--interface", required=True,
-                   help="python-can interface: udp_multicast, socketcan, virtual, or any other")
+    p.add_argument(
+        "-i",
+        "--interface",
+        required=True,
+        help="python-can interface: udp_multicast, socketcan, virtual, or any other",
+    )
     p.add_argument("-c", "--channel", required=True, help="channel (vcan0, can0, 239.74.163.2, …)")
     p.add_argument("-o", "--output", required=True, type=Path, help="log file (candump -L)")
-    p.add_argument("--duration", type=float, default=0.0, metavar="S",
-                   help="stop after S seconds (default: until SIGINT/SIGTERM)")
-    p.add_argument("--iface", default="",
-                   help="interface name written in each line (default: the channel for "
-                        "socketcan, else can0)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="stop after S seconds (default: until SIGINT/SIGTERM)",
+    )
+    p.add_argument(
+        "--iface",
+        default="",
+        help="interface name written in each line (default: the channel for socketcan, else can0)",
+    )
     p.add_argument("--port", type=int, default=None, help="udp_multicast port (default: config's)")
     p.add_argument("--max-bytes", type=int, default=256 * 2**20, help="rotate above this size")
     p.add_argument("--backups", type=int, default=5, help="rotated files kept (0: never rotate)")
@@ -81,8 +92,7 @@ class _StopFlag:
         self.event.set()
 
 
-def record(bus: can.BusABC, logger: CandumpLogger, stop: threading.Event,
-           duration_s: float = 0.0) -> int:
+def record(bus: can.BusABC, logger: CandumpLogger, stop: threading.Event, duration_s: float = 0.0) -> int:
     """Receive frames into ``logger`` until ``stop`` is set or ``duration_s`` (s) elapsed (0: no
     limit), then log what is already queued. Returns the number of frames received."""
     deadline = time.monotonic() + duration_s if duration_s > 0 else None
@@ -117,22 +127,31 @@ def run(args: argparse.Namespace) -> int:
     """Open the bus, log until stopped, print counts."""
     bus = open_log_bus(args.interface, args.channel, args.port)
     iface = args.iface or (args.channel if args.interface == "socketcan" else "can0")
-    meta = {"bus": {"interface": args.interface, "channel": args.channel},
-            "clock": _CLOCKS.get(args.interface, "python-can receive timestamp (s)"),
-            "process": {"command": "ehpss-hil log", "argv": sys.argv[1:]}}
+    meta = {
+        "bus": {"interface": args.interface, "channel": args.channel},
+        "clock": _CLOCKS.get(args.interface, "python-can receive timestamp (s)"),
+        "process": {"command": "ehpss-hil log", "argv": sys.argv[1:]},
+    }
     stop = _StopFlag()
     old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         try:
-            logger = CandumpLogger(args.output, iface=iface, max_bytes=args.max_bytes,
-                                   backups=args.backups, queue_lines=args.queue_lines,
-                                   sidecar=meta)
+            logger = CandumpLogger(
+                args.output,
+                iface=iface,
+                max_bytes=args.max_bytes,
+                backups=args.backups,
+                queue_lines=args.queue_lines,
+                sidecar=meta,
+            )
         except OSError as exc:
-            raise OutputError(f"{args.output}: cannot write the log: "
-                              f"{exc.strerror or exc}") from exc
+            raise OutputError(f"{args.output}: cannot write the log: {exc.strerror or exc}") from exc
         try:
-            print(f"logging {args.interface}:{args.channel} -> {args.output} (Ctrl-C to stop)",
-                  file=sys.stderr, flush=True)
+            print(
+                f"logging {args.interface}:{args.channel} -> {args.output} (Ctrl-C to stop)",
+                file=sys.stderr,
+                flush=True,
+            )
             received = record(bus, logger, stop.event, args.duration)
         finally:
             rejects = datagram_rejects(bus)

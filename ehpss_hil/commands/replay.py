@@ -103,15 +103,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``ehpss-hil replay``."""
     p.add_argument("log", type=Path, help="candump -L log (or its directory)")
     p.add_argument("--mode", default=None, help="controller mode (default: the logged one)")
-    p.add_argument("--config", type=Path, default=None,
-                   help="controller.yaml the run used (reference, tuning, params, rate)")
-    p.add_argument("--scenario", type=Path, default=None,
-                   help="scenario YAML for the reference and sample time")
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="controller.yaml the run used (reference, tuning, params, rate)",
+    )
+    p.add_argument(
+        "--scenario", type=Path, default=None, help="scenario YAML for the reference and sample time"
+    )
     p.add_argument("--show", type=int, default=5, help="divergences to print (default 5)")
-    p.add_argument("--gaps", choices=("auto", "overrun", "lost"), default="auto",
-                   help="CycleCount gaps are periods the daemon slept through (overrun) or "
-                        "commands lost on the bus (lost); auto: lost for a lockstep log (its "
-                        "sidecar says so), else overrun")
+    p.add_argument(
+        "--gaps",
+        choices=("auto", "overrun", "lost"),
+        default="auto",
+        help="CycleCount gaps are periods the daemon slept through (overrun) or "
+        "commands lost on the bus (lost); auto: lost for a lockstep log (its "
+        "sidecar says so), else overrun",
+    )
 
 
 def _logged_mode(log: Path) -> str | None:
@@ -126,25 +135,40 @@ def _logged_mode(log: Path) -> str | None:
     return mode
 
 
-def resolve_setup(log: Path, mode: str | None, config: Path | None,
-                  scenario: Path | None) -> ReplaySetup:
+def resolve_setup(log: Path, mode: str | None, config: Path | None, scenario: Path | None) -> ReplaySetup:
     """The controller configuration of a logged run (see the module docstring)."""
     if config is not None:
         cfg = load_controller_config(config)
-        return ReplaySetup(mode or cfg.mode, 1.0 / cfg.rate_hz, cfg.reference, cfg.tuning,
-                           load_params(cfg.params or None), str(config), cfg.setpoint)
-    info = run_info(read_sidecar(log), log.parent,
-                    load_scenario(scenario) if scenario is not None else None, log)
+        return ReplaySetup(
+            mode or cfg.mode,
+            1.0 / cfg.rate_hz,
+            cfg.reference,
+            cfg.tuning,
+            load_params(cfg.params or None),
+            str(config),
+            cfg.setpoint,
+        )
+    info = run_info(
+        read_sidecar(log), log.parent, load_scenario(scenario) if scenario is not None else None, log
+    )
     logged = mode or _logged_mode(log) or info.mode or "mmac"
-    return ReplaySetup(logged, info.ts_s or 1e-3, info.reference or Reference(),
-                       info.tuning or ControlTuning(), load_params(info.params_path),
-                       ", ".join(info.sources) or "defaults", info.setpoint or SetpointPolicy())
+    return ReplaySetup(
+        logged,
+        info.ts_s or 1e-3,
+        info.reference or Reference(),
+        info.tuning or ControlTuning(),
+        load_params(info.params_path),
+        ", ".join(info.sources) or "defaults",
+        info.setpoint or SetpointPolicy(),
+    )
 
 
 def _make(setup: ReplaySetup) -> Any:
     if setup.mode not in DAEMON_MODES:
-        raise ReplayError(f"mode {setup.mode!r} is not replayable (it needs the true faults); "
-                          f"choose one of {', '.join(DAEMON_MODES)}")
+        raise ReplayError(
+            f"mode {setup.mode!r} is not replayable (it needs the true faults); "
+            f"choose one of {', '.join(DAEMON_MODES)}"
+        )
     return make_controller(setup.mode, setup.params, setup.ts_s, setup.tuning, setup.reference)
 
 
@@ -186,8 +210,7 @@ class _Replayer:
         self.in_failsafe = False
         self.cycle_count = 0
         self.pending: list[_Rx] = []
-        self._names = {self.codec.can_id(n): n for n in
-                       ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD", "SETPOINT")}
+        self._names = {self.codec.can_id(n): n for n in ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD", "SETPOINT")}
 
     def frame(self, msg: Any, number: int) -> None:
         """One frame, in receive-time order."""
@@ -199,28 +222,26 @@ class _Replayer:
             return
         v, t = d.values, float(msg.timestamp)
         if name == "SENSOR_POS":
-            self.pending.append(_Rx(name, t, float(v["Position"]), float(v["Spool"]),
-                                    msg.data[1] & 0x0F))
+            self.pending.append(_Rx(name, t, float(v["Position"]), float(v["Spool"]), msg.data[1] & 0x0F))
         elif name == "SENSOR_AUX":
             self.pending.append(_Rx(name, t, float(v["CoilCurrent"]), float(v["LoadPressure"])))
         elif name == "SETPOINT":
-            self.pending.append(_Rx(name, t, float(v["Position"]), 0.0,
-                                    override=bool(v["Override"])))
+            self.pending.append(_Rx(name, t, float(v["Position"]), 0.0, override=bool(v["Override"])))
         elif self.started or v["Enable"]:
             cc = int(v["CycleCount"])
             gap = 0 if not self.started else (cc - self.cycle_count - 1) % 65536
             self.started = True
             self.cycle_count = cc
-            self.command(float(v["CurrentSetpoint"]), bool(v["Enable"]),
-                         int(v["SensorCounterEcho"]), t, number, gap)
+            self.command(
+                float(v["CurrentSetpoint"]), bool(v["Enable"]), int(v["SensorCounterEcho"]), t, number, gap
+            )
         else:  # before the daemon's first ACTIVE cycle (CONFIGURED: nothing is stepped)
             self._feed(self._leading_non_position())
             self.driver.idle_cycle()
 
     # ---- which frames a cycle took ------------------------------------------------------------
     def _leading_non_position(self) -> int:
-        return next((i for i, r in enumerate(self.pending) if r.kind == "SENSOR_POS"),
-                    len(self.pending))
+        return next((i for i, r in enumerate(self.pending) if r.kind == "SENSOR_POS"), len(self.pending))
 
     def _split(self, echo: int) -> int:
         """How many pending frames the cycle that echoes ``echo`` took: up to the last pending
@@ -272,8 +293,9 @@ class _Replayer:
             return
         self.driver.catch_up(periods)
 
-    def command(self, logged_a: float, logged_en: bool, echo: int, t_s: float, number: int,
-                gap: int = 0) -> None:
+    def command(
+        self, logged_a: float, logged_en: bool, echo: int, t_s: float, number: int, gap: int = 0
+    ) -> None:
         """A logged VALVE_CMD: the cycle it closes, replayed and compared."""
         if gap:
             self._gap(gap, t_s)
@@ -303,8 +325,14 @@ def _is_lockstep_log(side: dict[str, Any] | None) -> bool:
     return bool(side) and "lockstep" in str(side.get("tool", ""))  # type: ignore[union-attr]
 
 
-def replay_log(path: str | Path, mode: str | None = None, config: Path | None = None,
-               scenario: Path | None = None, keep: int = 5, gaps: str = "auto") -> ReplayResult:
+def replay_log(
+    path: str | Path,
+    mode: str | None = None,
+    config: Path | None = None,
+    scenario: Path | None = None,
+    keep: int = 5,
+    gaps: str = "auto",
+) -> ReplayResult:
     """Replay a log through the controller; see the module docstring. ``gaps``: ``overrun``,
     ``lost`` or ``auto`` (see :class:`_Replayer`)."""
     log = resolve_log(path)
@@ -323,31 +351,41 @@ def replay_log(path: str | Path, mode: str | None = None, config: Path | None = 
 def describe(d: Divergence, ts_s: float) -> str:
     """One line for a divergence."""
     lsb = 2e-7
-    return (f"cycle {d.cycle} (t = {d.cycle * ts_s:.4f} s, frame #{d.frame_number} of the log): "
-            f"logged {d.logged_a:+.7f} A (enable {int(d.logged_enable)}), replayed "
-            f"{d.replayed_a:+.7f} A (enable {int(d.replayed_enable)}), "
-            f"diff {(d.replayed_a - d.logged_a) / lsb:+.0f} LSB")
+    return (
+        f"cycle {d.cycle} (t = {d.cycle * ts_s:.4f} s, frame #{d.frame_number} of the log): "
+        f"logged {d.logged_a:+.7f} A (enable {int(d.logged_enable)}), replayed "
+        f"{d.replayed_a:+.7f} A (enable {int(d.replayed_enable)}), "
+        f"diff {(d.replayed_a - d.logged_a) / lsb:+.0f} LSB"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     """Replay and print the verdict: 0 identical, 1 diverged."""
     res = replay_log(args.log, args.mode, args.config, args.scenario, args.show, args.gaps)
     s = res.setup
-    print(f"replayed {res.cycles} cycles with mode {s.mode} at Ts = {s.ts_s * 1e3:g} ms "
-          f"(config from {s.source})")
+    print(
+        f"replayed {res.cycles} cycles with mode {s.mode} at Ts = {s.ts_s * 1e3:g} ms "
+        f"(config from {s.source})"
+    )
     if res.bad_lines.count:
         print(f"{res.bad_lines.text()} (not frame lines: a cut last line or garbage)")
     if res.skipped_periods:
-        print(f"{res.skipped_periods} periods skipped by the daemon's overruns (CycleCount gaps) "
-              "stepped without a frame, as the daemon does")
+        print(
+            f"{res.skipped_periods} periods skipped by the daemon's overruns (CycleCount gaps) "
+            "stepped without a frame, as the daemon does"
+        )
     if res.failsafe_cycles:
-        print(f"{res.failsafe_cycles} fail-safe cycles (logged Enable=0) skipped; the controller "
-              "is reset when they end, as the daemon does")
+        print(
+            f"{res.failsafe_cycles} fail-safe cycles (logged Enable=0) skipped; the controller "
+            "is reset when they end, as the daemon does"
+        )
     if res.identical:
         print("identical: every replayed VALVE_CMD equals the logged one bit for bit")
         return 0
-    print(f"DIVERGED in {res.divergent} of {res.cycles} cycles (max |diff| "
-          f"{res.max_abs_diff_a:.3g} A); first divergence:")
+    print(
+        f"DIVERGED in {res.divergent} of {res.cycles} cycles (max |diff| "
+        f"{res.max_abs_diff_a:.3g} A); first divergence:"
+    )
     for d in res.first:
         print("  " + describe(d, s.ts_s))
     return 1

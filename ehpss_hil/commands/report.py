@@ -21,10 +21,13 @@ NAME = "report"
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``ehpss-hil report``."""
     p.add_argument("log", type=Path, help="a candump -L log file or a directory holding one")
-    p.add_argument("--out", type=Path, default=None,
-                   help="output directory (default: <log dir>/report)")
-    p.add_argument("--scenario", type=Path, default=None,
-                   help="scenario YAML giving the reference (default: from the sidecar)")
+    p.add_argument("--out", type=Path, default=None, help="output directory (default: <log dir>/report)")
+    p.add_argument(
+        "--scenario",
+        type=Path,
+        default=None,
+        help="scenario YAML giving the reference (default: from the sidecar)",
+    )
     p.add_argument("--json", type=Path, default=None, help="also write the metrics row here")
     p.add_argument("--no-figures", action="store_true", help="metrics and report.md only")
 
@@ -43,15 +46,24 @@ def _metrics_lines(m: LogMetrics) -> list[str]:
     lines = ["## Metrics (docs/design.md §10)", ""]
     if m.run is not None:
         r = m.run
-        lines += ["| metric | value |", "|---|---|",
-                  f"| RMS error (x − y_m) | {_um(r.rms_error_m)} |",
-                  f"| pre-fault max error | {_um(r.pre_fault_max_m)} |",
-                  f"| model switches (seen at CTRL_STATUS rate) | {r.switches} |", ""]
+        lines += [
+            "| metric | value |",
+            "|---|---|",
+            f"| RMS error (x − y_m) | {_um(r.rms_error_m)} |",
+            f"| pre-fault max error | {_um(r.pre_fault_max_m)} |",
+            f"| model switches (seen at CTRL_STATUS rate) | {r.switches} |",
+            "",
+        ]
         if r.events:
-            lines += ["| event t (s) | peak error (0.3 s) | recovery (< 20 µm) | switches | "
-                      "active model at end |", "|---|---|---|---|---|"]
-            lines += [f"| {e.t_s:g} | {_um(e.peak_error_m)} | {_ms(e.recovery_s)} | "
-                      f"{e.switches} | {e.active_model} |" for e in r.events]
+            lines += [
+                "| event t (s) | peak error (0.3 s) | recovery (< 20 µm) | switches | active model at end |",
+                "|---|---|---|---|---|",
+            ]
+            lines += [
+                f"| {e.t_s:g} | {_um(e.peak_error_m)} | {_ms(e.recovery_s)} | "
+                f"{e.switches} | {e.active_model} |"
+                for e in r.events
+            ]
             lines.append("")
     for u in m.unavailable:
         lines.append(f"- **not available:** {u}")
@@ -59,17 +71,22 @@ def _metrics_lines(m: LogMetrics) -> list[str]:
         lines.append("")
     lines += ["Also from the log:", ""]
     x = m.extra
-    labels = {"samples": "controller samples", "switches_counter":
-              "model switches (CTRL_STATUS Switches counter)", "overruns": "loop overruns "
-              "(CTRL_STATS)", "cycle_time_max_s": "max cycle compute time (s)",
-              "sensor_rms_error_m": "sensor-based RMS y_s − y_m (indication only)",
-              "x_true_filled_samples": "samples without PLANT_TRUTH (held)"}
+    labels = {
+        "samples": "controller samples",
+        "switches_counter": "model switches (CTRL_STATUS Switches counter)",
+        "overruns": "loop overruns (CTRL_STATS)",
+        "cycle_time_max_s": "max cycle compute time (s)",
+        "sensor_rms_error_m": "sensor-based RMS y_s − y_m (indication only)",
+        "x_true_filled_samples": "samples without PLANT_TRUTH (held)",
+    }
     for key, label in labels.items():
         if key in x:
             v = _um(x[key]) if key.endswith("_m") else x[key]
             lines.append(f"- {label}: {v}")
-    lines.append("- frames a live receiver would reject, by verdict (WRONG_SEQUENCE data is still "
-                 f"used here: the frame itself is intact): {x['rejected_frames'] or 'none'}")
+    lines.append(
+        "- frames a live receiver would reject, by verdict (WRONG_SEQUENCE data is still "
+        f"used here: the frame itself is intact): {x['rejected_frames'] or 'none'}"
+    )
     return [*lines, ""]
 
 
@@ -77,14 +94,18 @@ def write_markdown(run: LogRun, m: LogMetrics, figures: list[Path], out_dir: Pat
     """``report.md`` in ``out_dir`` embedding ``figures`` (relative links)."""
     r, side = run.result, run.sidecar or {}
     frames = ", ".join(f"{n} {len(f['t_s'])}" for n, f in sorted(run.frames.items()))
-    lines = [f"# Run report: {r.scenario} / {r.controller}", "",
-             f"- log: `{run.log_path}` ({len(r.t_s)} samples at Ts = {r.ts_s * 1e3:g} ms)",
-             f"- sidecar: {'yes' if run.sidecar else 'none'}; started "
-             f"{side.get('start_time_utc', '?')}; versions {side.get('versions', '?')}",
-             f"- DBC sha256: {(side.get('dbc') or {}).get('sha256', '?')}",
-             f"- ground truth (PLANT_TRUTH): {'yes' if run.has_truth else 'NO'}; reference: "
-             f"{'yes' if run.has_reference else 'NO'}; events at {list(r.event_times_s)} s",
-             f"- frames decoded: {frames}", ""]
+    lines = [
+        f"# Run report: {r.scenario} / {r.controller}",
+        "",
+        f"- log: `{run.log_path}` ({len(r.t_s)} samples at Ts = {r.ts_s * 1e3:g} ms)",
+        f"- sidecar: {'yes' if run.sidecar else 'none'}; started "
+        f"{side.get('start_time_utc', '?')}; versions {side.get('versions', '?')}",
+        f"- DBC sha256: {(side.get('dbc') or {}).get('sha256', '?')}",
+        f"- ground truth (PLANT_TRUTH): {'yes' if run.has_truth else 'NO'}; reference: "
+        f"{'yes' if run.has_reference else 'NO'}; events at {list(r.event_times_s)} s",
+        f"- frames decoded: {frames}",
+        "",
+    ]
     if run.notes:
         lines += ["## Notes", ""] + [f"- {n}" for n in run.notes] + [""]
     lines += _metrics_lines(m)
@@ -98,9 +119,11 @@ def write_markdown(run: LogRun, m: LogMetrics, figures: list[Path], out_dir: Pat
 
 def metrics_row(run: LogRun, m: LogMetrics) -> dict[str, object]:
     """The docs/design.md §10 JSON row (plus ``extra`` and ``unavailable``)."""
-    row: dict[str, object] = (m.run.to_json() if m.run is not None else
-                              {"scenario": run.result.scenario,
-                               "controller": run.result.controller})
+    row: dict[str, object] = (
+        m.run.to_json()
+        if m.run is not None
+        else {"scenario": run.result.scenario, "controller": run.result.controller}
+    )
     row["extra"] = m.extra
     row["unavailable"] = m.unavailable
     return row
@@ -116,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
     figures: list[Path] = []
     if not args.no_figures:
         from ..report.logfigures import draw_all
+
         figures = draw_all(lr, out_dir / "figures")
     md = write_markdown(lr, m, figures, out_dir)
     row = metrics_row(lr, m)
@@ -126,7 +150,9 @@ def run(args: argparse.Namespace) -> int:
     for n in lr.notes + [f"not available: {u}" for u in m.unavailable]:
         print(f"note: {n}")
     if m.run is not None:
-        print(f"RMS error {m.run.rms_error_m * 1e6:.2f} µm, pre-fault max "
-              f"{m.run.pre_fault_max_m * 1e6:.2f} µm, switches {m.run.switches}")
+        print(
+            f"RMS error {m.run.rms_error_m * 1e6:.2f} µm, pre-fault max "
+            f"{m.run.pre_fault_max_m * 1e6:.2f} µm, switches {m.run.switches}"
+        )
     print(f"report: {md} ({len(figures)} figures)")
     return 0

@@ -19,35 +19,60 @@ NAME = "run"
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", type=Path, help="scenario YAML (scenarios/case2-drift.yaml, ...)")
     p.add_argument("--mode", default="mmac", choices=DAEMON_MODES)
-    p.add_argument("--interface", choices=("udp_multicast", "socketcan"),
-                   help="override the configs' bus.interface")
+    p.add_argument(
+        "--interface", choices=("udp_multicast", "socketcan"), help="override the configs' bus.interface"
+    )
     p.add_argument("--channel", help="override the configs' bus.channel (vcan0, can0, group)")
-    p.add_argument("--out", type=Path, help="run directory (default out/runs/<scenario>-<mode>); "
-                   "a non-empty directory that is no run directory is refused")
-    p.add_argument("--overwrite", action="store_true",
-                   help="use a non-empty --out anyway, replacing only the files a run writes")
-    p.add_argument("--lockstep", action="store_true",
-                   help="emulator advances one period per VALVE_CMD (deterministic)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        help="run directory (default out/runs/<scenario>-<mode>); "
+        "a non-empty directory that is no run directory is refused",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="use a non-empty --out anyway, replacing only the files a run writes",
+    )
+    p.add_argument(
+        "--lockstep", action="store_true", help="emulator advances one period per VALVE_CMD (deterministic)"
+    )
     p.add_argument("--plot", action="store_true", help="also draw the report figures")
-    p.add_argument("--watchdog-cycles", type=int, default=10,
-                   help="watchdog.timeout_cycles for this run (default 10 on a non-RT bench host; "
-                        "0 = the config's)")
-    p.add_argument("--sensor-age-us", type=float, default=300.0,
-                   help="controller phase lock for this run (µs after the sensor frame; default "
-                        "300; -1 = the config's rt.sensor_age_us)")
-    p.add_argument("--strict-watchdog", action="store_true",
-                   help="keep the config's watchdog.auto_recover (default for runs: recover "
-                        "after watchdog.recovery_cycles fresh cycles)")
+    p.add_argument(
+        "--watchdog-cycles",
+        type=int,
+        default=10,
+        help="watchdog.timeout_cycles for this run (default 10 on a non-RT bench host; 0 = the config's)",
+    )
+    p.add_argument(
+        "--sensor-age-us",
+        type=float,
+        default=300.0,
+        help="controller phase lock for this run (µs after the sensor frame; default "
+        "300; -1 = the config's rt.sensor_age_us)",
+    )
+    p.add_argument(
+        "--strict-watchdog",
+        action="store_true",
+        help="keep the config's watchdog.auto_recover (default for runs: recover "
+        "after watchdog.recovery_cycles fresh cycles)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     out = args.out or Path("out/runs") / f"{args.scenario.stem}-{args.mode}"
-    plan = RunPlan(scenario_path=args.scenario, mode=args.mode, out_dir=out,
-                   interface=args.interface, channel=args.channel, lockstep=args.lockstep,
-                   auto_recover=not args.strict_watchdog,
-                   watchdog_cycles=args.watchdog_cycles or None,
-                   sensor_age_us=None if args.sensor_age_us < 0 else args.sensor_age_us,
-                   overwrite=args.overwrite)
+    plan = RunPlan(
+        scenario_path=args.scenario,
+        mode=args.mode,
+        out_dir=out,
+        interface=args.interface,
+        channel=args.channel,
+        lockstep=args.lockstep,
+        auto_recover=not args.strict_watchdog,
+        watchdog_cycles=args.watchdog_cycles or None,
+        sensor_age_us=None if args.sensor_age_us < 0 else args.sensor_age_us,
+        overwrite=args.overwrite,
+    )
     res = execute(plan)
     check_exit_codes(res)
     written: list[Path] = []
@@ -60,7 +85,6 @@ def run(args: argparse.Namespace) -> int:
         counts = (read_sidecar(out / log) or {}).get("counts") or {}
         if counts.get("dropped"):
             why = ", ".join(f"{k} {n}" for k, n in (counts.get("dropped_by_reason") or {}).items())
-            print(f"warning: {log}: {counts['dropped']} lines not written ({why})",
-                  file=sys.stderr)
+            print(f"warning: {log}: {counts['dropped']} lines not written ({why})", file=sys.stderr)
     print(f"run directory: {out} (bus.log, metrics.json, run.json)")
     return 0

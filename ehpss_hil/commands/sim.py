@@ -18,15 +18,33 @@ NAME = "sim"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenarios", nargs="+", help="scenario YAML files (or directories of them)")
-    p.add_argument("--controller", "-C", action="append", choices=MODES, metavar="MODE",
-                   help=f"controller mode, repeatable ({', '.join(MODES)}; default mmac)")
+    p.add_argument(
+        "--controller",
+        "-C",
+        action="append",
+        choices=MODES,
+        metavar="MODE",
+        help=f"controller mode, repeatable ({', '.join(MODES)}; default mmac)",
+    )
     p.add_argument("--json", metavar="FILE", help="write the docs/design.md §10 metric rows as JSON")
-    p.add_argument("--plot", metavar="FILE.png",
-                   help="figure like the paper's Fig 5 (several runs: FILE-<scenario>-<mode>.png)")
-    p.add_argument("--transport", choices=TRANSPORTS, default="quantize",
-                   help="frame layer: DBC quantization (fast) or real encoded frames with E2E")
-    p.add_argument("--jobs", "-j", type=int, default=default_jobs(),
-                   help="worker processes for several runs (default: all cores)")
+    p.add_argument(
+        "--plot",
+        metavar="FILE.png",
+        help="figure like the paper's Fig 5 (several runs: FILE-<scenario>-<mode>.png)",
+    )
+    p.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        default="quantize",
+        help="frame layer: DBC quantization (fast) or real encoded frames with E2E",
+    )
+    p.add_argument(
+        "--jobs",
+        "-j",
+        type=int,
+        default=default_jobs(),
+        help="worker processes for several runs (default: all cores)",
+    )
 
 
 def _fmt_s(v: float) -> str:
@@ -35,15 +53,19 @@ def _fmt_s(v: float) -> str:
 
 def format_table(rows: list[RunMetrics]) -> str:
     """A fixed-width table of RMS, pre-fault max, switches, worst event peak and recovery, speed."""
-    head = (f"{'scenario':22s} {'controller':10s} {'RMS µm':>9s} {'pre µm':>7s} {'sw':>4s} "
-            f"{'peak µm':>9s} {'rec ms':>7s} {'speed':>7s}")
+    head = (
+        f"{'scenario':22s} {'controller':10s} {'RMS µm':>9s} {'pre µm':>7s} {'sw':>4s} "
+        f"{'peak µm':>9s} {'rec ms':>7s} {'speed':>7s}"
+    )
     lines = [head, "-" * len(head)]
     for m in rows:
         peak = max((e.peak_error_m for e in m.events), default=0.0)
         rec = max((e.recovery_s for e in m.events), default=0.0)
-        lines.append(f"{m.scenario[:22]:22s} {m.controller:10s} {m.rms_error_m * 1e6:9.2f} "
-                     f"{m.pre_fault_max_m * 1e6:7.1f} {m.switches:4d} {peak * 1e6:9.1f} "
-                     f"{_fmt_s(rec):>7s} {m.speed:6.0f}×")
+        lines.append(
+            f"{m.scenario[:22]:22s} {m.controller:10s} {m.rms_error_m * 1e6:9.2f} "
+            f"{m.pre_fault_max_m * 1e6:7.1f} {m.switches:4d} {peak * 1e6:9.1f} "
+            f"{_fmt_s(rec):>7s} {m.speed:6.0f}×"
+        )
     return "\n".join(lines)
 
 
@@ -51,8 +73,10 @@ def speed_line(rows: list[RunMetrics], wall_s: float, processes: int) -> str:
     """Simulated seconds per wall second, for the campaign and per run (one core each)."""
     simulated = sum(m.duration_s for m in rows)
     per_run = [m.speed for m in rows if m.speed > 0]
-    text = (f"{len(rows)} run(s): {simulated:.1f} s simulated in {wall_s:.2f} s wall = "
-            f"{simulated / wall_s:.0f}× real time on {processes} process(es)")
+    text = (
+        f"{len(rows)} run(s): {simulated:.1f} s simulated in {wall_s:.2f} s wall = "
+        f"{simulated / wall_s:.0f}× real time on {processes} process(es)"
+    )
     if per_run:
         text += f"; per run (loop CPU time, one core): {min(per_run):.0f}–{max(per_run):.0f}×"
     return text
@@ -80,7 +104,9 @@ def run(args: argparse.Namespace) -> int:
 
         for o in outcomes:
             if o.result is not None:
-                out = plot_run(o.result, _plot_name(Path(args.plot), len(outcomes) > 1,
-                                                    o.result.scenario, o.result.controller))
+                out = plot_run(
+                    o.result,
+                    _plot_name(Path(args.plot), len(outcomes) > 1, o.result.scenario, o.result.controller),
+                )
                 print(f"wrote {out}")
     return 0

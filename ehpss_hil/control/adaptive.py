@@ -52,14 +52,20 @@ class MmacController(LoopBase):
         lim_d = (t.k_dft_limits[0], t.k_dft_limits[1])
         self.spool_bank = ScalarBank(t.fixed_k_loe, t, ts, self.scale_spool_m, g, lim_l)
         self.pos_bank = ScalarBank(t.fixed_k_dft, t, ts, self.scale_pos_m, g, lim_d)
-        self.spool_sup = Supervisor(self.spool_bank, t, ts, guard_epsilon=t.guard_epsilon,
-                                    sustained_guard=True)
+        self.spool_sup = Supervisor(
+            self.spool_bank, t, ts, guard_epsilon=t.guard_epsilon, sustained_guard=True
+        )
         self.pos_sup = Supervisor(self.pos_bank, t, ts, guard_epsilon=t.position_guard_epsilon)
         self.flow = FlowGainMonitor(self.params.plant, ts, self.scale_spool_m, t)
         self.clock = SampleClock(self.valve, self.xhat, self.flow if t.flow_gain_test else None)
-        self.monitor = HarmMonitor(t.flow_gain_min_deviation, t.increment_window,
-                                   round(t.monitor_confirm_s / ts), round(t.monitor_reengage_s / ts),
-                                   t.sensor_failed_below, t.monitor_sensor_alive)
+        self.monitor = HarmMonitor(
+            t.flow_gain_min_deviation,
+            t.increment_window,
+            round(t.monitor_confirm_s / ts),
+            round(t.monitor_reengage_s / ts),
+            t.sensor_failed_below,
+            t.monitor_sensor_alive,
+        )
         self._lim_d_hi = t.k_dft_limits[1] - AT_LIMIT_MARGIN
         self._lim_l_lo = t.k_loe_limits[0] + AT_LIMIT_MARGIN
         self._in_flow = False
@@ -69,8 +75,9 @@ class MmacController(LoopBase):
         self._inv_s_spool = 1.0 / self.scale_spool_m
         self._inv_s_pos = 1.0 / self.scale_pos_m
         n_l, n_d = len(t.fixed_k_loe) + 2, len(t.fixed_k_dft) + 2
-        self.index_slots = (tuple(range(SPOOL_SLOT0, SPOOL_SLOT0 + n_l))
-                            + tuple(range(POSITION_SLOT0, POSITION_SLOT0 + n_d)))
+        self.index_slots = tuple(range(SPOOL_SLOT0, SPOOL_SLOT0 + n_l)) + tuple(
+            range(POSITION_SLOT0, POSITION_SLOT0 + n_d)
+        )
 
     def _reset_mode(self) -> None:
         self.spool_bank.reset()
@@ -102,8 +109,7 @@ class MmacController(LoopBase):
                 self.flow.hold_off(self._flow_hold)
             sb, ss = self.spool_bank, self.spool_sup
             lvl = self._stop_level_m
-            if (y_v >= lvl or y_v <= -lvl or abs(tl_prev * v) >= lvl
-                    or (gap and not resync)):
+            if y_v >= lvl or y_v <= -lvl or abs(tl_prev * v) >= lvl or (gap and not resync):
                 # the spool at its stop, or a gap the predictors could not redo (the valve model
                 # was dead-reckoned): not evidence until the model's error has died out
                 self._spool_hold = self._stop_hold
@@ -119,8 +125,7 @@ class MmacController(LoopBase):
                 # x̂ missed samples, was dead-reckoned, or integrated a spool slamming into its
                 # stop (a transient no model of the valve follows exactly)
                 td = self.k_dft_hat
-                if (not self.pos_sup.guarded and td >= self._failed_below
-                        and not self.flow.flow_fault):
+                if not self.pos_sup.guarded and td >= self._failed_below and not self.flow.flow_fault:
                     # re-anchor on the trusted sensor and start the regression over from here: a
                     # dead-reckoned offset must not be taken for a drift, nor the sensor's reading
                     # through the present θ̂_D for evidence (x̂ = y_s/θ̂_D, x0 = y0/θ̂_D)
@@ -207,14 +212,14 @@ class MmacController(LoopBase):
         pb, sb = self.pos_bank, self.spool_bank
         pa, sa = self.pos_sup.active, self.spool_sup.active
         guarded = self._position_guarded()
-        at_limit = ((pa >= pb.n_fixed and not guarded and self.k_dft_hat >= self._lim_d_hi)
-                    or (sa >= sb.n_fixed and not self.spool_sup.guarded and tl <= self._lim_l_lo))
+        at_limit = (pa >= pb.n_fixed and not guarded and self.k_dft_hat >= self._lim_d_hi) or (
+            sa >= sb.n_fixed and not self.spool_sup.guarded and tl <= self._lim_l_lo
+        )
         fl = self.flow
         # the position check only where the sensor is read through θ̂_D: under the guard the loop
         # runs on x̂ (no model explains the sensor; θ_prod, fitted on the same sensor, neither)
         fresh = fl.product_fresh and not guarded
-        self.set_nominal(self.monitor.update(self.k_dft_hat * self.k_q_hat, fl.theta_prod,
-                                             fresh, at_limit))
+        self.set_nominal(self.monitor.update(self.k_dft_hat * self.k_q_hat, fl.theta_prod, fresh, at_limit))
 
     def fallback_reason(self) -> int:
         """The monitor's reason while in fallback, else 0."""
@@ -237,8 +242,12 @@ class MmacController(LoopBase):
 
     def probe(self) -> tuple[int, int, float, float]:
         """Active slots of both channels and the estimates in use."""
-        return (SPOOL_SLOT0 + self.spool_sup.active, POSITION_SLOT0 + self.pos_sup.active,
-                self.k_loe_hat, self.k_dft_hat)
+        return (
+            SPOOL_SLOT0 + self.spool_sup.active,
+            POSITION_SLOT0 + self.pos_sup.active,
+            self.k_loe_hat,
+            self.k_dft_hat,
+        )
 
     def switch_count(self) -> int:
         """Switches of both channels."""

@@ -22,8 +22,7 @@ from .tuning import ControlTuning
 class _IndexBase:
     """Shared index state: per-model I_k and J_k lists, the window weight w."""
 
-    def __init__(self, n: int, n_fixed: int, tuning: ControlTuning, ts_s: float,
-                 scale: float) -> None:
+    def __init__(self, n: int, n_fixed: int, tuning: ControlTuning, ts_s: float, scale: float) -> None:
         self.n = n
         self.n_fixed = n_fixed
         self.fra = n_fixed
@@ -61,8 +60,16 @@ class _IndexBase:
 class ScalarBank(_IndexBase):
     """One channel ``y = θ·φ``: fixed θ values, then FRA, then RIA (NLMS from the nominal 1.0)."""
 
-    def __init__(self, fixed: tuple[float, ...], tuning: ControlTuning, ts_s: float, scale: float,
-                 gain: float, limits: tuple[float, float], theta0: float = 1.0) -> None:
+    def __init__(
+        self,
+        fixed: tuple[float, ...],
+        tuning: ControlTuning,
+        ts_s: float,
+        scale: float,
+        gain: float,
+        limits: tuple[float, float],
+        theta0: float = 1.0,
+    ) -> None:
         super().__init__(len(fixed) + 2, len(fixed), tuning, ts_s, scale)
         c = (tuning.nlms_c_fraction * scale) ** 2
         self.fixed = tuple(float(f) for f in fixed)
@@ -133,8 +140,14 @@ class JointBank(_IndexBase):
     θ_D held: 1 for the FRA, the θ_D of the fixed model the RIA was last reinitialized to.
     """
 
-    def __init__(self, fixed: tuple[tuple[float, float], ...], tuning: ControlTuning, ts_s: float,
-                 scale: float, gain: float) -> None:
+    def __init__(
+        self,
+        fixed: tuple[tuple[float, float], ...],
+        tuning: ControlTuning,
+        ts_s: float,
+        scale: float,
+        gain: float,
+    ) -> None:
         super().__init__(len(fixed) + 2, len(fixed), tuning, ts_s, scale)
         c = (tuning.nlms_c_fraction * scale) ** 2
         lim = (tuning.k_loe_limits[0], tuning.k_loe_limits[1])
@@ -154,7 +167,7 @@ class JointBank(_IndexBase):
 
     def update(self, y: float, phi: float) -> None:
         """Score every model (a priori residuals), then adapt FRA and RIA."""
-        res = [y - a * b * phi for a, b in self.pairs[:self.n_fixed]]
+        res = [y - a * b * phi for a, b in self.pairs[: self.n_fixed]]
         res.append(self.fra_est.update(y, phi))
         res.append(self.ria_est.update(y, self._ria_d * phi))
         self.pairs[self.fra] = (self.fra_est.theta, 1.0)

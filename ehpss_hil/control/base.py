@@ -72,13 +72,16 @@ def hold_sample(m: Measurement, counter: int) -> HeldSample:
     return (m.position_m, m.spool_m, m.coil_current_a, m.load_pressure_pa, counter)
 
 
-def observe_held(observe: Callable[[Measurement], None], held: list[HeldSample],
-                 samples_of: Callable[[int], int], scratch: Measurement) -> None:
+def observe_held(
+    observe: Callable[[Measurement], None],
+    held: list[HeldSample],
+    samples_of: Callable[[int], int],
+    scratch: Measurement,
+) -> None:
     """Hand the held samples to ``observe`` in order (``samples_of(counter)``: sensor samples
     since the one stepped or observed before), then forget them. The daemon calls it after the
     caught-up periods and before the cycle's step; ``replay`` does the same."""
-    for scratch.position_m, scratch.spool_m, scratch.coil_current_a, scratch.load_pressure_pa, \
-            c in held:
+    for scratch.position_m, scratch.spool_m, scratch.coil_current_a, scratch.load_pressure_pa, c in held:
         scratch.samples = samples_of(c)
         observe(scratch)
     held.clear()

@@ -126,8 +126,7 @@ class LoopBase:
     # ---- the cycle -------------------------------------------------------------------------
     def _finish(self, meas: Measurement, feedback: float) -> ValveCommand:
         self.pi.saturated = self._saturation(meas)
-        i = compensated_current(self.pi.step(meas.reference_m, feedback), self._applied_loe,
-                                self.min_theta_l)
+        i = compensated_current(self.pi.step(meas.reference_m, feedback), self._applied_loe, self.min_theta_l)
         self._cmd.current_a = i
         self._sent_prev, self._sent = self._sent, (i if math.isfinite(i) else 0.0)
         return self._cmd
@@ -175,8 +174,7 @@ class LoopBase:
         ``y_s/θ̂_D``); untrusted: x̂ alone. This makes the return to the sensor bumpless.
         """
         td = self.k_dft_hat
-        model_trusted = sensor_trusted(td, self._failed_below, self._position_guarded(),
-                                       meas.fresh)
+        model_trusted = sensor_trusted(td, self._failed_below, self._position_guarded(), meas.fresh)
         # nominal: the estimates are set aside, the guard (no model explains the sensor) is not
         trusted = (meas.fresh and not self._position_guarded()) if self.nominal else model_trusted
         self.sensor_trusted = trusted
@@ -233,12 +231,18 @@ class LoopBase:
             active["spool"] = sp
         if ps >= 0:
             active["position"] = ps
-        return ControllerStatus(mode=self.mode, active_model=active, k_loe_hat=kl, k_dft_hat=kd,
-                                index=dict(zip(self.index_slots, self.index_values(), strict=True)),
-                                theta=dict(zip(self.index_slots, self.theta_values(), strict=True)),
-                                switches=self.switch_count(), fallback=self.nominal,
-                                fallback_reason=self.fallback_reason(),
-                                fallbacks=self.fallback_count())
+        return ControllerStatus(
+            mode=self.mode,
+            active_model=active,
+            k_loe_hat=kl,
+            k_dft_hat=kd,
+            index=dict(zip(self.index_slots, self.index_values(), strict=True)),
+            theta=dict(zip(self.index_slots, self.theta_values(), strict=True)),
+            switches=self.switch_count(),
+            fallback=self.nominal,
+            fallback_reason=self.fallback_reason(),
+            fallbacks=self.fallback_count(),
+        )
 
     def fallback_reason(self) -> int:
         """Why the loop compensates nominally now (:class:`FallbackReason`; 0: it does not)."""

@@ -79,8 +79,9 @@ class FlowGainMonitor:
         "theta_prod",
     )
 
-    def __init__(self, plant: PlantParams, ts_s: float, scale_m: float,
-                 tuning: ControlTuning | None = None) -> None:
+    def __init__(
+        self, plant: PlantParams, ts_s: float, scale_m: float, tuning: ControlTuning | None = None
+    ) -> None:
         t = tuning if tuning is not None else ControlTuning()
         a, b = plant_matrices(plant)
         ad, bd = zoh(a, b, ts_s)
@@ -152,8 +153,7 @@ class FlowGainMonitor:
         """Back to the model state at the last :meth:`mark`."""
         self.s = self._mark
 
-    def product(self, position_m: float, spool_m: float, samples: int = 1,
-                excited: bool = True) -> float:
+    def product(self, position_m: float, spool_m: float, samples: int = 1, excited: bool = True) -> float:
         """Offset-free estimate of k_DFT·k_Q: NLMS on M-sample increments of the position against
         ``K_c·∫y_v``, updated only while the increments are excited (a k_Q change leaves x̂ with a
         level offset; increments have none). ``samples``: sensor samples since the previous call
@@ -179,13 +179,14 @@ class FlowGainMonitor:
         """Advance the unit-gain valve + cylinder model with the current echo (A)."""
         s0, s1, s2, s3 = self.s
         r0, r1, r2, r3 = self._c
-        self.s = (r0[0] * s0 + r0[1] * s1 + r0[2] * s2 + r0[3] * s3 + r0[4] * current_a,
-                  r1[0] * s0 + r1[1] * s1 + r1[2] * s2 + r1[3] * s3 + r1[4] * current_a,
-                  r2[0] * s0 + r2[1] * s1 + r2[2] * s2 + r2[3] * s3 + r2[4] * current_a,
-                  r3[0] * s0 + r3[1] * s1 + r3[2] * s2 + r3[3] * s3 + r3[4] * current_a)
+        self.s = (
+            r0[0] * s0 + r0[1] * s1 + r0[2] * s2 + r0[3] * s3 + r0[4] * current_a,
+            r1[0] * s0 + r1[1] * s1 + r1[2] * s2 + r1[3] * s3 + r1[4] * current_a,
+            r2[0] * s0 + r2[1] * s1 + r2[2] * s2 + r2[3] * s3 + r2[4] * current_a,
+            r3[0] * s0 + r3[1] * s1 + r3[2] * s2 + r3[3] * s3 + r3[4] * current_a,
+        )
 
-    def update(self, current_a: float, pressure_pa: float, theta_l: float,
-               theta_pos: float) -> float:
+    def update(self, current_a: float, pressure_pa: float, theta_l: float, theta_pos: float) -> float:
         """One sample: current echo (A), measured P_L (Pa), k̂_LOE and the product estimate
         θ_pos = k_DFT·k_Q; returns k̂_Q (1.0 under H_D)."""
         self.propagate(current_a)

@@ -55,8 +55,15 @@ class HarmMonitor:
         "reason",
     )
 
-    def __init__(self, min_deviation: float, settle_samples: int, confirm: int,
-                 reengage: int, failed_below: float, alive: float) -> None:
+    def __init__(
+        self,
+        min_deviation: float,
+        settle_samples: int,
+        confirm: int,
+        reengage: int,
+        failed_below: float,
+        alive: float,
+    ) -> None:
         """``min_deviation``: |θ − 1| that counts as a deviation; ``settle_samples``: M;
         ``confirm``/``reengage``: updates in a row to enter/leave the fallback;
         ``failed_below``: θ_used of the failed-sensor model; ``alive``: θ_prod of a live
@@ -80,8 +87,7 @@ class HarmMonitor:
         self.fallback = False
         self.reason = FallbackReason.NONE
 
-    def check(self, theta_used: float, theta_prod: float, prod_fresh: bool,
-              at_limit: bool) -> FallbackReason:
+    def check(self, theta_used: float, theta_prod: float, prod_fresh: bool, at_limit: bool) -> FallbackReason:
         """The rule that fires on this sample (NONE if none), and θ_prod's history advanced."""
         ring, i = self._ring, self._i
         settled = abs(theta_prod - ring[i]) < self._min_dev
@@ -98,8 +104,7 @@ class HarmMonitor:
             return FallbackReason.PRODUCT_MISMATCH  # "failed" sensor that follows the spool
         return FallbackReason.NONE
 
-    def update(self, theta_used: float, theta_prod: float, prod_fresh: bool,
-               at_limit: bool) -> bool:
+    def update(self, theta_used: float, theta_prod: float, prod_fresh: bool, at_limit: bool) -> bool:
         """One fresh sample: θ_used = θ̂_D·k̂_Q in use, θ_prod and whether it is fresh, whether an
         adaptive estimate in use is at its clip. Returns :attr:`fallback`."""
         r = self.check(theta_used, theta_prod, prod_fresh, at_limit)

@@ -51,8 +51,10 @@ class ValvePredictor:
         """Advance with ``current_a`` (A) held over the last sample; returns v (m), held on the
         stop ±:attr:`stop_m` like the plant's spool (outward velocity lost there)."""
         vel, v = self.vel, self.v
-        vel, v = (self._a00 * vel + self._a01 * v + self._b0 * current_a,
-                  self._a10 * vel + self._a11 * v + self._b1 * current_a)
+        vel, v = (
+            self._a00 * vel + self._a01 * v + self._b0 * current_a,
+            self._a10 * vel + self._a11 * v + self._b1 * current_a,
+        )
         stop = self.stop_m
         if v > stop or v < -stop:
             v = stop if v > 0.0 else -stop

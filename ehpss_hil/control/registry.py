@@ -40,9 +40,13 @@ DAEMON_MODES = tuple(m for m, s in REGISTRY.items() if s.daemon)
 MODE_CODE = {m: s.code for m, s in REGISTRY.items()}
 
 
-def make_controller(mode: str, params: Params, ts_s: float,
-                    tuning: ControlTuning | None = None,
-                    reference: NominalMotion | None = None) -> LoopBase:
+def make_controller(
+    mode: str,
+    params: Params,
+    ts_s: float,
+    tuning: ControlTuning | None = None,
+    reference: NominalMotion | None = None,
+) -> LoopBase:
     """Build and configure the controller for ``mode`` (one of :data:`MODES`).
 
     ``reference`` (a scenario's Reference, or any :class:`NominalMotion`) sets the channels'

@@ -68,8 +68,9 @@ class Advance(NamedTuple):
 class SampleClock:
     """Valve model, x̂ and (optionally) the pressure model, advanced once per sensor sample."""
 
-    def __init__(self, valve: ValvePredictor, xhat: ModelPosition,
-                 pressure: PressureModel | None = None) -> None:
+    def __init__(
+        self, valve: ValvePredictor, xhat: ModelPosition, pressure: PressureModel | None = None
+    ) -> None:
         self.valve = valve
         self.xhat = xhat
         self.pressure = pressure
@@ -134,8 +135,7 @@ class SampleClock:
         self._wire.append(current_a if sent else self._wire[-1])
 
     # ---- internals --------------------------------------------------------------------------
-    def _advance(self, meas: Measurement, stepped: bool, gain: float,
-                 bridge_gain: float | None) -> Advance:
+    def _advance(self, meas: Measurement, stepped: bool, gain: float, bridge_gain: float | None) -> Advance:
         dead, self._dead = self._dead, 0
         gap = dead > 0 or meas.samples > 1
         if resync_span(meas.samples, dead):
@@ -147,8 +147,9 @@ class SampleClock:
         self.y_seen = meas.position_m
         return out
 
-    def _predict_span(self, meas: Measurement, dead: int, stepped: bool, gain: float,
-                      bridge_gain: float | None) -> tuple[float, float]:
+    def _predict_span(
+        self, meas: Measurement, dead: int, stepped: bool, gain: float, bridge_gain: float | None
+    ) -> tuple[float, float]:
         """Valve model and x̂ stepped over ``meas.samples`` sensor samples from the last one seen
         (the dead-reckoned steps of the ``dead`` cycles without data undone). Returns (v, x̂) (m)."""
         valve, xh, pm = self.valve, self.xhat, self.pressure
@@ -190,8 +191,9 @@ def resync_span(samples: int, dead: int) -> bool:
     return samples <= RESYNC_SAMPLES and dead < RESYNC_SAMPLES
 
 
-def span_currents(samples: int, dead: int, wire: deque[float] | None, last_echo_a: float,
-                  echo_a: float) -> list[float]:
+def span_currents(
+    samples: int, dead: int, wire: deque[float] | None, last_echo_a: float, echo_a: float
+) -> list[float]:
     """The currents (A) applied over the ``samples − 1`` samples not seen before one whose echo
     is ``echo_a`` (the last one seen had ``last_echo_a``; ``dead`` cycles ran without data in
     between). ``wire``: the commands sent in the cycles before this one (newest last; one sample
@@ -203,8 +205,7 @@ def span_currents(samples: int, dead: int, wire: deque[float] | None, last_echo_
     the others (a late emulator holds the newest command over the periods it skips)."""
     if samples < 2:
         return []
-    if (wire is not None and dead == samples - 1
-            and abs(echo_a - wire[-2]) <= WIRE_MATCH_A):
+    if wire is not None and dead == samples - 1 and abs(echo_a - wire[-2]) <= WIRE_MATCH_A:
         return [wire[-m - 2] for m in range(samples - 1, 0, -1)]
     return [last_echo_a] + [echo_a] * (samples - 2)
 

@@ -69,21 +69,27 @@ class Supervisor:
         "switches",
     )
 
-    def __init__(self, bank: Bank, tuning: ControlTuning, ts_s: float,
-                 guard_epsilon: float | None = None, initial: int = 0,
-                 sustained_guard: bool = False) -> None:
+    def __init__(
+        self,
+        bank: Bank,
+        tuning: ControlTuning,
+        ts_s: float,
+        guard_epsilon: float | None = None,
+        initial: int = 0,
+        sustained_guard: bool = False,
+    ) -> None:
         self.bank = bank
         self.initial = initial
         self._dwell = round(tuning.dwell_s / ts_s)
         self._confirm = max(1, round(tuning.switch_confirm_s / ts_s))
         self._warm = round(tuning.warmup_s / ts_s)
         self._h = tuning.hysteresis
-        self._eps0sq = tuning.epsilon0 ** 2
+        self._eps0sq = tuning.epsilon0**2
         self._kappa = tuning.noise_margin_factor
         self._win = tuning.index_a1 + tuning.index_a2 / tuning.forgetting_1_s
         self._sep = tuning.min_theta_separation
         self._floor = tuning.excitation_floor
-        self._jmax = (self._win * guard_epsilon ** 2) if guard_epsilon else float("inf")
+        self._jmax = (self._win * guard_epsilon**2) if guard_epsilon else float("inf")
         self._release = tuning.guard_release * self._jmax
         self._sustained = sustained_guard
         self.reset()
@@ -94,7 +100,7 @@ class Supervisor:
         self.switches = 0
         self.guarded = False
         self._k = 0
-        self._last = -(10 ** 9)
+        self._last = -(10**9)
         self._cand = -1
         self._streak = 0
 
@@ -115,11 +121,14 @@ class Supervisor:
         elif g > self._jmax:
             self.guarded = True
         act = self.active
-        if (jb < j[act] and self._k >= self._warm and self._k - self._last >= self._dwell
-                and excitation >= self._floor):
+        if (
+            jb < j[act]
+            and self._k >= self._warm
+            and self._k - self._last >= self._dwell
+            and excitation >= self._floor
+        ):
             best = j.index(jb)
-            if (self.bank.separation(best, act) > self._sep
-                    and jb < (1.0 - self._h) * j[act] - self.margin):
+            if self.bank.separation(best, act) > self._sep and jb < (1.0 - self._h) * j[act] - self.margin:
                 self._streak = self._streak + 1 if best == self._cand else 1
                 self._cand = best
                 if self._streak >= self._confirm:

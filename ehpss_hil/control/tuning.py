@@ -36,22 +36,19 @@ class ControlTuning:
     guard_epsilon: float = field(default=0.4, metadata=rng(0.0, 10.0, lo_open=True))
     sensor_failed_below: float = field(default=0.15, metadata=rng(0.0, 1.0))
     anchor_rate_1_s: float = field(default=2.0, metadata=rng(0.0, 1e3))
-    fixed_k_loe: tuple[float, ...] = field(default=(1.0, 0.5),
-                                          metadata=rng(0.0, 1.5, lo_open=True, length=(1, 2)))
-    fixed_k_dft: tuple[float, ...] = field(default=(1.0, 0.5, 0.0),
-                                          metadata=rng(0.0, 2.5, length=(1, 3)))
-    k_loe_limits: tuple[float, ...] = field(default=(0.05, 1.5),
-                                           metadata=rng(0.0, 1.5, length=(2, 2)))
-    k_dft_limits: tuple[float, ...] = field(default=(0.0, 2.5),
-                                           metadata=rng(0.0, 2.5, length=(2, 2)))
+    fixed_k_loe: tuple[float, ...] = field(
+        default=(1.0, 0.5), metadata=rng(0.0, 1.5, lo_open=True, length=(1, 2))
+    )
+    fixed_k_dft: tuple[float, ...] = field(default=(1.0, 0.5, 0.0), metadata=rng(0.0, 2.5, length=(1, 3)))
+    k_loe_limits: tuple[float, ...] = field(default=(0.05, 1.5), metadata=rng(0.0, 1.5, length=(2, 2)))
+    k_dft_limits: tuple[float, ...] = field(default=(0.0, 2.5), metadata=rng(0.0, 2.5, length=(2, 2)))
     #: channel excitation gate: no switch while |φ| < excitation_floor·S (fraction of S)
     excitation_floor: float = field(default=0.03, metadata=rng(0.0, 1.0))
     #: NLMS regularization c = (nlms_c_fraction·S)² (≥ 1e-4: a vanishing c divides by φ² = 0)
     nlms_c_fraction: float = field(default=0.03, metadata=rng(1e-4, 10.0))
     #: position-channel guard: when even the best position model leaves a normalized residual
     #: above this, the sensor is not trusted (feedback from the model position x̂, no anchoring)
-    position_guard_epsilon: float = field(default=0.02,
-                                         metadata=rng(0.0, 10.0, lo_open=True))
+    position_guard_epsilon: float = field(default=0.02, metadata=rng(0.0, 10.0, lo_open=True))
     #: bumpless return from model-position feedback to the sensor: the sensor's share of the
     #: fed-back position ramps from 0 to 1 over this time (s); 0 = switch at once
     feedback_blend_s: float = field(default=0.02, metadata=rng(0.0, 60.0))

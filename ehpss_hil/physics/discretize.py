@@ -33,8 +33,9 @@ class ZohCache:
     ``build(key) -> (A, B)`` gives the continuous model for a key such as ``(k_loe, k_q)``.
     """
 
-    def __init__(self, build: Callable[[Hashable], tuple[Matrix, Matrix]], ts_s: float,
-                 max_entries: int = 256) -> None:
+    def __init__(
+        self, build: Callable[[Hashable], tuple[Matrix, Matrix]], ts_s: float, max_entries: int = 256
+    ) -> None:
         self._build = build
         self.ts_s = ts_s
         self._max = max_entries

@@ -47,8 +47,9 @@ def plant_matrices(p: PlantParams, k_loe: float = 1.0, k_q: float = 1.0) -> tupl
     return a, b
 
 
-def closed_loop_matrices(params: Params, k_loe: float = 1.0, k_dft: float = 1.0,
-                         k_q: float = 1.0) -> tuple[Matrix, Matrix, Matrix]:
+def closed_loop_matrices(
+    params: Params, k_loe: float = 1.0, k_dft: float = 1.0, k_q: float = 1.0
+) -> tuple[Matrix, Matrix, Matrix]:
     """The paper's eq 39 closed loop (PI on the drifted sensor), corrected per docs/design.md §6.
 
     Returns ``(A, B, C)`` for state ``[ẍ, ẋ, x, ẋ_v, x_v, z]``, input ``x_d`` (m), output ``x`` (m).

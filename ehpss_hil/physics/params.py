@@ -82,8 +82,12 @@ class Params:
         poles = np.linalg.eigvals(closed_loop_matrices(self)[0])
         worst = poles[np.argmax(poles.real)]
         if not np.isfinite(poles).all() or worst.real > 1e-9 * max(1.0, float(abs(poles).max())):
-            raise ConfigError("", "controller", "the fault-free closed loop (eq 39) with these "
-                              f"plant and gain values is unstable (pole at {worst:.4g} 1/s)")
+            raise ConfigError(
+                "",
+                "controller",
+                "the fault-free closed loop (eq 39) with these "
+                f"plant and gain values is unstable (pole at {worst:.4g} 1/s)",
+            )
 
 
 def load_params(path: str | Path | None = None) -> Params:

@@ -41,7 +41,7 @@ class PlantStepper:
 
     def _continuous_piston(self, key: Hashable) -> tuple[Matrix, Matrix]:
         a, _ = self._continuous(key)
-        return a[:SPOOL_VEL, :SPOOL_VEL], a[:SPOOL_VEL, SPOOL:SPOOL + 1]
+        return a[:SPOOL_VEL, :SPOOL_VEL], a[:SPOOL_VEL, SPOOL : SPOOL + 1]
 
     def _select(self, faults: FaultState) -> None:
         key = faults.dynamics_key

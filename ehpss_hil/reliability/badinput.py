@@ -88,7 +88,7 @@ def _wrong(target: str, key: Path_, value: Any, tmp: Path) -> list[Mutation]:
     if isinstance(value, bool):
         return [Mutation(target, key, "maybe", "type")]
     if isinstance(value, int):
-        return [Mutation(target, key, -10**12, "range")]
+        return [Mutation(target, key, -(10**12), "range")]
     if isinstance(value, float):
         return [Mutation(target, key, -1e12, "range")]
     if dotted in _ENUMS:
@@ -117,8 +117,11 @@ def mutations(tmp: Path) -> list[Mutation]:
     """Every key of the three files made wrong in turn, plus unknown keys (wrong file paths
     point into ``tmp``)."""
     tmp.mkdir(parents=True, exist_ok=True)
-    files = {"controller": load_yaml(CONTROLLER_YAML), "emulator": load_yaml(EMULATOR_YAML),
-             "scenario": base_scenario()}
+    files = {
+        "controller": load_yaml(CONTROLLER_YAML),
+        "emulator": load_yaml(EMULATOR_YAML),
+        "scenario": base_scenario(),
+    }
     out: list[Mutation] = []
     for target, data in files.items():
         for key, value in _leaves(data):
@@ -145,8 +148,7 @@ def _argv(m: Mutation, i: int, tmp: Path) -> list[str]:
         sc = tmp / f"bad-{i}-scenario.yaml"
         sc.write_text(yaml.safe_dump(_apply(base_scenario(), m), sort_keys=False))
         cfg = write_config(EMULATOR_YAML, tmp / f"bad-{i}-emulator.yaml", {})
-        return [PY, "-m", "firmware_sim.cli", "-c", str(cfg), "--scenario", str(sc),
-                "--duration", "0.5"]
+        return [PY, "-m", "firmware_sim.cli", "-c", str(cfg), "--scenario", str(sc), "--duration", "0.5"]
     src = CONTROLLER_YAML if m.target == "controller" else EMULATOR_YAML
     good = tmp / f"bad-{i}-{m.target}-base.yaml"
     write_config(src, good, {})  # absolute file paths first, then the wrong value
@@ -157,8 +159,9 @@ def _argv(m: Mutation, i: int, tmp: Path) -> list[str]:
     return [PY, "-m", "firmware_sim.cli", "-c", str(cfg), "--duration", "0.5"]
 
 
-def run_bad_inputs(out: Path, muts: list[Mutation] | None = None,
-                   parallel: int = 2) -> tuple[list[BadResult], int]:
+def run_bad_inputs(
+    out: Path, muts: list[Mutation] | None = None, parallel: int = 2
+) -> tuple[list[BadResult], int]:
     """Run every mutation as a process (``parallel`` at a time) beside a bus logger; returns the
     results and the number of frames the logger saw."""
     out.mkdir(parents=True, exist_ok=True)

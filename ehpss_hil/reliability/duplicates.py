@@ -30,8 +30,12 @@ from .procs import PY, Trial
 
 #: the copies are E2E errors: with the config's burst limit (10) the watchdog would hold the
 #: controller in FAULT for most of the trial and little would be acted on at all
-_WATCHDOG = {"watchdog.timeout_cycles": 10, "watchdog.auto_recover": True,
-             "watchdog.recovery_cycles": 5, "watchdog.max_e2e_errors": 1_000_000}
+_WATCHDOG = {
+    "watchdog.timeout_cycles": 10,
+    "watchdog.auto_recover": True,
+    "watchdog.recovery_cycles": 5,
+    "watchdog.max_e2e_errors": 1_000_000,
+}
 
 
 @dataclass
@@ -59,10 +63,18 @@ class DupResult:
     def ok(self) -> bool:
         """Counted as constructed, nothing lost, nothing acted on twice or wrongly."""
         keys = ("OK", "OK_SOME_LOST", "REPEATED", "WRONG_SEQUENCE")
-        return (not self.error and self.controller_exit == 0 and self.acted > 0
-                and all(self.counted.get(k) == self.expected.get(k) for k in keys)
-                and self.frames_missing == self.frames_extra == self.acted_twice
-                == self.acted_on_late == self.wrong_sample == 0)
+        return (
+            not self.error
+            and self.controller_exit == 0
+            and self.acted > 0
+            and all(self.counted.get(k) == self.expected.get(k) for k in keys)
+            and self.frames_missing
+            == self.frames_extra
+            == self.acted_twice
+            == self.acted_on_late
+            == self.wrong_sample
+            == 0
+        )
 
 
 def _cycles(log: LogFile, codec: FrameCodec) -> list[tuple[int | None, int, bool]]:
@@ -112,13 +124,25 @@ def dup_trial(out: Path, samples: int = 2000, seed: int = 1) -> DupResult:
     res = DupResult()
     try:
         with Trial(out) as t:
-            ctl = t.controller(_WATCHDOG, "--controller-factory",
-                               "ehpss_hil.reliability.probe:probe_factory")
+            ctl = t.controller(_WATCHDOG, "--controller-factory", "ehpss_hil.reliability.probe:probe_factory")
             if not ctl.wait_text(" on udp_multicast:"):
                 raise RuntimeError(f"controller did not start: {ctl.text()[-500:]}")
-            peer = t.spawn("peer", [PY, "-m", "ehpss_hil.reliability.peer", "--samples",
-                                    str(samples), "--seed", str(seed), "--sent",
-                                    str(out / "sent.log"), "--summary", str(out / "peer.json")])
+            peer = t.spawn(
+                "peer",
+                [
+                    PY,
+                    "-m",
+                    "ehpss_hil.reliability.peer",
+                    "--samples",
+                    str(samples),
+                    "--seed",
+                    str(seed),
+                    "--sent",
+                    str(out / "sent.log"),
+                    "--summary",
+                    str(out / "peer.json"),
+                ],
+            )
             if peer.wait(120.0) != 0:
                 raise RuntimeError(f"peer failed: {peer.text()[-500:]}")
             res.controller_exit = ctl.terminate()

@@ -101,9 +101,14 @@ class Receiver:
     """One receiver under fuzzing: its codec (whose counters say the verdict), one step per
     frame (deliver it and let the receiver run), and the inputs it acts on."""
 
-    def __init__(self, name: str, codec: FrameCodec, step: Callable[[can.Message], object],
-                 inputs: Callable[[], tuple[object, ...]] = tuple,
-                 close: Callable[[], object] = lambda: None) -> None:
+    def __init__(
+        self,
+        name: str,
+        codec: FrameCodec,
+        step: Callable[[can.Message], object],
+        inputs: Callable[[], tuple[object, ...]] = tuple,
+        close: Callable[[], object] = lambda: None,
+    ) -> None:
         self.name = name
         self.codec = codec
         self._step = step
@@ -144,17 +149,21 @@ def codec_receiver(codec: FrameCodec | None = None) -> Receiver:
 def _virtual_pair() -> tuple[can.BusABC, can.BusABC]:
     """Two python-can ``virtual`` buses on a fresh channel: (sender, receiver)."""
     ch = f"ehpss-fuzz-{next(_channels)}"
-    return (can.Bus(interface="virtual", channel=ch, receive_own_messages=False),
-            can.Bus(interface="virtual", channel=ch, receive_own_messages=False))
+    return (
+        can.Bus(interface="virtual", channel=ch, receive_own_messages=False),
+        can.Bus(interface="virtual", channel=ch, receive_own_messages=False),
+    )
 
 
 def _on_bus(sender: can.BusABC, run: Callable[[], object]) -> Callable[[can.Message], None]:
     """Send the frame, run the receiver once, discard what it sent back."""
+
     def step(msg: can.Message) -> None:
         sender.send(msg)
         run()
         while sender.recv(0.0) is not None:
             pass
+
     return step
 
 
@@ -173,9 +182,13 @@ def controller_receiver() -> Receiver:
         sender.shutdown()
         bus.shutdown()
 
-    return Receiver("controller", io.codec, _on_bus(sender, loop.poll_cycle),
-                    lambda: (m.position_m, m.spool_m, m.coil_current_a, m.load_pressure_pa),
-                    close)
+    return Receiver(
+        "controller",
+        io.codec,
+        _on_bus(sender, loop.poll_cycle),
+        lambda: (m.position_m, m.spool_m, m.coil_current_a, m.load_pressure_pa),
+        close,
+    )
 
 
 def emulator_receiver() -> Receiver:
@@ -194,5 +207,10 @@ def emulator_receiver() -> Receiver:
         sender.shutdown()
         bus.shutdown()
 
-    return Receiver("emulator", io.codec, _on_bus(sender, proc.step_period),
-                    lambda: (proc.hold.accepted, proc.inject_applied), close)
+    return Receiver(
+        "emulator",
+        io.codec,
+        _on_bus(sender, proc.step_period),
+        lambda: (proc.hold.accepted, proc.inject_applied),
+        close,
+    )

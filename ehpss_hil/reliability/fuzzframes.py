@@ -25,11 +25,26 @@ from ..codec import FrameCodec, Verdict
 from ..codec.e2e import protect
 
 #: crafted kinds and their weights
-KINDS: dict[str, float] = {"ok": 0.30, "lost": 0.08, "implausible": 0.16, "repeated": 0.10,
-                           "wrong_seq": 0.10, "crc": 0.10, "dlc": 0.10, "unknown": 0.06}
-_EXPECTED = {"ok": Verdict.OK, "lost": Verdict.OK_SOME_LOST, "implausible": Verdict.OUT_OF_RANGE,
-             "repeated": Verdict.REPEATED, "wrong_seq": Verdict.WRONG_SEQUENCE,
-             "crc": Verdict.CRC_ERROR, "dlc": Verdict.BAD_DLC, "unknown": Verdict.UNKNOWN_ID}
+KINDS: dict[str, float] = {
+    "ok": 0.30,
+    "lost": 0.08,
+    "implausible": 0.16,
+    "repeated": 0.10,
+    "wrong_seq": 0.10,
+    "crc": 0.10,
+    "dlc": 0.10,
+    "unknown": 0.06,
+}
+_EXPECTED = {
+    "ok": Verdict.OK,
+    "lost": Verdict.OK_SOME_LOST,
+    "implausible": Verdict.OUT_OF_RANGE,
+    "repeated": Verdict.REPEATED,
+    "wrong_seq": Verdict.WRONG_SEQUENCE,
+    "crc": Verdict.CRC_ERROR,
+    "dlc": Verdict.BAD_DLC,
+    "unknown": Verdict.UNKNOWN_ID,
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,8 +82,7 @@ class FrameFuzzer:
         """``n`` frames of random names and kinds, each with its expected verdict."""
         kinds, weights = list(KINDS), list(KINDS.values())
         names = self.codec.names
-        return [self._one(self._rng.choice(names), self._rng.choices(kinds, weights)[0])
-                for _ in range(n)]
+        return [self._one(self._rng.choice(names), self._rng.choices(kinds, weights)[0]) for _ in range(n)]
 
     def random(self, n: int) -> list[FuzzFrame]:
         """``n`` frames with random IDs (ours, other 11-bit, 29-bit), DLC 0–8 and bytes."""
@@ -78,13 +92,24 @@ class FrameFuzzer:
         for _ in range(n):
             u = r.random()
             ext = 0.7 <= u < 0.9
-            can_id = (r.choice(ours) if u < 0.4 or u >= 0.9 else
-                      r.getrandbits(29) if ext else r.getrandbits(11))
+            can_id = (
+                r.choice(ours) if u < 0.4 or u >= 0.9 else r.getrandbits(29) if ext else r.getrandbits(11)
+            )
             dlc = r.randint(0, 8)
             data = r.randbytes(dlc if r.random() < 0.95 else r.randint(0, 8))
-            out.append(FuzzFrame(can.Message(arbitration_id=can_id, data=data, dlc=dlc,
-                                             is_extended_id=ext, is_remote_frame=u >= 0.9,
-                                             check=False), None))
+            out.append(
+                FuzzFrame(
+                    can.Message(
+                        arbitration_id=can_id,
+                        data=data,
+                        dlc=dlc,
+                        is_extended_id=ext,
+                        is_remote_frame=u >= 0.9,
+                        check=False,
+                    ),
+                    None,
+                )
+            )
         return out
 
     # ---- crafted frames -------------------------------------------------------------------
@@ -156,8 +181,9 @@ class FrameFuzzer:
         dlc = r.choice([d for d in range(9) if d != length])
         if r.random() < 0.8:  # DLC and data agree, both wrong
             return _frame(can_id, (data + r.randbytes(8))[:dlc])
-        return can.Message(arbitration_id=can_id, data=data, dlc=dlc, is_extended_id=False,
-                           check=False)  # DLC field disagrees with the bytes
+        return can.Message(
+            arbitration_id=can_id, data=data, dlc=dlc, is_extended_id=False, check=False
+        )  # DLC field disagrees with the bytes
 
     def _unknown(self, can_id: int) -> can.Message:
         r = self._rng
@@ -171,14 +197,12 @@ class FrameFuzzer:
         if u < 0.7:
             return can.Message(arbitration_id=can_id, data=data, is_extended_id=True)
         if u < 0.85:
-            return can.Message(arbitration_id=can_id, is_remote_frame=True, dlc=8,
-                               is_extended_id=False)
+            return can.Message(arbitration_id=can_id, is_remote_frame=True, dlc=8, is_extended_id=False)
         return can.Message(arbitration_id=can_id, data=data, is_fd=True, is_extended_id=False)
 
 
 def _frame(can_id: int, data: bytes) -> can.Message:
-    return can.Message(arbitration_id=can_id, data=data, dlc=len(data), is_extended_id=False,
-                       check=False)
+    return can.Message(arbitration_id=can_id, data=data, dlc=len(data), is_extended_id=False, check=False)
 
 
 def _raw_limits(sig: Signal) -> tuple[int, int]:
@@ -200,8 +224,9 @@ def _implausible_signals(msg: DbcMessage) -> list[Signal]:
             continue
         lo, hi = _raw_limits(s)
         scale, off = float(s.scale), float(s.offset)
-        if hi * scale + off > float(s.maximum) + 1.5 * abs(scale) or \
-                lo * scale + off < float(s.minimum) - 1.5 * abs(scale):
+        if hi * scale + off > float(s.maximum) + 1.5 * abs(scale) or lo * scale + off < float(
+            s.minimum
+        ) - 1.5 * abs(scale):
             out.append(s)
     return out
 
@@ -222,15 +247,17 @@ def _out_of_range(sig: Signal, r: random.Random) -> float:
     return r.randint(a, b) * scale + off
 
 
-def _plausible_values(msg: DbcMessage, r: random.Random,
-                      mux_with: Signal | None = None) -> dict[str, Any]:
+def _plausible_values(msg: DbcMessage, r: random.Random, mux_with: Signal | None = None) -> dict[str, Any]:
     """Random in-range physical values for every signal of one multiplexer choice."""
     mux = next((s for s in msg.signals if s.is_multiplexer), None)
     chosen: int | None = None
     if mux is not None:
         ids = sorted({i for s in msg.signals for i in (s.multiplexer_ids or [])})
-        chosen = (mux_with.multiplexer_ids[0] if mux_with is not None and mux_with.multiplexer_ids
-                  else r.choice(ids))
+        chosen = (
+            mux_with.multiplexer_ids[0]
+            if mux_with is not None and mux_with.multiplexer_ids
+            else r.choice(ids)
+        )
     values: dict[str, Any] = {"CRC": 0, "Counter": 0}
     for s in msg.signals:
         if s.name in values:

@@ -45,12 +45,16 @@ class SmallTmpfs:
 
     def __enter__(self) -> Path:
         self.where.mkdir(parents=True, exist_ok=True)
-        subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={self.size}", "tmpfs",
-                        str(self.where)], check=True, capture_output=True)
+        subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", f"size={self.size}", "tmpfs", str(self.where)],
+            check=True,
+            capture_output=True,
+        )
         return self.where
 
-    def __exit__(self, et: type[BaseException] | None, ev: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None
+    ) -> None:
         subprocess.run(["umount", str(self.where)], check=False, capture_output=True)
 
 
@@ -83,15 +87,24 @@ class ForeignResult:
     @property
     def ok(self) -> bool:
         """Refused with exit 2 and one line; every foreign file kept both times; the run ran."""
-        return (self.refused_exit == 2 and len(self.refused_lines) == 1
-                and self.kept_after_refusal == self.kept_after_run == len(FOREIGN)
-                and self.overwrite_exit == 0 and self.run_files > 0)
+        return (
+            self.refused_exit == 2
+            and len(self.refused_lines) == 1
+            and self.kept_after_refusal == self.kept_after_run == len(FOREIGN)
+            and self.overwrite_exit == 0
+            and self.run_files > 0
+        )
 
 
 def _run_cli(args: list[str], timeout_s: float = 120.0) -> tuple[int | None, list[str]]:
     try:
-        r = subprocess.run([PY, "-m", "ehpss_hil.cli", *args], cwd=PROJECT_ROOT,
-                           capture_output=True, text=True, timeout=timeout_s)
+        r = subprocess.run(
+            [PY, "-m", "ehpss_hil.cli", *args],
+            cwd=PROJECT_ROOT,
+            capture_output=True,
+            text=True,
+            timeout=timeout_s,
+        )
     except subprocess.TimeoutExpired:
         return None, []
     return r.returncode, [ln for ln in (r.stdout + r.stderr).splitlines() if ln.strip()]
@@ -150,10 +163,16 @@ class DiskFullResult:
     def ok(self) -> bool:
         """Exit 0 everywhere, summaries written, exact sidecars, a warning, no .tmp, replay
         reads the controller's log, and the disk did fill up."""
-        return (not self.error and all(v == 0 for v in self.exits.values())
-                and all(self.summaries.values()) and all(s.ok for s in self.logs.values())
-                and self.warned and not self.tmp_left and self.replay_exit in (0, 1)
-                and self.dropped > 0)
+        return (
+            not self.error
+            and all(v == 0 for v in self.exits.values())
+            and all(self.summaries.values())
+            and all(s.ok for s in self.logs.values())
+            and self.warned
+            and not self.tmp_left
+            and self.replay_exit in (0, 1)
+            and self.dropped > 0
+        )
 
 
 def _log_state(path: Path) -> LogState:
@@ -175,15 +194,37 @@ def disk_full_trial(out: Path, seconds: float = 4.0) -> DiskFullResult:
     """Both processes with their logs and summaries on a 200 kB tmpfs for ``seconds`` (s)."""
     res = DiskFullResult()
     with SmallTmpfs(out / "tmpfs") as full, Trial(out) as t:
-        ctrl = t.spawn("controller", [
-            PY, "-m", "ehpss_hil.cli", "controller", "-c",
-            str(PROJECT_ROOT / "configs" / "controller.yaml"),
-            "--log", str(full / "controller.log"),
-            "--summary-json", str(full / "controller.json")])
-        emu = t.spawn("emulator", [
-            PY, "-m", "firmware_sim.cli", "-c", str(PROJECT_ROOT / "configs" / "emulator.yaml"),
-            "--log", str(full / "emulator.log"), "--summary-json", str(full / "emulator.json"),
-            "--duration", repr(seconds)])
+        ctrl = t.spawn(
+            "controller",
+            [
+                PY,
+                "-m",
+                "ehpss_hil.cli",
+                "controller",
+                "-c",
+                str(PROJECT_ROOT / "configs" / "controller.yaml"),
+                "--log",
+                str(full / "controller.log"),
+                "--summary-json",
+                str(full / "controller.json"),
+            ],
+        )
+        emu = t.spawn(
+            "emulator",
+            [
+                PY,
+                "-m",
+                "firmware_sim.cli",
+                "-c",
+                str(PROJECT_ROOT / "configs" / "emulator.yaml"),
+                "--log",
+                str(full / "emulator.log"),
+                "--summary-json",
+                str(full / "emulator.json"),
+                "--duration",
+                repr(seconds),
+            ],
+        )
         res.exits["emulator"] = emu.wait(seconds + 60.0)
         time.sleep(0.1)
         res.exits["controller"] = ctrl.terminate()
@@ -192,8 +233,13 @@ def disk_full_trial(out: Path, seconds: float = 4.0) -> DiskFullResult:
             res.summaries[name] = (full / f"{name}.json").exists()
             res.logs[name] = _log_state(full / f"{name}.log")
         res.tmp_left = sorted(p.name for p in full.iterdir() if p.name.endswith(".tmp"))
-        r = subprocess.run([PY, "-m", "ehpss_hil.cli", "replay", str(full / "controller.log")],
-                           cwd=PROJECT_ROOT, capture_output=True, text=True, timeout=120)
+        r = subprocess.run(
+            [PY, "-m", "ehpss_hil.cli", "replay", str(full / "controller.log")],
+            cwd=PROJECT_ROOT,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         res.replay_exit = r.returncode  # 0 identical, 1 diverged: both read the whole log
         if r.returncode not in (0, 1):
             res.error = f"replay: {(r.stdout + r.stderr).strip().splitlines()[-1:]}"

@@ -48,17 +48,20 @@ from .procs import CONTROLLER_YAML, EMULATOR_YAML, READY, Child, Trial
 
 PROCS = ("controller", "emulator")
 _CODEC = FrameCodec()
-_IDS = {"controller": {_CODEC.can_id(n) for n in CTRL_FRAMES},
-        "emulator": {_CODEC.can_id(n) for n in EMU_FRAMES}}
+_IDS = {
+    "controller": {_CODEC.can_id(n) for n in CTRL_FRAMES},
+    "emulator": {_CODEC.can_id(n) for n in EMU_FRAMES},
+}
 
 
 def configured_limits() -> dict[str, int]:
     """The safe-state limits from the shipped configs: controller ``watchdog.timeout_cycles``
     (cycles), emulator ``command_timeout_s × rate_hz`` (periods)."""
     c, e = load_yaml(CONTROLLER_YAML) or {}, load_yaml(EMULATOR_YAML) or {}
-    return {"controller": int((c.get("watchdog") or {}).get("timeout_cycles", 3)),
-            "emulator": max(1, round(float(e.get("command_timeout_s", 0.010)) *
-                                     float(e.get("rate_hz", 1000.0))))}
+    return {
+        "controller": int((c.get("watchdog") or {}).get("timeout_cycles", 3)),
+        "emulator": max(1, round(float(e.get("command_timeout_s", 0.010)) * float(e.get("rate_hz", 1000.0)))),
+    }
 
 
 @dataclass
@@ -77,8 +80,11 @@ class LogAudit:
     @property
     def ok(self) -> bool:
         """Nothing missing, nothing extra, no bad or partial line."""
-        return (self.rx_missing == self.rx_extra == self.tx_missing == self.tx_extra
-                == self.bad_lines == 0 and self.complete and self.frames > 0)
+        return (
+            self.rx_missing == self.rx_extra == self.tx_missing == self.tx_extra == self.bad_lines == 0
+            and self.complete
+            and self.frames > 0
+        )
 
 
 def audit_log(proc: str, own: LogFile, bus: LogFile, other_ended_first: bool = True) -> LogAudit:
@@ -88,8 +94,7 @@ def audit_log(proc: str, own: LogFile, bus: LogFile, other_ended_first: bool = T
     other = "emulator" if proc == "controller" else "controller"
     rx = compare(own.only(_IDS[other]), bus.only(_IDS[other]), to_end=other_ended_first)
     tx = compare(own.only(_IDS[proc]), bus.only(_IDS[proc]))
-    return LogAudit(rx.missing, rx.extra, tx.missing, tx.extra, len(own.frames), own.bad_lines,
-                    own.complete)
+    return LogAudit(rx.missing, rx.extra, tx.missing, tx.extra, len(own.frames), own.bad_lines, own.complete)
 
 
 @dataclass
@@ -144,8 +149,9 @@ _SAFE_LINE = {"controller": "-> FAULT", "emulator": "no valid VALVE_CMD for"}
 def kill_trial(out: Path, trial: int, victim: str, rng: random.Random) -> KillResult:
     """One kill -9 of ``victim`` at a random moment; measure the survivor."""
     limits = configured_limits()
-    res = KillResult(trial, victim, rng.uniform(0.2, 1.5), limits[
-        "emulator" if victim == "controller" else "controller"])
+    res = KillResult(
+        trial, victim, rng.uniform(0.2, 1.5), limits["emulator" if victim == "controller" else "controller"]
+    )
     surv = res.survivor
     try:
         with Trial(out) as t:
@@ -197,11 +203,16 @@ class TermResult:
     @property
     def ok(self) -> bool:
         """Both exit 0, zero current last, logs complete, closed, nothing dropped."""
-        return (not self.error and all(v == 0 for v in self.exits.values())
-                and len(self.exits) == 2 and self.last_command == (0.0, 0)
-                and all(a.ok for a in self.logs.values()) and all(self.closed.values())
-                and not any(self.dropped.values())
-                and (self.first == "emulator" or self.command_delivered))
+        return (
+            not self.error
+            and all(v == 0 for v in self.exits.values())
+            and len(self.exits) == 2
+            and self.last_command == (0.0, 0)
+            and all(a.ok for a in self.logs.values())
+            and all(self.closed.values())
+            and not any(self.dropped.values())
+            and (self.first == "emulator" or self.command_delivered)
+        )
 
 
 def term_trial(out: Path, trial: int, first: str, rng: random.Random) -> TermResult:

@@ -134,8 +134,7 @@ def controller_cycles(log: LogFile, codec: FrameCodec | None = None) -> list[Cyc
             cc = int(vals["CycleCount"])
             skipped = 0 if last is None else (cc - last - 1) % 65536
             last = cc
-            out.append(Cycle(bool(vals["Enable"]), float(vals["CurrentSetpoint"]), fresh, bad,
-                             skipped))
+            out.append(Cycle(bool(vals["Enable"]), float(vals["CurrentSetpoint"]), fresh, bad, skipped))
             fresh, bad = False, 0
     return out
 
@@ -169,8 +168,9 @@ class WatchdogAudit:
     at_end: int = 0
 
 
-def audit_watchdog(cycles: list[Cycle], timeout_cycles: int, max_e2e_errors: int = 10,
-                   stopped: bool = True) -> WatchdogAudit:
+def audit_watchdog(
+    cycles: list[Cycle], timeout_cycles: int, max_e2e_errors: int = 10, stopped: bool = True
+) -> WatchdogAudit:
     """Every trip must follow a real timeout and every real timeout while active must trip.
     Periods skipped by an overrun (CycleCount gaps) count as cycles without data; more than
     ``RESYNC_SAMPLES`` at once is due (LOOP_OVERRUN). Stale frames and starvation cannot be
@@ -195,12 +195,12 @@ def audit_watchdog(cycles: list[Cycle], timeout_cycles: int, max_e2e_errors: int
         elif due:
             missed += 1
     last_fresh = max((i for i, c in enumerate(cyc) if c.fresh), default=-1)
-    return WatchdogAudit(len(cyc), len(trips), real, spurious, missed,
-                         sum(t > last_fresh for t in trips))
+    return WatchdogAudit(len(cyc), len(trips), real, spurious, missed, sum(t > last_fresh for t in trips))
 
 
-def last_status(log: LogFile, codec: FrameCodec | None = None,
-                before_last: bool = True) -> tuple[str, str] | None:
+def last_status(
+    log: LogFile, codec: FrameCodec | None = None, before_last: bool = True
+) -> tuple[str, str] | None:
     """(State, FailsafeReason) names of the controller's last CTRL_STATUS (with
     ``before_last``: the one before the shutdown status)."""
     from ..runtime.lifecycle import FailsafeReason, State
@@ -244,5 +244,4 @@ def emulator_safe(log: LogFile, codec: FrameCodec | None = None) -> EmulatorSafe
         if periods[i][2] != 0.0:
             break
         k2 = i
-    return EmulatorSafe(None if k1 is None else k1 - k0,
-                        None if k2 == len(periods) else k2 - 1 - k0)
+    return EmulatorSafe(None if k1 is None else k1 - k0, None if k2 == len(periods) else k2 - 1 - k0)

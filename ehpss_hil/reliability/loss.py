@@ -68,8 +68,7 @@ def lossy(sc: Scenario, direction: str, loss: float) -> Scenario:
     return replace(sc, **{f"{direction}_frame_loss": loss})  # type: ignore[arg-type]
 
 
-def sim_loss(levels: tuple[float, ...] = LEVELS, mode: str = "mmac",
-             scenario: Path = CASE1) -> list[LossRow]:
+def sim_loss(levels: tuple[float, ...] = LEVELS, mode: str = "mmac", scenario: Path = CASE1) -> list[LossRow]:
     """Lossless, then each level in each direction, on the lockstep simulator."""
     sc = load_scenario(scenario)
     base = compute_metrics(run_scenario(sc, mode)).rms_error_m
@@ -99,8 +98,14 @@ def configured_timeout_cycles() -> int:
     return int(wd.get("timeout_cycles", 3))
 
 
-def process_loss(out: Path, direction: str, loss: float, mode: str = "mmac",
-                 duration_s: float | None = None, timeout_cycles: int | None = None) -> LossRow:
+def process_loss(
+    out: Path,
+    direction: str,
+    loss: float,
+    mode: str = "mmac",
+    duration_s: float | None = None,
+    timeout_cycles: int | None = None,
+) -> LossRow:
     """One ``ehpss-hil run`` (realtime) with ``loss`` in ``direction``; RMS and watchdog audit.
     ``timeout_cycles`` None: ``ehpss-hil run``'s bench watchdog."""
     from ..orchestrate import RunPlan, execute
@@ -108,8 +113,7 @@ def process_loss(out: Path, direction: str, loss: float, mode: str = "mmac",
 
     out.mkdir(parents=True, exist_ok=True)
     sc_path = _scenario_file(out, direction, loss, duration_s)
-    plan = RunPlan(scenario_path=sc_path, mode=mode, out_dir=out / "run", auto_recover=True,
-                   quiet=True)
+    plan = RunPlan(scenario_path=sc_path, mode=mode, out_dir=out / "run", auto_recover=True, quiet=True)
     if timeout_cycles is not None:
         plan = replace(plan, watchdog_cycles=timeout_cycles)
     res = execute(plan)
@@ -120,18 +124,26 @@ def process_loss(out: Path, direction: str, loss: float, mode: str = "mmac",
         rms = float(row["rms_error_m"]) if row.get("rms_error_m") is not None else rms
     wd = (load_yaml(out / "run" / "controller.yaml") or {}).get("watchdog") or {}
     timeout = int(wd.get("timeout_cycles", configured_timeout_cycles()))
-    audit = audit_watchdog(controller_cycles(read_candump(out / "run" / "controller.log")),
-                           timeout, int(wd.get("max_e2e_errors", 10)))
+    audit = audit_watchdog(
+        controller_cycles(read_candump(out / "run" / "controller.log")),
+        timeout,
+        int(wd.get("max_e2e_errors", 10)),
+    )
     return LossRow("processes", direction, loss, rms, None, audit, exit_ok, timeout)
 
 
-def processes_loss(out: Path, levels: tuple[float, ...] = LEVELS, lossless: bool = True,
-                   duration_s: float | None = None,
-                   timeout_cycles: int | None = None) -> list[LossRow]:
+def processes_loss(
+    out: Path,
+    levels: tuple[float, ...] = LEVELS,
+    lossless: bool = True,
+    duration_s: float | None = None,
+    timeout_cycles: int | None = None,
+) -> list[LossRow]:
     """The lossless run (optional), then each level in each direction, as processes."""
     rows = []
     cases = ([("none", 0.0)] if lossless else []) + [(d, p) for d in DIRECTIONS for p in levels]
     for d, p in cases:
-        rows.append(process_loss(out / f"{d}-{p:g}", d, p, duration_s=duration_s,
-                                 timeout_cycles=timeout_cycles))
+        rows.append(
+            process_loss(out / f"{d}-{p:g}", d, p, duration_s=duration_s, timeout_cycles=timeout_cycles)
+        )
     return rows  # no ratio: on a shared non-RT host a realtime run's RMS varies several-fold

@@ -31,8 +31,7 @@ from ..config import BusConfig
 from .probe import POSITION_STEP_M
 
 #: tick kind → probability
-TICKS = {"normal": 0.78, "dup": 0.06, "late_dup": 0.04, "reorder": 0.06, "burst": 0.03,
-         "dup_burst": 0.03}
+TICKS = {"normal": 0.78, "dup": 0.06, "late_dup": 0.04, "reorder": 0.06, "burst": 0.03, "dup_burst": 0.03}
 
 
 @dataclass
@@ -50,8 +49,12 @@ class Schedule:
         pairs = sum(len(t) for t in self.ticks)
         rep = 2 * (self.kinds["dup"] + self.kinds["late_dup"] + 4 * self.kinds["dup_burst"])
         wrong = 2 * self.kinds["reorder"]
-        return {"OK": 2 * pairs - rep - 2 * wrong, "OK_SOME_LOST": wrong, "REPEATED": rep,
-                "WRONG_SEQUENCE": wrong}
+        return {
+            "OK": 2 * pairs - rep - 2 * wrong,
+            "OK_SOME_LOST": wrong,
+            "REPEATED": rep,
+            "WRONG_SEQUENCE": wrong,
+        }
 
 
 def make_schedule(n_samples: int, seed: int) -> Schedule:
@@ -64,8 +67,13 @@ def make_schedule(n_samples: int, seed: int) -> Schedule:
         kind = r.choices(kinds, weights)[0]
         if kind in ("late_dup", "reorder") and i == 1:
             kind = "normal"  # the first frame of an ID is accepted whatever its counter
-        ticks = {"normal": [[i]], "dup": [[i, i]], "late_dup": [[i - 1]],
-                 "reorder": [[i + 1], [i]], "dup_burst": [[i] * 5]}.get(kind)
+        ticks = {
+            "normal": [[i]],
+            "dup": [[i, i]],
+            "late_dup": [[i - 1]],
+            "reorder": [[i + 1], [i]],
+            "dup_burst": [[i] * 5],
+        }.get(kind)
         if ticks is None:  # burst
             ticks = [list(range(i, i + r.randint(10, 30)))]
         if kind == "reorder":
@@ -78,8 +86,7 @@ def make_schedule(n_samples: int, seed: int) -> Schedule:
 
 def _frames(codec: FrameCodec, i: int) -> tuple[bytes, bytes]:
     """The pair for sample i (counter = i mod 16, so a resend is an exact duplicate)."""
-    pos = codec.encode("SENSOR_POS", {"Position": i * POSITION_STEP_M, "Spool": 0.0},
-                       counter=i & 0xF).data
+    pos = codec.encode("SENSOR_POS", {"Position": i * POSITION_STEP_M, "Spool": 0.0}, counter=i & 0xF).data
     aux = codec.encode("SENSOR_AUX", {"LoadPressure": 0.0, "CoilCurrent": 0.0}, counter=i & 0xF).data
     return bytes(pos), bytes(aux)
 
@@ -97,11 +104,16 @@ def play(sch: Schedule, bus_cfg: BusConfig, sent_path: Path, period_s: float = 1
             for tick in sch.ticks:
                 for i in tick:
                     for can_id, data in zip(ids, _frames(codec, i), strict=True):
-                        msg = can.Message(arbitration_id=can_id, data=data, is_extended_id=False,
-                                          timestamp=time.time())
+                        msg = can.Message(
+                            arbitration_id=can_id, data=data, is_extended_id=False, timestamp=time.time()
+                        )
                         bus.send(msg)
-                        log.write(format_line((msg.timestamp, can_id, False, False, False, False,
-                                               False, False, 8, data), "can0"))
+                        log.write(
+                            format_line(
+                                (msg.timestamp, can_id, False, False, False, False, False, False, 8, data),
+                                "can0",
+                            )
+                        )
                         n += 1
                 nxt += period_s
                 time.sleep(max(0.0, nxt - time.monotonic()))
@@ -122,8 +134,11 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     sch = make_schedule(a.samples, a.seed)
     n = play(sch, BusConfig(channel=a.channel, port=a.port), a.sent)
-    a.summary.write_text(json.dumps({"frames": n, "kinds": dict(sch.kinds),
-                                     "expected": sch.expected, "late": sorted(sch.late)}))
+    a.summary.write_text(
+        json.dumps(
+            {"frames": n, "kinds": dict(sch.kinds), "expected": sch.expected, "late": sorted(sch.late)}
+        )
+    )
     print(f"peer: {n} frames sent", flush=True)
     return 0
 

@@ -28,8 +28,12 @@ PY = sys.executable
 CONTROLLER_YAML = PROJECT_ROOT / "configs" / "controller.yaml"
 EMULATOR_YAML = PROJECT_ROOT / "configs" / "emulator.yaml"
 #: what each process prints once it is on the bus (and, for the controller, has sensor data)
-READY = {"logger": "logging ", "emulator": "realtime on", "controller": "first sensor data: ACTIVE",
-         "controller-lockstep": "(lockstep)"}
+READY = {
+    "logger": "logging ",
+    "emulator": "realtime on",
+    "controller": "first sensor data: ACTIVE",
+    "controller-lockstep": "(lockstep)",
+}
 
 
 def skip_reason() -> str | None:
@@ -106,8 +110,9 @@ class Trial:
         self._ns = PrivateNetns().start()
         return self
 
-    def __exit__(self, et: type[BaseException] | None, ev: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None
+    ) -> None:
         self.close()
 
     def close(self) -> None:
@@ -124,8 +129,14 @@ class Trial:
         out = self.dir / f"{name}.out"
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         with open(out, "wb") as f:
-            p = subprocess.Popen([*self._ns.prefix(), *argv], stdout=f, stderr=subprocess.STDOUT,
-                                 stdin=subprocess.DEVNULL, cwd=PROJECT_ROOT, env=env)
+            p = subprocess.Popen(
+                [*self._ns.prefix(), *argv],
+                stdout=f,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                cwd=PROJECT_ROOT,
+                env=env,
+            )
         child = Child(name, p, out)
         self.children[name] = child
         return child
@@ -134,8 +145,21 @@ class Trial:
     def logger(self, name: str = "logger") -> Child:
         """``ehpss-hil log`` on the configs' bus, writing ``<name>.log``; waits until it listens."""
         bus = (load_yaml(CONTROLLER_YAML) or {}).get("bus", {})
-        c = self.spawn(name, [PY, "-m", "ehpss_hil.cli", "log", "-i", bus["interface"], "-c",
-                              str(bus["channel"]), "-o", str(self.dir / f"{name}.log")])
+        c = self.spawn(
+            name,
+            [
+                PY,
+                "-m",
+                "ehpss_hil.cli",
+                "log",
+                "-i",
+                bus["interface"],
+                "-c",
+                str(bus["channel"]),
+                "-o",
+                str(self.dir / f"{name}.log"),
+            ],
+        )
         if not c.wait_text(READY["logger"]):
             raise RuntimeError(f"bus logger did not start: {c.text()[-500:]}")
         return c
@@ -144,17 +168,21 @@ class Trial:
         out = ["--summary-json", str(self.dir / f"{name}.json")]
         return [*out, "--log", str(self.dir / f"{name}.log")] if log else out
 
-    def controller(self, overrides: dict[str, Any], *args: str, name: str = "controller",
-                   log: bool = True) -> Child:
+    def controller(
+        self, overrides: dict[str, Any], *args: str, name: str = "controller", log: bool = True
+    ) -> Child:
         """``ehpss-hil controller`` with ``configs/controller.yaml`` + ``overrides``, its
         summary ``<name>.json`` and (``log``) its candump log ``<name>.log``."""
         cfg = write_config(CONTROLLER_YAML, self.dir / f"{name}.yaml", overrides)
-        return self.spawn(name, [PY, "-m", "ehpss_hil.cli", "controller", "-c", str(cfg),
-                                 *self._outputs(name, log), *args])
+        return self.spawn(
+            name, [PY, "-m", "ehpss_hil.cli", "controller", "-c", str(cfg), *self._outputs(name, log), *args]
+        )
 
-    def emulator(self, overrides: dict[str, Any], *args: str, name: str = "emulator",
-                 log: bool = True) -> Child:
+    def emulator(
+        self, overrides: dict[str, Any], *args: str, name: str = "emulator", log: bool = True
+    ) -> Child:
         """``firmware-sim`` with ``configs/emulator.yaml`` + ``overrides``, summary and log."""
         cfg = write_config(EMULATOR_YAML, self.dir / f"{name}.yaml", overrides)
-        return self.spawn(name, [PY, "-m", "firmware_sim.cli", "-c", str(cfg),
-                                 *self._outputs(name, log), *args])
+        return self.spawn(
+            name, [PY, "-m", "firmware_sim.cli", "-c", str(cfg), *self._outputs(name, log), *args]
+        )

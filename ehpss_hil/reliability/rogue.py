@@ -43,9 +43,17 @@ def send_rogue(seconds: float, rate_hz: float, bus_cfg: BusConfig) -> int:
         nxt = time.monotonic()
         end = nxt + seconds
         while nxt < end:
-            bus.send(codec.encode("VALVE_CMD", {
-                "CurrentSetpoint": ROGUE_CURRENT_A, "Enable": 1,
-                "CycleCount": (ROGUE_FIRST_CYCLE + n) & 0xFFFF}, timestamp_s=time.time()))
+            bus.send(
+                codec.encode(
+                    "VALVE_CMD",
+                    {
+                        "CurrentSetpoint": ROGUE_CURRENT_A,
+                        "Enable": 1,
+                        "CycleCount": (ROGUE_FIRST_CYCLE + n) & 0xFFFF,
+                    },
+                    timestamp_s=time.time(),
+                )
+            )
             n += 1
             nxt += period
             time.sleep(max(0.0, nxt - time.monotonic()))
@@ -76,23 +84,30 @@ class RogueResult:
     def ok(self) -> bool:
         """Emulator centred (a conflict, CommandConflict sent), controller in ID_COLLISION with
         the collision counted, piston within bound, both exits 0."""
-        return (not self.error and self.sent > 0
-                and self.emulator.get("command_conflicts", 0) >= 1 and self.command_conflict_seen
-                and self.controller.get("failsafe_reason") == "ID_COLLISION"
-                and self.valve_cmd_collisions > 0
-                and self.truth_samples > 0 and self.max_deviation_m <= MAX_DEVIATION_M
-                and all(v == 0 for v in self.exits.values()))
+        return (
+            not self.error
+            and self.sent > 0
+            and self.emulator.get("command_conflicts", 0) >= 1
+            and self.command_conflict_seen
+            and self.controller.get("failsafe_reason") == "ID_COLLISION"
+            and self.valve_cmd_collisions > 0
+            and self.truth_samples > 0
+            and self.max_deviation_m <= MAX_DEVIATION_M
+            and all(v == 0 for v in self.exits.values())
+        )
 
     def line(self) -> str:
         """One line of figures."""
         c, e = self.controller, self.emulator
-        return (f"rogue sent {self.sent}; emulator: conflicts {e.get('command_conflicts')}, "
-                f"foreign commands {e.get('foreign_commands')}, CommandConflict sent "
-                f"{self.command_conflict_seen}; controller: state {c.get('state')} reason "
-                f"{c.get('failsafe_reason')}, VALVE_CMD collisions {self.valve_cmd_collisions}; "
-                f"piston max |x − x_d| {self.max_deviation_m * 1e6:.1f} µm over "
-                f"{self.truth_samples} samples; exits {self.exits}"
-                + (f"; error: {self.error}" if self.error else ""))
+        return (
+            f"rogue sent {self.sent}; emulator: conflicts {e.get('command_conflicts')}, "
+            f"foreign commands {e.get('foreign_commands')}, CommandConflict sent "
+            f"{self.command_conflict_seen}; controller: state {c.get('state')} reason "
+            f"{c.get('failsafe_reason')}, VALVE_CMD collisions {self.valve_cmd_collisions}; "
+            f"piston max |x − x_d| {self.max_deviation_m * 1e6:.1f} µm over "
+            f"{self.truth_samples} samples; exits {self.exits}"
+            + (f"; error: {self.error}" if self.error else "")
+        )
 
 
 def _json(path: Path) -> dict[str, Any]:
@@ -131,15 +146,25 @@ def rogue_trial(out: Path, rogue_s: float = 1.0, duration_s: float = 3.0) -> Rog
     with Trial(out) as t:
         # the bench runs' 10-cycle watchdog (a loaded host's stall is no collision); no recovery:
         # the final reason is the one the rogue caused
-        ctl = t.controller({"reference": {"kind": "step", "amplitude_m": 0.0},
-                            "watchdog.timeout_cycles": 10})
+        ctl = t.controller({"reference": {"kind": "step", "amplitude_m": 0.0}, "watchdog.timeout_cycles": 10})
         emu = t.emulator({}, "--truth", "--duration", repr(duration_s))
         if not ctl.wait_text("first sensor data", 60.0):
             res.error = "controller had no sensor data"
             return res
-        rogue = t.spawn("rogue", [PY, "-m", "ehpss_hil.reliability.rogue", "--seconds",
-                                  repr(rogue_s), "--channel", bus.channel, "--port",
-                                  str(bus.port)])
+        rogue = t.spawn(
+            "rogue",
+            [
+                PY,
+                "-m",
+                "ehpss_hil.reliability.rogue",
+                "--seconds",
+                repr(rogue_s),
+                "--channel",
+                bus.channel,
+                "--port",
+                str(bus.port),
+            ],
+        )
         rogue.wait(60.0 + rogue_s)
         try:
             res.sent = int(rogue.text().split()[-1])
@@ -149,8 +174,7 @@ def rogue_trial(out: Path, rogue_s: float = 1.0, duration_s: float = 3.0) -> Rog
         res.exits["controller"] = ctl.terminate()
     res.controller = _json(out / "controller.json")
     res.emulator = _json(out / "emulator.json")
-    res.max_deviation_m, res.truth_samples, res.command_conflict_seen = _truth(
-        out / "emulator.log")
+    res.max_deviation_m, res.truth_samples, res.command_conflict_seen = _truth(out / "emulator.log")
     return res
 
 

@@ -30,13 +30,19 @@ def _truncated_frame() -> bytes:
     it)."""
     import can
 
-    return pack_message(can.Message(arbitration_id=0x555, data=bytes(8), is_extended_id=False,
-                                    timestamp=1.0))[:-5]
+    return pack_message(
+        can.Message(arbitration_id=0x555, data=bytes(8), is_extended_id=False, timestamp=1.0)
+    )[:-5]
 
 
 #: kind → datagram
-KINDS: dict[str, bytes] = {"empty": b"", "text": b"hello", "msgpack int": msgpack.packb(7),
-                           "truncated frame map": _truncated_frame(), "60 kB": bytes(60_000)}
+KINDS: dict[str, bytes] = {
+    "empty": b"",
+    "text": b"hello",
+    "msgpack int": msgpack.packb(7),
+    "truncated frame map": _truncated_frame(),
+    "60 kB": bytes(60_000),
+}
 
 
 def send_garbage(rounds: int, period_s: float, channel: str, port: int) -> int:
@@ -67,9 +73,13 @@ class StrayResult:
     @property
     def ok(self) -> bool:
         """All alive, exit 0, each counted exactly what was sent."""
-        return (not self.error and self.sent > 0 and all(self.alive.values())
-                and all(v == 0 for v in self.exits.values())
-                and all(v == self.sent for v in self.counted.values()))
+        return (
+            not self.error
+            and self.sent > 0
+            and all(self.alive.values())
+            and all(v == 0 for v in self.exits.values())
+            and all(v == self.sent for v in self.counted.values())
+        )
 
 
 #: the emulator's plant time limit (s): it is stopped long before, after the datagrams
@@ -102,8 +112,20 @@ def stray_trial(out: Path, rounds: int = 4) -> StrayResult:
         if not procs["controller"].wait_text("first sensor data", 60.0):
             res.error = "controller had no sensor data"
             return res
-        snd = t.spawn("stray", [PY, "-m", "ehpss_hil.reliability.stray", "--rounds",
-                                str(rounds), "--channel", bus.channel, "--port", str(bus.port)])
+        snd = t.spawn(
+            "stray",
+            [
+                PY,
+                "-m",
+                "ehpss_hil.reliability.stray",
+                "--rounds",
+                str(rounds),
+                "--channel",
+                bus.channel,
+                "--port",
+                str(bus.port),
+            ],
+        )
         snd.wait(30.0)
         try:
             res.sent = int(snd.text().split()[-1])
@@ -114,10 +136,12 @@ def stray_trial(out: Path, rounds: int = 4) -> StrayResult:
         res.alive = {n: c.popen.poll() is None for n, c in procs.items()}
         for n in ("emulator", "controller", "logger"):
             res.exits[n] = procs[n].terminate()
-    res.counted = {"controller": _total(_json(out / "controller.json")),
-                   "emulator": _total(_json(out / "emulator.json")),
-                   "logger": _total(_json(out / "bus.log.json")),
-                   "controller log": _total(_json(out / "controller.log.json"))}
+    res.counted = {
+        "controller": _total(_json(out / "controller.json")),
+        "emulator": _total(_json(out / "emulator.json")),
+        "logger": _total(_json(out / "bus.log.json")),
+        "controller log": _total(_json(out / "controller.log.json")),
+    }
     return res
 
 

@@ -14,10 +14,21 @@ from .loss import TARGET_LEVEL, TARGET_RATIO, LossRow
 from .rogue import MAX_DEVIATION_M, RogueResult
 from .stray import StrayResult
 
-_ABBR = {"OK": "OK", "OK_SOME_LOST": "LOST", "REPEATED": "REP", "WRONG_SEQUENCE": "SEQ",
-         "CRC_ERROR": "CRC", "BAD_DLC": "DLC", "UNKNOWN_ID": "UNK", "OUT_OF_RANGE": "RANGE"}
-_TARGET_NAME = {"codec": "FrameCodec.classify", "controller": "controller loop (mmac)",
-                "emulator": "emulator command handler"}
+_ABBR = {
+    "OK": "OK",
+    "OK_SOME_LOST": "LOST",
+    "REPEATED": "REP",
+    "WRONG_SEQUENCE": "SEQ",
+    "CRC_ERROR": "CRC",
+    "BAD_DLC": "DLC",
+    "UNKNOWN_ID": "UNK",
+    "OUT_OF_RANGE": "RANGE",
+}
+_TARGET_NAME = {
+    "codec": "FrameCodec.classify",
+    "controller": "controller loop (mmac)",
+    "emulator": "emulator command handler",
+}
 
 
 @dataclass
@@ -57,14 +68,15 @@ class Summary:
 
     @property
     def ok(self) -> bool:
-        return (self.survived == self.trials and self.crashes == 0 and self.data_lost == 0
-                and not self.failed)
+        return self.survived == self.trials and self.crashes == 0 and self.data_lost == 0 and not self.failed
 
     def line(self) -> str:
-        return (f"summary: trials {self.trials}, faults survived {self.survived}/{self.trials}, "
-                f"frames fuzzed {self.frames_fuzzed} ({self.frames_fuzzed // max(self.receivers, 1)}"
-                f" × {self.receivers} receivers), crashes = {self.crashes}, data lost = "
-                f"{self.data_lost}: {'PASS' if self.ok else 'FAIL'}")
+        return (
+            f"summary: trials {self.trials}, faults survived {self.survived}/{self.trials}, "
+            f"frames fuzzed {self.frames_fuzzed} ({self.frames_fuzzed // max(self.receivers, 1)}"
+            f" × {self.receivers} receivers), crashes = {self.crashes}, data lost = "
+            f"{self.data_lost}: {'PASS' if self.ok else 'FAIL'}"
+        )
 
 
 def fuzz_rows(tallies: list[FuzzTally], s: Summary) -> list[Row]:
@@ -76,13 +88,23 @@ def fuzz_rows(tallies: list[FuzzTally], s: Summary) -> list[Row]:
         s.frames_fuzzed += t.frames
         s.receivers += 1
         s.crashes += t.crashes
-        ok = t.crashes == 0 and t.mismatches == 0 and t.acted_on_bad == 0 \
+        ok = (
+            t.crashes == 0
+            and t.mismatches == 0
+            and t.acted_on_bad == 0
             and t.consumed == sum(t.by_verdict.values())
-        rows.append(Row("fuzz", _TARGET_NAME[t.target],
-                        f"{t.frames} frames, {t.consumed} consumed: {counts} {nums}; "
-                        f"verdict≠expected {t.mismatches}, rejected but acted on "
-                        f"{t.acted_on_bad}, crashes {t.crashes}",
-                        "each counted under its verdict, none acted on, no crash", ok))
+        )
+        rows.append(
+            Row(
+                "fuzz",
+                _TARGET_NAME[t.target],
+                f"{t.frames} frames, {t.consumed} consumed: {counts} {nums}; "
+                f"verdict≠expected {t.mismatches}, rejected but acted on "
+                f"{t.acted_on_bad}, crashes {t.crashes}",
+                "each counted under its verdict, none acted on, no crash",
+                ok,
+            )
+        )
     return rows
 
 
@@ -108,8 +130,10 @@ def loss_rows(rows: list[LossRow], s: Summary) -> list[Row]:
         if r.audit is not None:
             a = r.audit
             end = f" + {a.at_end} after the emulator ended" if a.at_end else ""
-            measured += (f"; watchdog trips {a.trips - a.at_end}{end} (real timeouts "
-                         f"{a.real_timeouts}, spurious {a.spurious}, missed {a.missed})")
+            measured += (
+                f"; watchdog trips {a.trips - a.at_end}{end} (real timeouts "
+                f"{a.real_timeouts}, spurious {a.spurious}, missed {a.missed})"
+            )
             target = "trips only on real timeouts, every one trips"
             if not r.exit_ok:
                 measured += "; a process ended badly"
@@ -129,14 +153,19 @@ def dup_rows(results: list[DupResult], s: Summary) -> list[Row]:
             rows.append(Row("dup/reorder/burst", f"#{i}", f"error: {d.error}", "", False))
             continue
         c, e = d.counted, d.expected
-        rows.append(Row(
-            "dup/reorder/burst", f"#{i}: {d.frames_sent} sensor frames",
-            f"REP {c.get('REPEATED')}/{e.get('REPEATED')}, SEQ {c.get('WRONG_SEQUENCE')}/"
-            f"{e.get('WRONG_SEQUENCE')}, LOST {c.get('OK_SOME_LOST')}/{e.get('OK_SOME_LOST')}, "
-            f"OK {c.get('OK')}/{e.get('OK')} (counted/sent); {d.acted} steps acted on "
-            f"{d.distinct_usable} usable samples: twice {d.acted_twice}, late {d.acted_on_late}, "
-            f"not the newest {d.wrong_sample}; frames lost {d.frames_missing}",
-            "counted; never acted on twice", d.ok))
+        rows.append(
+            Row(
+                "dup/reorder/burst",
+                f"#{i}: {d.frames_sent} sensor frames",
+                f"REP {c.get('REPEATED')}/{e.get('REPEATED')}, SEQ {c.get('WRONG_SEQUENCE')}/"
+                f"{e.get('WRONG_SEQUENCE')}, LOST {c.get('OK_SOME_LOST')}/{e.get('OK_SOME_LOST')}, "
+                f"OK {c.get('OK')}/{e.get('OK')} (counted/sent); {d.acted} steps acted on "
+                f"{d.distinct_usable} usable samples: twice {d.acted_twice}, late {d.acted_on_late}, "
+                f"not the newest {d.wrong_sample}; frames lost {d.frames_missing}",
+                "counted; never acted on twice",
+                d.ok,
+            )
+        )
     return rows
 
 
@@ -153,16 +182,22 @@ def kill_rows(results: list[KillResult], s: Summary) -> list[Row]:
         unit = "cycles" if k.survivor == "controller" else "periods"
         if k.survivor == "controller":
             how = (k.status[1] if k.status else "no status") + (
-                f", spurious trips {k.audit.spurious}" if k.audit is not None else "")
+                f", spurious trips {k.audit.spurious}" if k.audit is not None else ""
+            )
         else:
             how = f"0 A applied after {k.zero_current}"
         lg = k.log
-        rows.append(Row(
-            "kill -9", case,
-            f"{k.survivor} safe in {k.safe} {unit} ({how}); exit {k.survivor_exit}; log "
-            f"{lg.frames} frames, missing {lg.rx_missing + lg.tx_missing}, extra "
-            f"{lg.rx_extra + lg.tx_extra}, bad lines {lg.bad_lines + (not lg.complete)}",
-            f"≤ {k.limit} {unit}; log complete", k.ok))
+        rows.append(
+            Row(
+                "kill -9",
+                case,
+                f"{k.survivor} safe in {k.safe} {unit} ({how}); exit {k.survivor_exit}; log "
+                f"{lg.frames} frames, missing {lg.rx_missing + lg.tx_missing}, extra "
+                f"{lg.rx_extra + lg.tx_extra}, bad lines {lg.bad_lines + (not lg.complete)}",
+                f"≤ {k.limit} {unit}; log complete",
+                k.ok,
+            )
+        )
     return rows
 
 
@@ -177,15 +212,19 @@ def term_rows(results: list[TermResult], s: Summary) -> list[Row]:
         if t.error:
             rows.append(Row("SIGTERM", case, f"error: {t.error}", "", False))
             continue
-        cmd = ("none" if t.last_command is None else
-               f"{t.last_command[0]:g} A Enable {t.last_command[1]}")
+        cmd = "none" if t.last_command is None else f"{t.last_command[0]:g} A Enable {t.last_command[1]}"
         missing = sum(a.rx_missing + a.tx_missing for a in t.logs.values())
-        rows.append(Row(
-            "SIGTERM", case,
-            f"exits {'/'.join(str(v) for v in t.exits.values())}; last VALVE_CMD {cmd}"
-            f"{' (reached the emulator)' if t.command_delivered else ''}; logs missing {missing}, "
-            f"dropped {sum(t.dropped.values())}, closed {all(t.closed.values())}",
-            "exit 0, 0 A Enable 0, logs flushed", t.ok))
+        rows.append(
+            Row(
+                "SIGTERM",
+                case,
+                f"exits {'/'.join(str(v) for v in t.exits.values())}; last VALVE_CMD {cmd}"
+                f"{' (reached the emulator)' if t.command_delivered else ''}; logs missing {missing}, "
+                f"dropped {sum(t.dropped.values())}, closed {all(t.closed.values())}",
+                "exit 0, 0 A Enable 0, logs flushed",
+                t.ok,
+            )
+        )
     return rows
 
 
@@ -198,52 +237,87 @@ def bad_rows(results: list[BadResult], bus_frames: int, s: Summary) -> list[Row]
             continue
         good = [r for r in rs if r.ok]
         s.crashes += sum(r.exit_code not in (2, None) and r.exit_code != 0 for r in rs)
-        bad = ", ".join(f"{r.mutation.key_path}={r.mutation.value!r} → {r.exit_code}"
-                        for r in rs if not r.ok)[:300]
+        bad = ", ".join(
+            f"{r.mutation.key_path}={r.mutation.value!r} → {r.exit_code}" for r in rs if not r.ok
+        )[:300]
         name = "scenario (case 1 + loss keys)" if target == "scenario" else f"{target}.yaml"
-        rows.append(Row("bad input", f"{name}: {len(rs)} keys",
-                        f"exit 2 + one line naming the key path: {len(good)}/{len(rs)}"
-                        + (f"; failed: {bad}" if bad else ""),
-                        "all", len(good) == len(rs), trial=False))
+        rows.append(
+            Row(
+                "bad input",
+                f"{name}: {len(rs)} keys",
+                f"exit 2 + one line naming the key path: {len(good)}/{len(rs)}"
+                + (f"; failed: {bad}" if bad else ""),
+                "all",
+                len(good) == len(rs),
+                trial=False,
+            )
+        )
     s.trials += len(results)
     s.survived += sum(r.ok for r in results)
-    s.failed += [f"bad input: {r.mutation.target} {r.mutation.key_path}" for r in results
-                 if not r.ok]
-    rows.append(Row("bad input", "bus logger beside them", f"frames on the bus: {bus_frames}",
-                    "0", bus_frames == 0, trial=False))
+    s.failed += [f"bad input: {r.mutation.target} {r.mutation.key_path}" for r in results if not r.ok]
+    rows.append(
+        Row(
+            "bad input",
+            "bus logger beside them",
+            f"frames on the bus: {bus_frames}",
+            "0",
+            bus_frames == 0,
+            trial=False,
+        )
+    )
     if bus_frames:
         s.failed.append("bad input: frames reached the bus")
     return rows
 
 
-def hostile_rows(stray: StrayResult, foreign: ForeignResult | None,
-                 disk: DiskFullResult | None, s: Summary) -> list[Row]:
+def hostile_rows(
+    stray: StrayResult, foreign: ForeignResult | None, disk: DiskFullResult | None, s: Summary
+) -> list[Row]:
     """Stray datagrams on the bus, foreign files in ``--out``, a full disk (issue #16); None:
     the part could not run (no root for ``mount``)."""
     s.crashes += sum(v not in (0, None) for v in stray.exits.values())
     counted = ", ".join(f"{k} {v}" for k, v in stray.counted.items())
-    rows = [Row("stray datagrams", f"{stray.sent} sent (empty, text, msgpack int, cut map, "
-                "60 kB)", f"alive {sum(stray.alive.values())}/{len(stray.alive)}; exits "
-                f"{'/'.join(str(v) for v in stray.exits.values())}; counted: {counted}"
-                + (f"; error: {stray.error}" if stray.error else ""),
-                "all alive, exit 0, each counts every one", stray.ok)]
+    rows = [
+        Row(
+            "stray datagrams",
+            f"{stray.sent} sent (empty, text, msgpack int, cut map, 60 kB)",
+            f"alive {sum(stray.alive.values())}/{len(stray.alive)}; exits "
+            f"{'/'.join(str(v) for v in stray.exits.values())}; counted: {counted}"
+            + (f"; error: {stray.error}" if stray.error else ""),
+            "all alive, exit 0, each counts every one",
+            stray.ok,
+        )
+    ]
     if foreign is not None:
-        rows.append(Row("foreign files in --out", f"{len(foreign.refused_lines)} line(s)",
-                        f"refused: exit {foreign.refused_exit}, kept "
-                        f"{foreign.kept_after_refusal}/4; --overwrite: exit "
-                        f"{foreign.overwrite_exit}, kept {foreign.kept_after_run}/4",
-                        "exit 2 + one line, then exit 0; all 4 kept", foreign.ok))
+        rows.append(
+            Row(
+                "foreign files in --out",
+                f"{len(foreign.refused_lines)} line(s)",
+                f"refused: exit {foreign.refused_exit}, kept "
+                f"{foreign.kept_after_refusal}/4; --overwrite: exit "
+                f"{foreign.overwrite_exit}, kept {foreign.kept_after_run}/4",
+                "exit 2 + one line, then exit 0; all 4 kept",
+                foreign.ok,
+            )
+        )
     if disk is not None:
         s.crashes += sum(v not in (0, None) for v in disk.exits.values())
-        logs = "; ".join(f"{n} {st.written}/{st.lines} lines, {st.dropped} dropped "
-                         f"({', '.join(st.reasons) or '-'})" for n, st in disk.logs.items())
-        rows.append(Row("disk full (200 kB tmpfs)", "controller + emulator --log",
-                        f"exits {'/'.join(str(v) for v in disk.exits.values())}; sidecar/file "
-                        f"{logs}; warned {disk.warned}, summaries "
-                        f"{sum(disk.summaries.values())}/2, .tmp left {len(disk.tmp_left)}, "
-                        f"replay exit {disk.replay_exit}" + (f"; {disk.error}" if disk.error
-                                                             else ""),
-                        "exit 0, exact counts, whole lines, warned", disk.ok))
+        logs = "; ".join(
+            f"{n} {st.written}/{st.lines} lines, {st.dropped} dropped ({', '.join(st.reasons) or '-'})"
+            for n, st in disk.logs.items()
+        )
+        rows.append(
+            Row(
+                "disk full (200 kB tmpfs)",
+                "controller + emulator --log",
+                f"exits {'/'.join(str(v) for v in disk.exits.values())}; sidecar/file "
+                f"{logs}; warned {disk.warned}, summaries "
+                f"{sum(disk.summaries.values())}/2, .tmp left {len(disk.tmp_left)}, "
+                f"replay exit {disk.replay_exit}" + (f"; {disk.error}" if disk.error else ""),
+                "exit 0, exact counts, whole lines, warned",
+                disk.ok,
+            )
+        )
     return rows
 
 
@@ -251,14 +325,20 @@ def rogue_rows(r: RogueResult, s: Summary) -> list[Row]:
     """A second VALVE_CMD transmitter beside the controller and the emulator (issue #16)."""
     s.crashes += sum(v not in (0, None) for v in r.exits.values())
     c, e = r.controller, r.emulator
-    return [Row("second transmitter", f"rogue VALVE_CMD at 1 kHz, {r.sent} sent",
-                f"emulator conflicts {e.get('command_conflicts')} (foreign "
-                f"{e.get('foreign_commands')}, CommandConflict {int(r.command_conflict_seen)}); "
-                f"controller {c.get('state')}/{c.get('failsafe_reason')}, VALVE_CMD collisions "
-                f"{r.valve_cmd_collisions}; piston max |x − x_d| {r.max_deviation_m * 1e6:.1f} µm; "
-                f"exits {'/'.join(str(v) for v in r.exits.values())}"
-                + (f"; error: {r.error}" if r.error else ""),
-                f"valve centred, ID_COLLISION, |x − x_d| ≤ {MAX_DEVIATION_M * 1e3:g} mm", r.ok)]
+    return [
+        Row(
+            "second transmitter",
+            f"rogue VALVE_CMD at 1 kHz, {r.sent} sent",
+            f"emulator conflicts {e.get('command_conflicts')} (foreign "
+            f"{e.get('foreign_commands')}, CommandConflict {int(r.command_conflict_seen)}); "
+            f"controller {c.get('state')}/{c.get('failsafe_reason')}, VALVE_CMD collisions "
+            f"{r.valve_cmd_collisions}; piston max |x − x_d| {r.max_deviation_m * 1e6:.1f} µm; "
+            f"exits {'/'.join(str(v) for v in r.exits.values())}"
+            + (f"; error: {r.error}" if r.error else ""),
+            f"valve centred, ID_COLLISION, |x − x_d| ≤ {MAX_DEVIATION_M * 1e3:g} mm",
+            r.ok,
+        )
+    ]
 
 
 def format_table(rows: list[Row]) -> str:

@@ -58,8 +58,17 @@ def plot_run(r: SimResult, path: str | Path, title: str | None = None) -> Path:
         for te in r.event_times_s:
             a.axvline(te, color="0.6", lw=0.6)
         if len(fb) == len(t) and fb.any():  # the do-no-harm monitor's nominal fallback
-            a.fill_between(t, 0, 1, where=fb, transform=a.get_xaxis_transform(), color="orange",
-                           alpha=0.25, lw=0, label="nominal fallback" if a is ax[3] else None)
+            a.fill_between(
+                t,
+                0,
+                1,
+                where=fb,
+                transform=a.get_xaxis_transform(),
+                color="orange",
+                alpha=0.25,
+                lw=0,
+                label="nominal fallback" if a is ax[3] else None,
+            )
     if len(fb) == len(t) and fb.any():
         ax[3].legend(loc="upper right", fontsize=8)
     fig.suptitle(title or f"{r.scenario} — {r.controller}")

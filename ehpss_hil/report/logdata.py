@@ -61,8 +61,9 @@ class LogRun:
 
 
 # ---- helpers on decoded arrays ----------------------------------------------------------------
-def hold(t_src: np.ndarray, v_src: np.ndarray, t_query: np.ndarray,
-         default: float | None = np.nan) -> np.ndarray:
+def hold(
+    t_src: np.ndarray, v_src: np.ndarray, t_query: np.ndarray, default: float | None = np.nan
+) -> np.ndarray:
     """Zero-order hold: the newest ``v_src`` at or before each ``t_query``; before the first
     source sample ``default`` (None: the first source value, i.e. backfill)."""
     if len(t_src) == 0:
@@ -89,8 +90,9 @@ def _sorted(frames: dict[str, dict[str, np.ndarray]], name: str) -> dict[str, np
     return {k: v[order] for k, v in f.items()}
 
 
-def _rows(frames: dict[str, dict[str, np.ndarray]], notes: list[str]) -> tuple[
-        np.ndarray, np.ndarray, np.ndarray]:
+def _rows(
+    frames: dict[str, dict[str, np.ndarray]], notes: list[str]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(k, wall time (s), commanded current (A))`` of every sample 0…K (module docstring).
 
     Samples whose VALVE_CMD is missing from the log get an interpolated wall time and a NaN
@@ -107,25 +109,34 @@ def _rows(frames: dict[str, dict[str, np.ndarray]], notes: list[str]) -> tuple[
         k_all = np.arange(int(k[-1]) + 1)
         missing = len(k_all) - len(np.unique(k))
         if missing:
-            notes.append(f"{missing} VALVE_CMD frames missing from the log (periods skipped by "
-                         "controller overruns, frames lost or not logged): their samples use "
-                         "the neighbours' timing")
+            notes.append(
+                f"{missing} VALVE_CMD frames missing from the log (periods skipped by "
+                "controller overruns, frames lost or not logged): their samples use "
+                "the neighbours' timing"
+            )
         t_all = np.interp(k_all, k, cmd["t_s"][start:])
         i_all = np.full(len(k_all), np.nan)
         i_all[k] = cmd["CurrentSetpoint"][start:]
         return k_all, t_all, i_all
     truth = frames.get("PLANT_TRUTH")
     if truth is not None and len(truth["t_s"]):
-        notes.append("no VALVE_CMD in the log: one row per PLANT_TRUTH frame, the reference "
-                     "assumed to start at the first one")
+        notes.append(
+            "no VALVE_CMD in the log: one row per PLANT_TRUTH frame, the reference "
+            "assumed to start at the first one"
+        )
         n = len(truth["t_s"])
         return np.arange(n), truth["t_s"] + 1e-9, np.full(n, np.nan)
     return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
 
 
-def _within_truth(frames: dict[str, dict[str, np.ndarray]], k: np.ndarray, t_rows: np.ndarray,
-                  i_cmd: np.ndarray, ts_s: float, notes: list[str]) -> tuple[
-        np.ndarray, np.ndarray, np.ndarray]:
+def _within_truth(
+    frames: dict[str, dict[str, np.ndarray]],
+    k: np.ndarray,
+    t_rows: np.ndarray,
+    i_cmd: np.ndarray,
+    ts_s: float,
+    notes: list[str],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Drop the rows after the emulator's last PLANT_TRUTH frame (+ 1.5 periods): the plant was
     no longer emulated there (the run stops the emulator first, the controller then sees no data
     and goes to its fail-safe), so there is no ground truth to score them against."""
@@ -135,8 +146,10 @@ def _within_truth(frames: dict[str, dict[str, np.ndarray]], k: np.ndarray, t_row
     keep = t_rows <= float(np.max(truth["t_s"])) + 1.5 * ts_s
     n_drop = len(t_rows) - int(np.count_nonzero(keep))
     if n_drop:
-        notes.append(f"{n_drop} controller cycles after the emulator's last PLANT_TRUTH frame "
-                     "(the emulator had stopped) are left out")
+        notes.append(
+            f"{n_drop} controller cycles after the emulator's last PLANT_TRUTH frame "
+            "(the emulator had stopped) are left out"
+        )
     return k[keep], t_rows[keep], i_cmd[keep]
 
 
@@ -160,8 +173,9 @@ def _index_matrix(idx: dict[str, np.ndarray], t_rows: np.ndarray) -> np.ndarray:
     return out
 
 
-def _event_times(faults: dict[str, np.ndarray], t_rows: np.ndarray, k: np.ndarray,
-                 ts: float) -> tuple[float, ...]:
+def _event_times(
+    faults: dict[str, np.ndarray], t_rows: np.ndarray, k: np.ndarray, ts: float
+) -> tuple[float, ...]:
     """Reference times (s) at which PLANT_FAULTS reports a change of any gain."""
     if len(faults["t_s"]) < 2 or len(t_rows) == 0:
         return ()
@@ -175,16 +189,19 @@ def _event_times(faults: dict[str, np.ndarray], t_rows: np.ndarray, k: np.ndarra
 
 
 # ---- the whole log ----------------------------------------------------------------------------
-def load_log_run(path: str | os.PathLike[str], scenario: Scenario | None = None,
-                 params: Params | None = None, codec: FrameCodec | None = None) -> LogRun:
+def load_log_run(
+    path: str | os.PathLike[str],
+    scenario: Scenario | None = None,
+    params: Params | None = None,
+    codec: FrameCodec | None = None,
+) -> LogRun:
     """Decode a log (file or directory, whole rotation set) into a :class:`LogRun`."""
     log = resolve_log(path)
     side = read_sidecar(log)
     codec = codec if codec is not None else FrameCodec(_dbc_of(side))
     bad = BadLines()
     frames = decode_log(log, codec, bad=bad)
-    verdicts = {n: {v.name: c for v, c in per.items() if c} for n, per in
-                codec.counts_by_name.items()}
+    verdicts = {n: {v.name: c for v, c in per.items() if c} for n, per in codec.counts_by_name.items()}
     notes: list[str] = [bad.text()] if bad.count else []
     info = run_info(side, log.parent, scenario, log)
     sc, ref, ts = info.scenario, info.reference, info.ts_s
@@ -204,16 +221,25 @@ def load_log_run(path: str | os.PathLike[str], scenario: Scenario | None = None,
         x_d = xd_all[k]
         y_m = ReferenceModel(prm, ts).simulate(xd_all)[k]
     else:
-        notes.append("no reference in the metadata (sidecar scenario/config): x_d and y_m "
-                     "unavailable; pass --scenario to recompute them")
+        notes.append(
+            "no reference in the metadata (sidecar scenario/config): x_d and y_m "
+            "unavailable; pass --scenario to recompute them"
+        )
     result, has_truth = _assemble(frames, sc, info, k, t_rows, ts, x_d, y_m, notes)
-    return LogRun(log, result, side, has_truth, ref is not None, sc, i_cmd, frames, verdicts,
-                  notes)
+    return LogRun(log, result, side, has_truth, ref is not None, sc, i_cmd, frames, verdicts, notes)
 
 
-def _assemble(frames: dict[str, dict[str, np.ndarray]], sc: Scenario | None,
-              info: RunInfo, k: np.ndarray, t_rows: np.ndarray, ts: float,
-              x_d: np.ndarray, y_m: np.ndarray, notes: list[str]) -> tuple[SimResult, bool]:
+def _assemble(
+    frames: dict[str, dict[str, np.ndarray]],
+    sc: Scenario | None,
+    info: RunInfo,
+    k: np.ndarray,
+    t_rows: np.ndarray,
+    ts: float,
+    x_d: np.ndarray,
+    y_m: np.ndarray,
+    notes: list[str],
+) -> tuple[SimResult, bool]:
     pos, aux = _sorted(frames, "SENSOR_POS"), _sorted(frames, "SENSOR_AUX")
     truth, flt = _sorted(frames, "PLANT_TRUTH"), _sorted(frames, "PLANT_FAULTS")
     st, idx = _sorted(frames, "CTRL_STATUS"), _sorted(frames, "CTRL_INDEX")
@@ -221,13 +247,17 @@ def _assemble(frames: dict[str, dict[str, np.ndarray]], sc: Scenario | None,
     if has_truth and len(t_rows) > 100:
         n_emu = int(np.count_nonzero((truth["t_s"] >= t_rows[0]) & (truth["t_s"] <= t_rows[-1])))
         if abs(n_emu - len(t_rows)) > 0.01 * len(t_rows):
-            notes.append(f"the controller ran {len(t_rows)} cycles while the emulator sent "
-                         f"{n_emu} PLANT_TRUTH frames in the same time: real time was not kept "
-                         "(overruns?); metrics are on the controller's time base")
+            notes.append(
+                f"the controller ran {len(t_rows)} cycles while the emulator sent "
+                f"{n_emu} PLANT_TRUTH frames in the same time: real time was not kept "
+                "(overruns?); metrics are on the controller's time base"
+            )
     if not has_truth:
-        notes.append("no PLANT_TRUTH frames (emulator truth off): no ground truth, so no "
-                     "tracking-error metrics (RMS, peaks, recovery); sensor-based plots, "
-                     "model switches, k̂ and J are still shown")
+        notes.append(
+            "no PLANT_TRUTH frames (emulator truth off): no ground truth, so no "
+            "tracking-error metrics (RMS, peaks, recovery); sensor-based plots, "
+            "model switches, k̂ and J are still shown"
+        )
 
     def col(f: dict[str, np.ndarray], sig: str, default: float | None = np.nan) -> np.ndarray:
         if sig not in f:
@@ -245,15 +275,26 @@ def _assemble(frames: dict[str, dict[str, np.ndarray]], sc: Scenario | None,
     mode = _mode(st, info)
     res = SimResult(
         scenario=sc.name if sc is not None else "log",
-        controller=mode, ts_s=ts, event_times_s=events, t_s=k * ts, x_d_m=x_d, y_m_m=y_m,
-        x_true_m=col(truth, "Position"), y_s_m=col(pos, "Position"), spool_m=col(pos, "Spool"),
+        controller=mode,
+        ts_s=ts,
+        event_times_s=events,
+        t_s=k * ts,
+        x_d_m=x_d,
+        y_m_m=y_m,
+        x_true_m=col(truth, "Position"),
+        y_s_m=col(pos, "Position"),
+        spool_m=col(pos, "Spool"),
         current_a=applied,
         active_spool=np.where(spool_m == _NO_MODEL, -1, spool_m).astype(np.int64),
         active_position=np.where(pos_m == _NO_MODEL, -1, pos_m).astype(np.int64),
-        k_loe_hat=col(st, "KLoeHat"), k_dft_hat=col(st, "KDftHat"),
-        index=_index_matrix(idx, t_rows), true_k_loe=col(flt, "KLoe"),
-        true_k_q=col(flt, "KQ"), true_k_dft=col(flt, "KDft"),
-        fresh=_fresh(pos["t_s"], t_rows) if len(pos["t_s"]) else np.zeros(len(k), bool))
+        k_loe_hat=col(st, "KLoeHat"),
+        k_dft_hat=col(st, "KDftHat"),
+        index=_index_matrix(idx, t_rows),
+        true_k_loe=col(flt, "KLoe"),
+        true_k_q=col(flt, "KQ"),
+        true_k_dft=col(flt, "KDft"),
+        fresh=_fresh(pos["t_s"], t_rows) if len(pos["t_s"]) else np.zeros(len(k), bool),
+    )
     return res, has_truth
 
 
@@ -317,13 +358,14 @@ def log_metrics(run: LogRun) -> LogMetrics:
     unavailable: list[str] = []
     if run.has_reference and np.any(np.isfinite(r.y_s_m)):
         e_s = r.y_s_m - r.y_m_m
-        extra["sensor_rms_error_m"] = float(np.sqrt(np.nanmean(e_s ** 2)))
+        extra["sensor_rms_error_m"] = float(np.sqrt(np.nanmean(e_s**2)))
     if not run.has_truth:
-        unavailable.append("rms_error_m, pre_fault_max_m, per-event peak_error_m and recovery_s "
-                           "need x_true: the log has no PLANT_TRUTH (run the emulator with truth on)")
+        unavailable.append(
+            "rms_error_m, pre_fault_max_m, per-event peak_error_m and recovery_s "
+            "need x_true: the log has no PLANT_TRUTH (run the emulator with truth on)"
+        )
     if not run.has_reference:
-        unavailable.append("every tracking metric needs y_m: no reference in the sidecar "
-                           "(pass --scenario)")
+        unavailable.append("every tracking metric needs y_m: no reference in the sidecar (pass --scenario)")
     if unavailable or len(r.t_s) == 0:
         return LogMetrics(None, extra, unavailable)
     x = r.x_true_m.copy()

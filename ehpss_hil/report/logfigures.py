@@ -18,10 +18,24 @@ from .logdata import LogRun
 from .metrics import RECOVERY_BAND_M
 
 #: CTRL_INDEX slot names (ehpss_hil.control.controllers docstring)
-SLOT_NAMES = {0: "spool k_LOE=1", 1: "spool k_LOE=0.5", 2: "spool FRA", 3: "spool RIA",
-              4: "pos k_DFT=1", 5: "pos k_DFT=0.5", 6: "pos k_DFT=0 (failed)", 7: "pos FRA",
-              8: "pos RIA", 9: "joint nominal", 10: "joint LOE 50 %", 11: "joint drift 0.5",
-              12: "joint FRA", 13: "joint RIA", 14: "smac adaptive", 15: "slot 15"}
+SLOT_NAMES = {
+    0: "spool k_LOE=1",
+    1: "spool k_LOE=0.5",
+    2: "spool FRA",
+    3: "spool RIA",
+    4: "pos k_DFT=1",
+    5: "pos k_DFT=0.5",
+    6: "pos k_DFT=0 (failed)",
+    7: "pos FRA",
+    8: "pos RIA",
+    9: "joint nominal",
+    10: "joint LOE 50 %",
+    11: "joint drift 0.5",
+    12: "joint FRA",
+    13: "joint RIA",
+    14: "smac adaptive",
+    15: "slot 15",
+}
 
 
 class PlotUnavailableError(EhpssError, ImportError):
@@ -32,6 +46,7 @@ def pyplot() -> Any:
     """``matplotlib.pyplot`` with the file-only Agg backend, or a clear error."""
     try:
         import matplotlib
+
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError as exc:
@@ -88,8 +103,13 @@ def fig_error(run: LogRun, out_dir: Path) -> Path | None:
     if run.has_truth:
         ax.plot(r.t_s, r.error_m * 1e6, "C0", lw=0.8, label="e = x − y_m")
     else:
-        ax.plot(r.t_s, (r.y_s_m - r.y_m_m) * 1e6, "C1", lw=0.8,
-                label="y_s − y_m (sensor-based: no ground truth in this log)")
+        ax.plot(
+            r.t_s,
+            (r.y_s_m - r.y_m_m) * 1e6,
+            "C1",
+            lw=0.8,
+            label="y_s − y_m (sensor-based: no ground truth in this log)",
+        )
     band = RECOVERY_BAND_M * 1e6
     ax.axhspan(-band, band, color="C2", alpha=0.15, label="±20 µm")
     ax.set_ylabel("error (µm)")
@@ -134,8 +154,10 @@ def fig_estimates(run: LogRun, out_dir: Path) -> Path | None:
     if "CTRL_STATUS" not in run.frames and "PLANT_FAULTS" not in run.frames:
         return None
     fig, axs = _figure(run, 2, 2.6)
-    for ax, hat, true, lab in ((axs[0], r.k_loe_hat, r.true_k_loe, "k_LOE"),
-                               (axs[1], r.k_dft_hat, r.true_k_dft, "k_DFT")):
+    for ax, hat, true, lab in (
+        (axs[0], r.k_loe_hat, r.true_k_loe, "k_LOE"),
+        (axs[1], r.k_dft_hat, r.true_k_dft, "k_DFT"),
+    ):
         ax.plot(r.t_s, hat, "C0", lw=1.0, label=f"{lab} estimate (CTRL_STATUS)")
         if np.any(np.isfinite(true)):
             ax.step(r.t_s, true, "k--", where="post", lw=1.0, label=f"true {lab}")
@@ -165,7 +187,13 @@ def fig_index(run: LogRun, out_dir: Path) -> Path | None:
 
 
 FIGURES: tuple[Callable[[LogRun, Path], Path | None], ...] = (
-    fig_position, fig_error, fig_current, fig_models, fig_estimates, fig_index)
+    fig_position,
+    fig_error,
+    fig_current,
+    fig_models,
+    fig_estimates,
+    fig_index,
+)
 
 
 def fig_overview(run: LogRun, out_dir: Path) -> Path | None:

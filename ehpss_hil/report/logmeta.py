@@ -55,8 +55,11 @@ def scenario_from(value: Any, log_dir: Path) -> Scenario | None:
         if "reference" in clean:
             clean["reference"] = _reference_keys(clean["reference"])
         if isinstance(clean.get("events"), list):
-            clean["events"] = [{k: v for k, v in ev.items() if v is not None}
-                               for ev in clean["events"] if isinstance(ev, dict)]
+            clean["events"] = [
+                {k: v for k, v in ev.items() if v is not None}
+                for ev in clean["events"]
+                if isinstance(ev, dict)
+            ]
         return build(Scenario, clean, "sidecar", "scenario")
     if not isinstance(value, str) or not value:
         return None
@@ -97,8 +100,9 @@ def _from_config_file(path: Path, info: RunInfo) -> None:
 def _from_mapping(side: dict[str, Any], log_dir: Path, info: RunInfo) -> None:
     """Fill what is still missing in ``info`` from one sidecar-like mapping."""
     if info.scenario is None:
-        info.scenario = (scenario_from(side.get("scenario"), log_dir)
-                         or scenario_from(side.get("scenario_path"), log_dir))
+        info.scenario = scenario_from(side.get("scenario"), log_dir) or scenario_from(
+            side.get("scenario_path"), log_dir
+        )
     cfg = side.get("config")
     if isinstance(cfg, str) and Path(cfg).is_file():
         _from_config_file(Path(cfg), info)
@@ -143,8 +147,9 @@ def _neighbours(log_dir: Path, own: Path | None) -> list[tuple[str, dict[str, An
     return out
 
 
-def run_info(side: dict[str, Any] | None, log_dir: Path, scenario: Scenario | None = None,
-             log: Path | None = None) -> RunInfo:
+def run_info(
+    side: dict[str, Any] | None, log_dir: Path, scenario: Scenario | None = None, log: Path | None = None
+) -> RunInfo:
     """Everything the metadata around a log tells about its run (see the module docstring)."""
     info = RunInfo(scenario=scenario)
     if scenario is not None:
@@ -161,9 +166,9 @@ def run_info(side: dict[str, Any] | None, log_dir: Path, scenario: Scenario | No
     return info
 
 
-def reference_of(side: dict[str, Any] | None, log_dir: Path,
-                 scenario: Scenario | None = None) -> tuple[Scenario | None, Reference | None,
-                                                            float | None]:
+def reference_of(
+    side: dict[str, Any] | None, log_dir: Path, scenario: Scenario | None = None
+) -> tuple[Scenario | None, Reference | None, float | None]:
     """``(scenario, reference, Ts)`` of a run from the caller's scenario or the metadata."""
     info = run_info(side, log_dir, scenario)
     return info.scenario, info.reference, info.ts_s

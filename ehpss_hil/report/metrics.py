@@ -43,9 +43,12 @@ class EventMetrics:
 
     def to_json(self) -> dict[str, Any]:
         """docs/design.md §10 event row (inf → null)."""
-        return {"t_s": self.t_s, "peak_error_m": self.peak_error_m,
-                "recovery_s": None if math.isinf(self.recovery_s) else self.recovery_s,
-                "active_model": self.active_model}
+        return {
+            "t_s": self.t_s,
+            "peak_error_m": self.peak_error_m,
+            "recovery_s": None if math.isinf(self.recovery_s) else self.recovery_s,
+            "active_model": self.active_model,
+        }
 
 
 @dataclass
@@ -69,9 +72,14 @@ class RunMetrics:
 
     def to_json(self) -> dict[str, Any]:
         """The docs/design.md §10 JSON row."""
-        return {"scenario": self.scenario, "controller": self.controller,
-                "rms_error_m": self.rms_error_m, "pre_fault_max_m": self.pre_fault_max_m,
-                "switches": self.switches, "events": [e.to_json() for e in self.events]}
+        return {
+            "scenario": self.scenario,
+            "controller": self.controller,
+            "rms_error_m": self.rms_error_m,
+            "pre_fault_max_m": self.pre_fault_max_m,
+            "switches": self.switches,
+            "events": [e.to_json() for e in self.events],
+        }
 
 
 def _changes(a: np.ndarray) -> np.ndarray:
@@ -120,14 +128,24 @@ def compute_metrics(r: SimResult) -> RunMetrics:
         if k1 <= k0:
             continue
         kp = min(k0 + round(PEAK_WINDOW_S / ts), n)
-        events.append(EventMetrics(
-            t_s=r.event_times_s[i], peak_error_m=float(e[k0:kp].max()),
-            recovery_s=recovery_time_s(e[k0:k1], ts), active_model=_active(r, k1 - 1),
-            switches=int(np.count_nonzero(marks[k0:k1]))))
+        events.append(
+            EventMetrics(
+                t_s=r.event_times_s[i],
+                peak_error_m=float(e[k0:kp].max()),
+                recovery_s=recovery_time_s(e[k0:k1], ts),
+                active_model=_active(r, k1 - 1),
+                switches=int(np.count_nonzero(marks[k0:k1])),
+            )
+        )
     return RunMetrics(
-        scenario=r.scenario, controller=r.controller,
-        rms_error_m=float(np.sqrt(np.mean(r.error_m ** 2))),
+        scenario=r.scenario,
+        controller=r.controller,
+        rms_error_m=float(np.sqrt(np.mean(r.error_m**2))),
         pre_fault_max_m=float(e[:first].max()) if first > 0 else 0.0,
-        switches=int(np.count_nonzero(marks)), events=events, speed=r.speed,
-        duration_s=r.duration_s, max_error_m=float(e.max()) if n else 0.0,
-        fallback_s=float(np.count_nonzero(r.fallback)) * ts)
+        switches=int(np.count_nonzero(marks)),
+        events=events,
+        speed=r.speed,
+        duration_s=r.duration_s,
+        max_error_m=float(e.max()) if n else 0.0,
+        fallback_s=float(np.count_nonzero(r.fallback)) * ts,
+    )

@@ -32,8 +32,16 @@ _T0_S = 1_767_225_600.0  # 2026-01-01T00:00:00Z: a fixed wall-clock origin (repr
 class _Bench:
     """Emulator side + controller side + logger for one run."""
 
-    def __init__(self, sc: Scenario, ctrl: LoopBase, prm: Params, log: CandumpLogger,
-                 truth: bool, t0_s: float, x_d: list[float]) -> None:
+    def __init__(
+        self,
+        sc: Scenario,
+        ctrl: LoopBase,
+        prm: Params,
+        log: CandumpLogger,
+        truth: bool,
+        t0_s: float,
+        x_d: list[float],
+    ) -> None:
         self.sc, self.ctrl, self.log, self.truth, self.t0 = sc, ctrl, log, truth, t0_s
         self.emu = PlantEmulation(prm, sc)
         self.tx_emu, self.tx_ctrl, self.rx_ctrl = FrameCodec(), FrameCodec(), FrameCodec()
@@ -46,47 +54,79 @@ class _Bench:
     def sensors(self, s: SensorSample, t: float) -> None:
         """Truth and sensor frames of sample k; the controller decodes the sensor frames."""
         if self.truth:
-            self.send(self.tx_emu, "PLANT_TRUTH", {"Position": _clip(s.true_position_m, 0.5),
-                                                   "SpoolActual": _clip(s.true_spool_m, 0.01),
-                                                   "Stuck": int(s.faults.stuck)}, t)
+            self.send(
+                self.tx_emu,
+                "PLANT_TRUTH",
+                {
+                    "Position": _clip(s.true_position_m, 0.5),
+                    "SpoolActual": _clip(s.true_spool_m, 0.01),
+                    "Stuck": int(s.faults.stuck),
+                },
+                t,
+            )
         if self.emu.frame_lost(0):  # lost on the way: the sensor's E2E counters move on
             self.tx_emu.skip("SENSOR_POS")
             self.tx_emu.skip("SENSOR_AUX")
             return
-        f1 = self.tx_emu.encode("SENSOR_POS", {"Position": _clip(s.position_m, 0.5),
-                                               "Spool": _clip(s.spool_m, 0.01)}, t + 10e-6)
-        f2 = self.tx_emu.encode("SENSOR_AUX", {
-            "LoadPressure": _clip(s.load_pressure_pa, 4e7), "CoilCurrent": _clip(s.coil_current_a, 1),
-            "ValveEnabled": 1, "CurrentSaturated": int(s.current_saturated)}, t + 20e-6)
+        f1 = self.tx_emu.encode(
+            "SENSOR_POS", {"Position": _clip(s.position_m, 0.5), "Spool": _clip(s.spool_m, 0.01)}, t + 10e-6
+        )
+        f2 = self.tx_emu.encode(
+            "SENSOR_AUX",
+            {
+                "LoadPressure": _clip(s.load_pressure_pa, 4e7),
+                "CoilCurrent": _clip(s.coil_current_a, 1),
+                "ValveEnabled": 1,
+                "CurrentSaturated": int(s.current_saturated),
+            },
+            t + 20e-6,
+        )
         self.log.log(f1)
         self.log.log(f2)
         d1, d2 = self.rx_ctrl.classify(f1), self.rx_ctrl.classify(f2)
         if d1.values and d2.values:
-            self.drv.position(float(d1.values["Position"]), float(d1.values["Spool"]),
-                              f1.data[1] & 0x0F)
+            self.drv.position(float(d1.values["Position"]), float(d1.values["Spool"]), f1.data[1] & 0x0F)
             self.drv.aux(float(d2.values["CoilCurrent"]), float(d2.values["LoadPressure"]))
 
     def status(self, t: float) -> None:
         st = self.ctrl.status()
-        self.send(self.tx_ctrl, "CTRL_STATUS", {
-            "State": 2, "Mode": MODE_CODE.get(self.ctrl.mode, MODE_UNKNOWN),
-            "NominalFallback": int(st.fallback),
-            "ActiveSpoolModel": st.active_model.get("spool", -1) & 0xF,
-            "ActivePosModel": st.active_model.get("position", -1) & 0xF,
-            "KLoeHat": _clip(st.k_loe_hat, 4.095, 0.0), "KDftHat": _clip(st.k_dft_hat, 4.095, 0.0),
-            "Switches": min(st.switches, 255)}, t)
+        self.send(
+            self.tx_ctrl,
+            "CTRL_STATUS",
+            {
+                "State": 2,
+                "Mode": MODE_CODE.get(self.ctrl.mode, MODE_UNKNOWN),
+                "NominalFallback": int(st.fallback),
+                "ActiveSpoolModel": st.active_model.get("spool", -1) & 0xF,
+                "ActivePosModel": st.active_model.get("position", -1) & 0xF,
+                "KLoeHat": _clip(st.k_loe_hat, 4.095, 0.0),
+                "KDftHat": _clip(st.k_dft_hat, 4.095, 0.0),
+                "Switches": min(st.switches, 255),
+            },
+            t,
+        )
         for slot, j in sorted(st.index.items()):
             if 0 <= slot <= 15:
-                self.send(self.tx_ctrl, "CTRL_INDEX", {
-                    "ModelSlot": slot, f"J_{slot}": _clip(j, 3e38),
-                    f"Theta_{slot}": _clip(st.theta.get(slot, 0.0), 6.5535, 0.0)}, t)
+                self.send(
+                    self.tx_ctrl,
+                    "CTRL_INDEX",
+                    {
+                        "ModelSlot": slot,
+                        f"J_{slot}": _clip(j, 3e38),
+                        f"Theta_{slot}": _clip(st.theta.get(slot, 0.0), 6.5535, 0.0),
+                    },
+                    t,
+                )
 
     def plant_faults(self, k: int, t: float) -> None:
         f = self.emu.faults
         if self.truth and (f != self.faults or k % 100 == 0):
-            self.send(self.tx_emu, "PLANT_FAULTS", {"KLoe": min(f.k_loe, 6.5535),
-                                                    "KQ": min(f.k_q, 6.5535),
-                                                    "KDft": min(f.k_dft, 6.5535)}, t)
+            self.send(
+                self.tx_emu,
+                "PLANT_FAULTS",
+                {"KLoe": min(f.k_loe, 6.5535), "KQ": min(f.k_q, 6.5535), "KDft": min(f.k_dft, 6.5535)},
+                t,
+            )
         self.faults = f
 
 
@@ -95,17 +135,26 @@ def _clip(v: float, hi: float, lo: float | None = None) -> float:
     return lo if v < lo else hi if v > hi else v
 
 
-def write_lockstep_log(scenario: Scenario, mode: str, path: str | os.PathLike[str],
-                       params: Params | None = None, tuning: ControlTuning | None = None,
-                       truth: bool = True, status_every: int = 20,
-                       t0_s: float = _T0_S) -> Path:
+def write_lockstep_log(
+    scenario: Scenario,
+    mode: str,
+    path: str | os.PathLike[str],
+    params: Params | None = None,
+    tuning: ControlTuning | None = None,
+    truth: bool = True,
+    status_every: int = 20,
+    t0_s: float = _T0_S,
+) -> Path:
     """Run ``scenario`` with controller ``mode`` and log every frame to ``path``; returns it."""
     prm = params if params is not None else load_params()
     ts = scenario.sample_time_s
     ctrl = make_controller(mode, prm, ts, tuning, scenario.reference)
-    side = {"tool": "ehpss_hil.report.samplelog (lockstep, no bus)",
-            "scenario": jsonable(scenario), "config": {"mode": mode, "rate_hz": 1.0 / ts},
-            "clock": "synthetic: t0 + k*Ts (+ µs per frame), s since the Unix epoch"}
+    side = {
+        "tool": "ehpss_hil.report.samplelog (lockstep, no bus)",
+        "scenario": jsonable(scenario),
+        "config": {"mode": mode, "rate_hz": 1.0 / ts},
+        "clock": "synthetic: t0 + k*Ts (+ µs per frame), s since the Unix epoch",
+    }
     log = CandumpLogger(path, iface="vcan0", sidecar=side)
     x_d = scenario.reference_samples().tolist()
     b = _Bench(scenario, ctrl, prm, log, truth, t0_s, x_d)
@@ -122,14 +171,24 @@ def write_lockstep_log(scenario: Scenario, mode: str, path: str | os.PathLike[st
             fresh, echo = b.drv.fresh, b.drv.counter
             cur, enable = b.drv.step()
             current = cur if enable else 0.0
-            f = b.tx_ctrl.encode("VALVE_CMD", {"CurrentSetpoint": current, "Enable": 1,
-                                               "SensorCounterEcho": echo if fresh else 0,
-                                               "CycleCount": k & 0xFFFF}, t + 100e-6)
+            f = b.tx_ctrl.encode(
+                "VALVE_CMD",
+                {
+                    "CurrentSetpoint": current,
+                    "Enable": 1,
+                    "SensorCounterEcho": echo if fresh else 0,
+                    "CycleCount": k & 0xFFFF,
+                },
+                t + 100e-6,
+            )
             lost = b.emu.frame_lost(1)
             if not lost:
                 log.log(f)
-            queue.append(None if lost else b.tx_ctrl.quantize("VALVE_CMD", {
-                "CurrentSetpoint": current})["CurrentSetpoint"])
+            queue.append(
+                None
+                if lost
+                else b.tx_ctrl.quantize("VALVE_CMD", {"CurrentSetpoint": current})["CurrentSetpoint"]
+            )
             arrived = queue.popleft()
             held = held if arrived is None else arrived
             b.emu.advance(held)

@@ -68,8 +68,7 @@ class IdCollisions:
     #: after the first warning on an ID, a line of the counts at most this often (s)
     WARN_INTERVAL_S = 10.0
 
-    def __init__(self, names_by_id: dict[int, str],
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, names_by_id: dict[int, str], clock: Callable[[], float] = time.monotonic) -> None:
         self._names = dict(names_by_id)
         self.by_name: dict[str, int] = {n: 0 for n in self._names.values()}
         self.total = 0
@@ -86,9 +85,14 @@ class IdCollisions:
         self._unwarned += 1
         now = self._clock()
         if n == 1 or now >= self._next_warn_s:
-            log.warning("ID collision: %s (0x%03X) received from another transmitter; foreign "
-                        "frames on own IDs: %s (%d since the last warning)", name, can_id,
-                        self.text(), self._unwarned)
+            log.warning(
+                "ID collision: %s (0x%03X) received from another transmitter; foreign "
+                "frames on own IDs: %s (%d since the last warning)",
+                name,
+                can_id,
+                self.text(),
+                self._unwarned,
+            )
             self._next_warn_s = now + self.WARN_INTERVAL_S
             self._unwarned = 0
 

@@ -77,8 +77,7 @@ class LoopOptions:
 class ControllerLoop:
     """One controller instance on one bus."""
 
-    def __init__(self, controller: Controller, io: FrameIO, reference: Reference,
-                 opts: LoopOptions) -> None:
+    def __init__(self, controller: Controller, io: FrameIO, reference: Reference, opts: LoopOptions) -> None:
         self.controller = controller
         self.io = io
         self.codec = io.codec
@@ -107,9 +106,11 @@ class ControllerLoop:
         self._id_pos = self.codec.can_id("SENSOR_POS")
         self._id_aux = self.codec.can_id("SENSOR_AUX")
         self._id_setpoint = self.codec.can_id("SETPOINT")
-        self.schedule = FrameSchedule(round(opts.rate_hz / opts.status_rate_hz),
-                                      round(opts.rate_hz / opts.stats_rate_hz),
-                                      round(opts.rate_hz / opts.heartbeat_rate_hz))
+        self.schedule = FrameSchedule(
+            round(opts.rate_hz / opts.status_rate_hz),
+            round(opts.rate_hz / opts.stats_rate_hz),
+            round(opts.rate_hz / opts.heartbeat_rate_hz),
+        )
         self._log_every = round(opts.stats_interval_s * opts.rate_hz)
         self._interval_compute_max_s = 0.0
         self.cycles = 0
@@ -168,8 +169,12 @@ class ControllerLoop:
                     self._e2e_bad += 1
             return d.verdict
         v = d.values
-        if (self.check_age and fid != self._id_setpoint and not self._lockstep
-                and self._rx_now - msg.timestamp > self.stale_after_s):
+        if (
+            self.check_age
+            and fid != self._id_setpoint
+            and not self._lockstep
+            and self._rx_now - msg.timestamp > self.stale_after_s
+        ):
             self.stale_frames += 1
             self._stale_in_cycle += 1
             return d.verdict
@@ -189,8 +194,9 @@ class ControllerLoop:
             self.guard.command_conflict(bool(v["CommandConflict"]))
         else:
             override, x_d = bool(v["Override"]), self.driver.override_m
-            if self.setpoints.admit(override, float(v["Position"]),
-                                    self.ref.at(self.k_active) if x_d is None else x_d):
+            if self.setpoints.admit(
+                override, float(v["Position"]), self.ref.at(self.k_active) if x_d is None else x_d
+            ):
                 self.driver.setpoint(float(v["Position"]) if override else None)
         return d.verdict
 
@@ -223,29 +229,41 @@ class ControllerLoop:
                     self._fault(FailsafeReason.ID_COLLISION)
             return
         if self._stale_in_cycle:
-            log.warning("cycle %d: %d stale sensor frame(s) (received > %.3g ms ago) dropped",
-                        self.cycles, self._stale_in_cycle, self.stale_after_s * 1e3)
+            log.warning(
+                "cycle %d: %d stale sensor frame(s) (received > %.3g ms ago) dropped",
+                self.cycles,
+                self._stale_in_cycle,
+                self.stale_after_s * 1e3,
+            )
         tripped = self.wd.update(self._fresh, self._e2e_bad, self._implausible, self._late)
         if st is State.ACTIVE and (tripped or collided):
             self._fault(None if tripped else FailsafeReason.ID_COLLISION)
         elif st is State.FAULT and collided:  # the more specific diagnosis
             if self.life.reason is not FailsafeReason.ID_COLLISION:
-                log.error("cycle %d: second transmitter: FAULT reason %s -> ID_COLLISION",
-                          self.cycles, self.life.reason.name)
+                log.error(
+                    "cycle %d: second transmitter: FAULT reason %s -> ID_COLLISION",
+                    self.cycles,
+                    self.life.reason.name,
+                )
             self.life.reason = FailsafeReason.ID_COLLISION
         elif st is State.FAULT and not tripped:
             self.driver.restart()
             self.life.to(State.ACTIVE)
-            log.warning("cycle %d: sensor data fresh for %d cycles: ACTIVE again", self.cycles,
-                        self.wd.fresh_cycles)
+            log.warning(
+                "cycle %d: sensor data fresh for %d cycles: ACTIVE again", self.cycles, self.wd.fresh_cycles
+            )
 
     def _fault(self, reason: FailsafeReason | None = None) -> None:
         """ACTIVE → FAULT for ``reason`` (None: the watchdog's)."""
         why = self.wd.reason if reason is None else reason
         self.life.to(State.FAULT, why)
-        log.error("cycle %d: %s: %s -> FAULT, fail-safe %s", self.cycles,
-                  "watchdog" if reason is None else "second transmitter", why.name,
-                  self.opts.watchdog.failsafe)
+        log.error(
+            "cycle %d: %s: %s -> FAULT, fail-safe %s",
+            self.cycles,
+            "watchdog" if reason is None else "second transmitter",
+            why.name,
+            self.opts.watchdog.failsafe,
+        )
 
     def _command(self) -> tuple[float, bool]:
         st = self.life.state
@@ -290,8 +308,7 @@ class ControllerLoop:
             return
         self.driver.catch_up(periods)
 
-    def poll_cycle(self, skipped: int = 0, drain: bool = True, late: bool = False
-                   ) -> float | None:
+    def poll_cycle(self, skipped: int = 0, drain: bool = True, late: bool = False) -> float | None:
         """One realtime cycle without waiting: the ``skipped`` grid periods before it
         (:meth:`catch_up`), drain every pending frame (unless ``drain`` is False: the caller
         has just drained the bus), then :meth:`cycle`. ``late``: the cycle started after its
@@ -322,9 +339,15 @@ class ControllerLoop:
 
     def send_command(self, current_a: float, enable: bool) -> None:
         """One VALVE_CMD (A) with the sensor counter echo and the cycle count."""
-        self.io.send("VALVE_CMD", {"CurrentSetpoint": current_a, "Enable": int(enable),
-                                   "SensorCounterEcho": self._pos_counter,
-                                   "CycleCount": self.cycles & 0xFFFF})
+        self.io.send(
+            "VALVE_CMD",
+            {
+                "CurrentSetpoint": current_a,
+                "Enable": int(enable),
+                "SensorCounterEcho": self._pos_counter,
+                "CycleCount": self.cycles & 0xFFFF,
+            },
+        )
         self.last_current_a = current_a
         self.last_enable = enable
 
@@ -337,10 +360,15 @@ class ControllerLoop:
         if due.status:
             self.send_status()
         if due.stats:
-            self.io.send("CTRL_STATS", {
-                "FallbackReason": self.reporter.fallback_reason & 0xF,
-                "Overruns": self.overruns & 0xFFFF, "RejectedFrames": self.codec.rejected & 0xFFFF,
-                "CycleTimeMax": min(self._compute_max_s, 0.065535)})
+            self.io.send(
+                "CTRL_STATS",
+                {
+                    "FallbackReason": self.reporter.fallback_reason & 0xF,
+                    "Overruns": self.overruns & 0xFFFF,
+                    "RejectedFrames": self.codec.rejected & 0xFFFF,
+                    "CycleTimeMax": min(self._compute_max_s, 0.065535),
+                },
+            )
             self._compute_max_s = 0.0
         if due.heartbeat:
             self.io.send("HEARTBEAT_CTRL", {"NmtState": self.life.nmt_state})
@@ -352,12 +380,20 @@ class ControllerLoop:
 
     def _log_counters(self) -> None:
         """Cheap counters only (no percentiles in the cycle: they would cost an overrun)."""
-        log.info("cycles %d, state %s, overruns %d, rejected frames %d, stale frames %d, "
-                 "fail-safe cycles %d, ID collisions: %s, second-transmitter episodes %d, "
-                 "max compute %.0f µs in the last interval", self.cycles,
-                 self.life.state.name, self.overruns, self.codec.rejected, self.stale_frames,
-                 self.failsafe_cycles, self.io.collisions.text(), self.guard.episodes,
-                 self._interval_compute_max_s * 1e6)
+        log.info(
+            "cycles %d, state %s, overruns %d, rejected frames %d, stale frames %d, "
+            "fail-safe cycles %d, ID collisions: %s, second-transmitter episodes %d, "
+            "max compute %.0f µs in the last interval",
+            self.cycles,
+            self.life.state.name,
+            self.overruns,
+            self.codec.rejected,
+            self.stale_frames,
+            self.failsafe_cycles,
+            self.io.collisions.text(),
+            self.guard.episodes,
+            self._interval_compute_max_s * 1e6,
+        )
         self._interval_compute_max_s = 0.0
 
     def send_status(self, all_index: bool = False) -> None:
@@ -465,20 +501,24 @@ class ControllerLoop:
 
     def summary(self) -> dict[str, object]:
         """Counters and loop statistics (JSON-able)."""
-        return {"cycles": self.cycles, "skipped_periods": self.skipped_periods,
-                "stale_frames": self.stale_frames,
-                "woken_by_sensor": self.woken_by_sensor,
-                "state": self.life.state.name,
-                "failsafe_reason": self.life.reason.name, "watchdog_trips": self.wd.trips,
-                "failsafe_cycles": self.failsafe_cycles, "saturations": self.saturations,
-                "nominal_fallbacks": self._fallbacks(),
-                "frames_sent": dict(self.io.sent), "tx_errors": self.io.tx_errors,
-                "frames_received": self.io.received,
-                "id_collisions": dict(self.io.collisions.by_name),
-                "second_transmitter": self.guard.summary(),
-                "setpoints": {"accepted": self.setpoints.accepted,
-                              "rejected": self.setpoints.rejected},
-                "received_by_verdict": {v.name: n for v, n in self.codec.counts.items()},
-                "stats": self.stats.summary(),
-                "max_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}
-
+        return {
+            "cycles": self.cycles,
+            "skipped_periods": self.skipped_periods,
+            "stale_frames": self.stale_frames,
+            "woken_by_sensor": self.woken_by_sensor,
+            "state": self.life.state.name,
+            "failsafe_reason": self.life.reason.name,
+            "watchdog_trips": self.wd.trips,
+            "failsafe_cycles": self.failsafe_cycles,
+            "saturations": self.saturations,
+            "nominal_fallbacks": self._fallbacks(),
+            "frames_sent": dict(self.io.sent),
+            "tx_errors": self.io.tx_errors,
+            "frames_received": self.io.received,
+            "id_collisions": dict(self.io.collisions.by_name),
+            "second_transmitter": self.guard.summary(),
+            "setpoints": {"accepted": self.setpoints.accepted, "rejected": self.setpoints.rejected},
+            "received_by_verdict": {v.name: n for v, n in self.codec.counts.items()},
+            "stats": self.stats.summary(),
+            "max_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+        }

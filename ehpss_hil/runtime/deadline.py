@@ -23,9 +23,14 @@ log = logging.getLogger(__name__)
 class DeadlineTimer:
     """Wakes a loop on the grid ``t0 + n·period_s`` (monotonic seconds)."""
 
-    def __init__(self, period_s: float, clock: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep, warn_interval_s: float = 1.0,
-                 name: str = "loop") -> None:
+    def __init__(
+        self,
+        period_s: float,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+        warn_interval_s: float = 1.0,
+        name: str = "loop",
+    ) -> None:
         if period_s <= 0.0:
             raise ValueError("period_s must be > 0")
         self.period_s = period_s
@@ -92,9 +97,15 @@ class DeadlineTimer:
         self.overruns += 1
         self._unwarned += 1
         if now - self._last_warn >= self._warn_interval_s:
-            log.warning("%s: %d overrun(s) since the last warning (this one skipped %d period(s) "
-                        "of %.3g ms; %d overruns in total)", self._name, self._unwarned, missed,
-                        self.period_s * 1e3, self.overruns)
+            log.warning(
+                "%s: %d overrun(s) since the last warning (this one skipped %d period(s) "
+                "of %.3g ms; %d overruns in total)",
+                self._name,
+                self._unwarned,
+                missed,
+                self.period_s * 1e3,
+                self.overruns,
+            )
             self._last_warn = now
             self._unwarned = 0
 

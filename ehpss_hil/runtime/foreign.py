@@ -94,20 +94,29 @@ class CollisionGuard:
     def update(self, cycle: int) -> bool:
         """Account one cycle; True when the loop must be in fail-safe for ID_COLLISION now."""
         n_cmd = self._collisions.by_name.get(COMMAND_FRAME, 0)
-        causes = [c for c, hit in ((f"{COMMAND_FRAME} from another transmitter",
-                                    n_cmd > self._cmd_seen),
-                                   ("the emulator reports CommandConflict", self._conflict_flag),
-                                   ("a second SENSOR_POS transmitter", self.sensor.conflict))
-                  if hit]
+        causes = [
+            c
+            for c, hit in (
+                (f"{COMMAND_FRAME} from another transmitter", n_cmd > self._cmd_seen),
+                ("the emulator reports CommandConflict", self._conflict_flag),
+                ("a second SENSOR_POS transmitter", self.sensor.conflict),
+            )
+            if hit
+        ]
         self._cmd_seen = n_cmd
         self._conflict_flag = False
         if causes:
             if not self.evident:
                 self.episodes += 1
                 self.last_cause = "; ".join(causes)
-                log.warning("cycle %d: second transmitter: %s (%s)", cycle, self.last_cause,
-                            "fail-safe ID_COLLISION" if self.fault_on_collision
-                            else "on_collision: warn, control goes on")
+                log.warning(
+                    "cycle %d: second transmitter: %s (%s)",
+                    cycle,
+                    self.last_cause,
+                    "fail-safe ID_COLLISION"
+                    if self.fault_on_collision
+                    else "on_collision: warn, control goes on",
+                )
             self.evident = True
             self.quiet_cycles = 0
             self.holding = self.holding or self.fault_on_collision
@@ -120,12 +129,15 @@ class CollisionGuard:
 
     def summary(self) -> dict[str, object]:
         """Counters (JSON-able)."""
-        return {"policy": "fault" if self.fault_on_collision else "warn",
-                "episodes": self.episodes, "valve_cmd_foreign": self._cmd_seen,
-                "command_conflict_frames": self.conflict_frames,
-                "sensor_pos_conflicts": self.sensor.conflicts,
-                "sensor_pos_sequence_failures": self.sensor.failures,
-                "last_cause": self.last_cause}
+        return {
+            "policy": "fault" if self.fault_on_collision else "warn",
+            "episodes": self.episodes,
+            "valve_cmd_foreign": self._cmd_seen,
+            "command_conflict_frames": self.conflict_frames,
+            "sensor_pos_conflicts": self.sensor.conflicts,
+            "sensor_pos_sequence_failures": self.sensor.failures,
+            "last_cause": self.last_cause,
+        }
 
 
 class SetpointGate:
@@ -141,16 +153,24 @@ class SetpointGate:
         of 0 and ``max_step_m`` of the x_d in force (``x_d_m``); Override 0 (back to the
         configured trajectory) needs only ``enabled``."""
         p = self.policy
-        ok = p.enabled and (not override or (
-            math.isfinite(position_m) and abs(position_m) <= p.max_abs_m
-            and abs(position_m - x_d_m) <= p.max_step_m))
+        ok = p.enabled and (
+            not override
+            or (
+                math.isfinite(position_m)
+                and abs(position_m) <= p.max_abs_m
+                and abs(position_m - x_d_m) <= p.max_step_m
+            )
+        )
         if ok:
             self.accepted += 1
             return True
         self.rejected += 1
         if self.rejected % SETPOINT_WARN_EVERY == 1:
-            why = ("setpoint.enabled is false" if not p.enabled else
-                   f"{position_m:.6g} m is beyond ±{p.max_abs_m:g} m or more than "
-                   f"{p.max_step_m:g} m from x_d {x_d_m:.6g} m")
+            why = (
+                "setpoint.enabled is false"
+                if not p.enabled
+                else f"{position_m:.6g} m is beyond ±{p.max_abs_m:g} m or more than "
+                f"{p.max_step_m:g} m from x_d {x_d_m:.6g} m"
+            )
             log.warning("SETPOINT rejected (%s); %d rejected so far", why, self.rejected)
         return False

@@ -51,16 +51,23 @@ class FrameLogger(Protocol):
     def close(self) -> object: ...
 
 
-def open_can_logger(path: str, cfg: LogConfig, bus: BusConfig,
-                    sidecar: dict[str, Any] | None = None) -> FrameLogger | None:
+def open_can_logger(
+    path: str, cfg: LogConfig, bus: BusConfig, sidecar: dict[str, Any] | None = None
+) -> FrameLogger | None:
     """A candump logger for ``path`` (None when ``path`` is empty or canlog is unavailable)."""
     if not path:
         return None
     from ..canlog import CandumpLogger
+
     iface = bus.channel if bus.interface == "socketcan" else "can0"
-    logger: FrameLogger = CandumpLogger(path, iface=iface, max_bytes=cfg.max_bytes,
-                                        backups=cfg.backups, queue_lines=cfg.queue_lines,
-                                        sidecar=sidecar)
+    logger: FrameLogger = CandumpLogger(
+        path,
+        iface=iface,
+        max_bytes=cfg.max_bytes,
+        backups=cfg.backups,
+        queue_lines=cfg.queue_lines,
+        sidecar=sidecar,
+    )
     return logger
 
 
@@ -69,10 +76,12 @@ def process_codec(dbc: str, ids: CanIds, config_path: str) -> FrameCodec:
     that cannot be loaded is a :class:`ConfigError` naming ``dbc``, an ID layout that does not
     fit it one naming ``ids.id_base`` (exit 2)."""
     try:
-        return FrameCodec(dbc or None, id_base=ids.id_base,
-                          node_ids={"HEARTBEAT_CTRL": ids.controller_node,
-                                    "HEARTBEAT_EMU": ids.emulator_node},
-                          max_delta_counter=ids.max_delta_counter)
+        return FrameCodec(
+            dbc or None,
+            id_base=ids.id_base,
+            node_ids={"HEARTBEAT_CTRL": ids.controller_node, "HEARTBEAT_EMU": ids.emulator_node},
+            max_delta_counter=ids.max_delta_counter,
+        )
     except FrameIdError as exc:
         raise ConfigError(config_path, "ids.id_base", str(exc)) from exc
     except ValueError as exc:  # FrameError, or cantools on a file that is no DBC
@@ -86,9 +95,14 @@ def limit_sensor_rate(codec: FrameCodec, speed_max_m_s: float, ts_s: float) -> R
     return codec.limit_rate("SENSOR_POS", "Position", position_step_bound_m(speed_max_m_s, ts_s))
 
 
-def open_process_logger(cli_path: str | None, cfg: LogConfig, bus_cfg: BusConfig,
-                        bus: can.BusABC, config_path: str,
-                        sidecar: dict[str, Any]) -> FrameLogger | None:
+def open_process_logger(
+    cli_path: str | None,
+    cfg: LogConfig,
+    bus_cfg: BusConfig,
+    bus: can.BusABC,
+    config_path: str,
+    sidecar: dict[str, Any],
+) -> FrameLogger | None:
     """:func:`open_can_logger` for a process whose bus is open (``--log`` wins over
     ``log.path``): a log that cannot be written shuts the bus (nothing was sent yet) and is a
     :class:`ConfigError` naming the option or key it came from (exit 2)."""
@@ -96,16 +110,22 @@ def open_process_logger(cli_path: str | None, cfg: LogConfig, bus_cfg: BusConfig
         return open_can_logger(cli_path or cfg.path, cfg, bus_cfg, sidecar=sidecar)
     except OSError as exc:
         bus.shutdown()
-        raise ConfigError(config_path, "--log" if cli_path else "log.path",
-                          f"cannot write the log: {exc}") from exc
+        raise ConfigError(
+            config_path, "--log" if cli_path else "log.path", f"cannot write the log: {exc}"
+        ) from exc
 
 
 class FrameIO:
     """One process's view of the bus: counts sent frames by name, transmit errors and ID
     collisions (frames on the own TX IDs that this process did not send)."""
 
-    def __init__(self, bus: can.BusABC, codec: FrameCodec, own_names: tuple[str, ...],
-                 logger: FrameLogger | None = None) -> None:
+    def __init__(
+        self,
+        bus: can.BusABC,
+        codec: FrameCodec,
+        own_names: tuple[str, ...],
+        logger: FrameLogger | None = None,
+    ) -> None:
         self.bus = bus
         self.codec = codec
         self.logger = logger
@@ -119,9 +139,15 @@ class FrameIO:
         #: True when a received frame's timestamp is its receive time (wall clock)
         self.receive_timestamps = stamps_receive_time(bus)
         # every DBC frame's datagram template built now, not in the first cycles (udp_multicast)
-        shapes = {n: can.Message(arbitration_id=codec.can_id(n), is_extended_id=False,
-                                 dlc=codec.message(n).length, data=bytes(codec.message(n).length))
-                  for n in codec.names}
+        shapes = {
+            n: can.Message(
+                arbitration_id=codec.can_id(n),
+                is_extended_id=False,
+                dlc=codec.message(n).length,
+                data=bytes(codec.message(n).length),
+            )
+            for n in codec.names
+        }
         self._read = frame_reader(bus, (m for n, m in shapes.items() if n not in own_names))
         self._write = frame_writer(bus, (shapes[n] for n in own_names))
         self.sent: dict[str, int] = {n: 0 for n in own_names}

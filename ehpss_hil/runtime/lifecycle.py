@@ -36,8 +36,7 @@ class FailsafeReason(IntEnum):
 
 
 #: CiA 301 heartbeat NMT state for each lifecycle state
-NMT_STATE = {State.INIT: 0, State.CONFIGURED: 127, State.ACTIVE: 5, State.FAULT: 127,
-             State.STOPPED: 4}
+NMT_STATE = {State.INIT: 0, State.CONFIGURED: 127, State.ACTIVE: 5, State.FAULT: 127, State.STOPPED: 4}
 
 _ALLOWED = {
     State.INIT: {State.CONFIGURED, State.STOPPED},
@@ -67,8 +66,9 @@ class Lifecycle:
         if new not in _ALLOWED[self.state]:
             raise LifecycleError(f"lifecycle: {self.state.name} -> {new.name} is not allowed")
         self.state = new
-        self.reason = reason if new is State.FAULT else (
-            self.reason if new is State.STOPPED else FailsafeReason.NONE)
+        self.reason = (
+            reason if new is State.FAULT else (self.reason if new is State.STOPPED else FailsafeReason.NONE)
+        )
         self.transitions += 1
 
     @property

@@ -18,8 +18,9 @@ from __future__ import annotations
 class PhaseLock:
     """Deadline corrections (s) from sensor frame ages; ``gain`` per cycle, bounded slew."""
 
-    def __init__(self, period_s: float, target_age_s: float, gain: float = 0.1,
-                 max_slew_s: float | None = None) -> None:
+    def __init__(
+        self, period_s: float, target_age_s: float, gain: float = 0.1, max_slew_s: float | None = None
+    ) -> None:
         if not 0.0 <= target_age_s < period_s:
             raise ValueError("target_age_s must be in [0, period_s)")
         if not 0.0 < gain <= 1.0:

@@ -26,8 +26,10 @@ def set_fifo_priority(priority: int) -> str | None:
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except (OSError, AttributeError) as exc:
-        return (f"SCHED_FIFO priority {priority} not permitted ({exc}); running with the default "
-                "scheduler (needs root or CAP_SYS_NICE / an rtprio limit)")
+        return (
+            f"SCHED_FIFO priority {priority} not permitted ({exc}); running with the default "
+            "scheduler (needs root or CAP_SYS_NICE / an rtprio limit)"
+        )
     return None
 
 
@@ -64,8 +66,10 @@ def lock_memory() -> str | None:
         return f"mlockall unavailable ({exc})"
     if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
         err = ctypes.get_errno()
-        return (f"mlockall not permitted ({os.strerror(err)}); memory may be paged "
-                "(needs root or a higher RLIMIT_MEMLOCK)")
+        return (
+            f"mlockall not permitted ({os.strerror(err)}); memory may be paged "
+            "(needs root or a higher RLIMIT_MEMLOCK)"
+        )
     return None
 
 

@@ -25,9 +25,9 @@ class StopFlag:
         return self.stop
 
 
-def install_stop_handlers(flag: StopFlag | None = None,
-                          signals: tuple[int, ...] = (signal.SIGTERM, signal.SIGINT)
-                          ) -> tuple[StopFlag, dict[int, Any]]:
+def install_stop_handlers(
+    flag: StopFlag | None = None, signals: tuple[int, ...] = (signal.SIGTERM, signal.SIGINT)
+) -> tuple[StopFlag, dict[int, Any]]:
     """Route ``signals`` to ``flag.set``; returns the flag and the previous handlers.
 
     Must be called from the main thread.

@@ -51,11 +51,15 @@ class Ring:
         """``n``, ``p50``, ``p99``, ``p99_9`` (over the ring) and all-time ``max`` (s)."""
         v = self.values()
         if v.size == 0:
-            return {"n": 0, "p50": float("nan"), "p99": float("nan"), "p99_9": float("nan"),
-                    "max": float("nan")}
+            return {
+                "n": 0,
+                "p50": float("nan"),
+                "p99": float("nan"),
+                "p99_9": float("nan"),
+                "max": float("nan"),
+            }
         p50, p99, p999 = np.percentile(v, [50.0, 99.0, 99.9])
-        return {"n": self.n, "p50": float(p50), "p99": float(p99), "p99_9": float(p999),
-                "max": self.max}
+        return {"n": self.n, "p50": float(p50), "p99": float(p99), "p99_9": float(p999), "max": self.max}
 
 
 class LoopStats:
@@ -70,9 +74,13 @@ class LoopStats:
 
     def summary(self) -> dict[str, Any]:
         """A JSON-able dict: one sub-dict per series (s), overruns, skipped periods."""
-        return {"compute_s": self.compute.summary(), "lateness_s": self.lateness.summary(),
-                "latency_s": self.latency.summary(), "overruns": self.overruns,
-                "skipped": self.skipped}
+        return {
+            "compute_s": self.compute.summary(),
+            "lateness_s": self.lateness.summary(),
+            "latency_s": self.latency.summary(),
+            "overruns": self.overruns,
+            "skipped": self.skipped,
+        }
 
     def text(self) -> str:
         """Human-readable summary, one line per series in µs."""
@@ -80,9 +88,11 @@ class LoopStats:
         lines = []
         for key in SERIES:
             d = s[key]
-            lines.append(f"{key[:-2]:9s} n={d['n']:<8d} p50={d['p50'] * 1e6:8.1f} µs "
-                         f"p99={d['p99'] * 1e6:8.1f} µs p99.9={d['p99_9'] * 1e6:8.1f} µs "
-                         f"max={d['max'] * 1e6:8.1f} µs")
+            lines.append(
+                f"{key[:-2]:9s} n={d['n']:<8d} p50={d['p50'] * 1e6:8.1f} µs "
+                f"p99={d['p99'] * 1e6:8.1f} µs p99.9={d['p99_9'] * 1e6:8.1f} µs "
+                f"max={d['max'] * 1e6:8.1f} µs"
+            )
         lines.append(f"overruns={self.overruns} skipped_periods={self.skipped}")
         return "\n".join(lines)
 
@@ -94,8 +104,9 @@ def rejects_text(summary: dict[str, Any]) -> str:
     return f"{r.get('total', 0)}" + (f" ({reasons})" if reasons else "")
 
 
-def publish_summary(fmt: Callable[[dict[str, Any]], str], summary: dict[str, Any],
-                    json_path: Path | None) -> None:
+def publish_summary(
+    fmt: Callable[[dict[str, Any]], str], summary: dict[str, Any], json_path: Path | None
+) -> None:
     """A process's exit summary: ``fmt(summary)`` on stdout, and the whole dict as JSON to
     ``json_path`` when given (what ``run`` and the benches read back; written whole or not at
     all: a full or read-only folder gives one warning line, not an error, as control is over)."""

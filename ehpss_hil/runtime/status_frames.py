@@ -38,26 +38,39 @@ class StatusReporter:
         """``controller``'s CTRL_STATUS now; the CTRL_INDEX frames (one per model slot) queued,
         or all sent at once with ``all_index``."""
         s = controller.status()
-        self.io.send("CTRL_STATUS", {
-            "State": int(life.state), "FailsafeReason": int(life.reason),
-            "Mode": MODE_CODE.get(controller.mode, MODE_UNKNOWN),
-            "NominalFallback": int(s.fallback),
-            "ActiveSpoolModel": _nibble(s.active_model.get("spool", 0)),
-            "ActivePosModel": _nibble(s.active_model.get("position", 0)),
-            "KLoeHat": _clip(s.k_loe_hat, 0.0, 4.095), "KDftHat": _clip(s.k_dft_hat, 0.0, 4.095),
-            "Switches": min(s.switches, 255)})
+        self.io.send(
+            "CTRL_STATUS",
+            {
+                "State": int(life.state),
+                "FailsafeReason": int(life.reason),
+                "Mode": MODE_CODE.get(controller.mode, MODE_UNKNOWN),
+                "NominalFallback": int(s.fallback),
+                "ActiveSpoolModel": _nibble(s.active_model.get("spool", 0)),
+                "ActivePosModel": _nibble(s.active_model.get("position", 0)),
+                "KLoeHat": _clip(s.k_loe_hat, 0.0, 4.095),
+                "KDftHat": _clip(s.k_dft_hat, 0.0, 4.095),
+                "Switches": min(s.switches, 255),
+            },
+        )
         self.fallback_reason = s.fallback_reason
         self.fallbacks = s.fallbacks
-        self.pending = [(slot, j, s.theta.get(slot, 0.0))
-                        for slot, j in reversed(s.index.items()) if 0 <= slot <= 15]
+        self.pending = [
+            (slot, j, s.theta.get(slot, 0.0)) for slot, j in reversed(s.index.items()) if 0 <= slot <= 15
+        ]
         while all_index and self.pending:
             self.send_next_index()
 
     def send_next_index(self) -> None:
         """The next queued CTRL_INDEX (J dimensionless, θ the model's gain)."""
         slot, j, theta = self.pending.pop()
-        self.io.send("CTRL_INDEX", {"ModelSlot": slot, f"J_{slot}": _clip(j, -_F32_MAX, _F32_MAX),
-                                    f"Theta_{slot}": _clip(theta, 0.0, 6.5535)})
+        self.io.send(
+            "CTRL_INDEX",
+            {
+                "ModelSlot": slot,
+                f"J_{slot}": _clip(j, -_F32_MAX, _F32_MAX),
+                f"Theta_{slot}": _clip(theta, 0.0, 6.5535),
+            },
+        )
 
 
 def _clip(v: float, lo: float, hi: float) -> float:

@@ -87,8 +87,7 @@ class SensorWatchdog:
         self.fresh_cycles = 0
         if self.tripped:
             return True
-        if (periods > self.max_skipped or periods >= self.cfg.timeout_cycles
-                or self.starved):
+        if periods > self.max_skipped or periods >= self.cfg.timeout_cycles or self.starved:
             self._trip(FailsafeReason.LOOP_OVERRUN)
         else:
             reason = self._trip_reason()
@@ -102,8 +101,7 @@ class SensorWatchdog:
         self.trips += 1
         self.overrun_trips += reason is FailsafeReason.LOOP_OVERRUN
 
-    def update(self, fresh: bool, e2e_errors: int = 0, implausible: int = 0,
-               late: bool = False) -> bool:
+    def update(self, fresh: bool, e2e_errors: int = 0, implausible: int = 0, late: bool = False) -> bool:
         """Account one cycle; ``e2e_errors``/``implausible`` = sensor frames rejected this cycle
         for E2E/DLC resp. range reasons; ``late``: it started after its deadline. Returns True
         when the loop must be in fail-safe."""
@@ -126,8 +124,7 @@ class SensorWatchdog:
             reason = self._trip_reason()
             if reason is not FailsafeReason.NONE:
                 self._trip(reason)
-        elif (self.cfg.auto_recover and self.fresh_cycles >= self.cfg.recovery_cycles
-              and not self.starved):
+        elif self.cfg.auto_recover and self.fresh_cycles >= self.cfg.recovery_cycles and not self.starved:
             self.tripped = False
             self.reason = FailsafeReason.NONE
         return self.tripped

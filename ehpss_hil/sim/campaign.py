@@ -57,9 +57,13 @@ def default_jobs() -> int:
     return os.cpu_count() or 1
 
 
-def run_campaign(jobs: Sequence[Job], n_jobs: int | None = None, params: Params | None = None,
-                 tuning: ControlTuning | None = None,
-                 progress: Callable[[int, int], None] | None = None) -> list[JobOutcome]:
+def run_campaign(
+    jobs: Sequence[Job],
+    n_jobs: int | None = None,
+    params: Params | None = None,
+    tuning: ControlTuning | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[JobOutcome]:
     """Run every job (on ``n_jobs`` processes; 1 = in this process); outcomes in job order.
 
     ``progress(done, total)`` is called after each finished run.

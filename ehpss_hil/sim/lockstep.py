@@ -65,8 +65,13 @@ def reference_output(params: Params, ts_s: float, x_d: np.ndarray) -> np.ndarray
     return y
 
 
-def run_scenario(scenario: Scenario, mode: str, params: Params | None = None,
-                 tuning: ControlTuning | None = None, transport: str = "quantize") -> SimResult:
+def run_scenario(
+    scenario: Scenario,
+    mode: str,
+    params: Params | None = None,
+    tuning: ControlTuning | None = None,
+    transport: str = "quantize",
+) -> SimResult:
     """Simulate ``scenario`` with controller ``mode``; returns every per-sample array."""
     limit_blas_threads(1)
     prm = params if params is not None else load_params()
@@ -86,9 +91,15 @@ def run_scenario(scenario: Scenario, mode: str, params: Params | None = None,
     return res
 
 
-def _loop(emu: PlantEmulation, ctrl: LoopBase, tr: QuantizeTransport | FramesTransport,
-          x_d: list[float], delay: int, set_truth: Callable[[FaultState], None] | None,
-          rows: list[tuple]) -> None:
+def _loop(
+    emu: PlantEmulation,
+    ctrl: LoopBase,
+    tr: QuantizeTransport | FramesTransport,
+    x_d: list[float],
+    delay: int,
+    set_truth: Callable[[FaultState], None] | None,
+    rows: list[tuple],
+) -> None:
     """The per-sample loop (locals bound once: this is the simulator's hot path), the controller
     run by the same :class:`ControllerDriver` as the daemon and replay: sample k's frames carry
     the E2E counter k mod 16, a lost sample is a cycle without data.
@@ -105,8 +116,9 @@ def _loop(emu: PlantEmulation, ctrl: LoopBase, tr: QuantizeTransport | FramesTra
     probe, index_values, push = ctrl.probe, ctrl.index_values, rows.append
     for k in range(len(x_d)):
         s = measure()
-        vals = sensor(s.position_m, s.spool_m, s.load_pressure_pa, s.coil_current_a,
-                      s.current_saturated, lost(0))
+        vals = sensor(
+            s.position_m, s.spool_m, s.load_pressure_pa, s.coil_current_a, s.current_saturated, lost(0)
+        )
         if vals is not None:
             position(vals[0], vals[1], k & 0x0F)
             aux(vals[3], vals[2])
@@ -118,32 +130,65 @@ def _loop(emu: PlantEmulation, ctrl: LoopBase, tr: QuantizeTransport | FramesTra
         arrived = queue.popleft()
         if arrived is not None:
             held = arrived
-        push((s.true_position_m, s.position_m, s.spool_m, advance(held), probe(), s.faults,
-              fresh, index_values(), ctrl.nominal))
+        push(
+            (
+                s.true_position_m,
+                s.position_m,
+                s.spool_m,
+                advance(held),
+                probe(),
+                s.faults,
+                fresh,
+                index_values(),
+                ctrl.nominal,
+            )
+        )
 
 
-def _result(sc: Scenario, mode: str, ts: float, x_d: np.ndarray, y_m: np.ndarray,
-            rows: list[tuple], slots: tuple[int, ...], wall: float,
-            counts: dict[str, int]) -> SimResult:
+def _result(
+    sc: Scenario,
+    mode: str,
+    ts: float,
+    x_d: np.ndarray,
+    y_m: np.ndarray,
+    rows: list[tuple],
+    slots: tuple[int, ...],
+    wall: float,
+    counts: dict[str, int],
+) -> SimResult:
     n = len(x_d)
-    x, ys, sp, cur, probes, faults, fresh, jrows, nominal = (list(c)
-                                                            for c in zip(*rows, strict=True))
+    x, ys, sp, cur, probes, faults, fresh, jrows, nominal = (list(c) for c in zip(*rows, strict=True))
     index = np.full((n, N_SLOTS), np.nan)
     if slots:
         index[:, list(slots)] = np.asarray(jrows, dtype=float)
     pr = np.asarray(probes, dtype=float).reshape(n, 4)
     seen: dict[FaultState, tuple[float, float, float]] = {}
-    tf = np.asarray([seen.setdefault(f, (f.k_loe, f.k_q, f.k_dft)) for f in faults],
-                    dtype=float).reshape(n, 3)
+    tf = np.asarray([seen.setdefault(f, (f.k_loe, f.k_q, f.k_dft)) for f in faults], dtype=float).reshape(
+        n, 3
+    )
     f = np.asarray
     return SimResult(
-        scenario=sc.name, controller=mode, ts_s=ts,
+        scenario=sc.name,
+        controller=mode,
+        ts_s=ts,
         event_times_s=tuple(ev.t_s for ev in sc.events),
-        t_s=np.arange(n, dtype=np.float64) * ts, x_d_m=x_d, y_m_m=y_m,
-        x_true_m=f(x, dtype=float), y_s_m=f(ys, dtype=float), spool_m=f(sp, dtype=float),
-        current_a=f(cur, dtype=float), active_spool=pr[:, 0].astype(np.int64),
-        active_position=pr[:, 1].astype(np.int64), k_loe_hat=pr[:, 2].copy(),
-        k_dft_hat=pr[:, 3].copy(), index=index, true_k_loe=tf[:, 0].copy(),
-        true_k_q=tf[:, 1].copy(), true_k_dft=tf[:, 2].copy(),
-        fresh=f(fresh, dtype=bool), wall_s=wall, frame_counts=counts,
-        fallback=f(nominal, dtype=bool))
+        t_s=np.arange(n, dtype=np.float64) * ts,
+        x_d_m=x_d,
+        y_m_m=y_m,
+        x_true_m=f(x, dtype=float),
+        y_s_m=f(ys, dtype=float),
+        spool_m=f(sp, dtype=float),
+        current_a=f(cur, dtype=float),
+        active_spool=pr[:, 0].astype(np.int64),
+        active_position=pr[:, 1].astype(np.int64),
+        k_loe_hat=pr[:, 2].copy(),
+        k_dft_hat=pr[:, 3].copy(),
+        index=index,
+        true_k_loe=tf[:, 0].copy(),
+        true_k_q=tf[:, 1].copy(),
+        true_k_dft=tf[:, 2].copy(),
+        fresh=f(fresh, dtype=bool),
+        wall_s=wall,
+        frame_counts=counts,
+        fallback=f(nominal, dtype=bool),
+    )

@@ -79,7 +79,22 @@ class SimResult:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Every per-sample array by name (for comparisons and saving)."""
-        names = ("t_s", "x_d_m", "y_m_m", "x_true_m", "y_s_m", "spool_m", "current_a",
-                 "active_spool", "active_position", "k_loe_hat", "k_dft_hat", "index",
-                 "true_k_loe", "true_k_q", "true_k_dft", "fresh")
+        names = (
+            "t_s",
+            "x_d_m",
+            "y_m_m",
+            "x_true_m",
+            "y_s_m",
+            "spool_m",
+            "current_a",
+            "active_spool",
+            "active_position",
+            "k_loe_hat",
+            "k_dft_hat",
+            "index",
+            "true_k_loe",
+            "true_k_q",
+            "true_k_dft",
+            "fresh",
+        )
         return {n: getattr(self, n) for n in names}

@@ -53,18 +53,20 @@ class QuantizeTransport:
     """
 
     def __init__(self, codec: FrameCodec) -> None:
-        lin = [_linear_scale(codec, "SENSOR_POS", "Position"),
-               _linear_scale(codec, "SENSOR_POS", "Spool"),
-               _linear_scale(codec, "SENSOR_AUX", "CoilCurrent"),
-               _linear_scale(codec, "VALVE_CMD", "CurrentSetpoint")]
+        lin = [
+            _linear_scale(codec, "SENSOR_POS", "Position"),
+            _linear_scale(codec, "SENSOR_POS", "Spool"),
+            _linear_scale(codec, "SENSOR_AUX", "CoilCurrent"),
+            _linear_scale(codec, "VALVE_CMD", "CurrentSetpoint"),
+        ]
         if any(x is None for x in lin):
             raise TypeError("position/spool/current signals must use a linear integer scaling")
-        (self._ps, self._po), (self._ss, self._so), (self._cs, self._co), (self._ks, self._ko) = \
-            lin  # type: ignore[misc]
+        (self._ps, self._po), (self._ss, self._so), (self._cs, self._co), (self._ks, self._ko) = lin  # type: ignore[misc]
         self._press = _quantizer(codec, "SENSOR_AUX", "LoadPressure")
 
-    def sensor(self, pos: float, spool: float, pressure: float, coil: float,
-               saturated: bool, lost: bool) -> SensorValues | None:
+    def sensor(
+        self, pos: float, spool: float, pressure: float, coil: float, saturated: bool, lost: bool
+    ) -> SensorValues | None:
         """SENSOR_POS + SENSOR_AUX as the controller decodes them (m, m, Pa, A); None if lost."""
         if lost:
             return None
@@ -72,8 +74,12 @@ class QuantizeTransport:
         spool = -0.01 if spool < -0.01 else 0.01 if spool > 0.01 else spool
         coil = -1.0 if coil < -1.0 else 1.0 if coil > 1.0 else coil
         ps, po, ss, so, cs, co = self._ps, self._po, self._ss, self._so, self._cs, self._co
-        return (round((pos - po) / ps) * ps + po, round((spool - so) / ss) * ss + so,
-                self._press(_clip(pressure, 4e7)), round((coil - co) / cs) * cs + co)
+        return (
+            round((pos - po) / ps) * ps + po,
+            round((spool - so) / ss) * ss + so,
+            self._press(_clip(pressure, 4e7)),
+            round((coil - co) / cs) * cs + co,
+        )
 
     def command(self, current_a: float, k: int, lost: bool) -> float | None:
         """VALVE_CMD current as the emulator decodes it (A); None if lost."""
@@ -94,29 +100,46 @@ class FramesTransport:
         self._emu = emu_codec
         self._ctrl = ctrl_codec
 
-    def sensor(self, pos: float, spool: float, pressure: float, coil: float,
-               saturated: bool, lost: bool) -> SensorValues | None:
+    def sensor(
+        self, pos: float, spool: float, pressure: float, coil: float, saturated: bool, lost: bool
+    ) -> SensorValues | None:
         """Encode both sensor frames on the emulator side, classify them on the controller side
         unless ``lost`` (the TX counters advance either way)."""
-        f1 = self._emu.encode("SENSOR_POS", {"Position": _clip(pos, 0.5),
-                                             "Spool": _clip(spool, 0.01)})
-        f2 = self._emu.encode("SENSOR_AUX", {
-            "LoadPressure": _clip(pressure, 4e7), "CoilCurrent": _clip(coil, 1.0),
-            "ValveEnabled": 1, "CmdTimeout": 0, "CurrentSaturated": int(saturated)})
+        f1 = self._emu.encode("SENSOR_POS", {"Position": _clip(pos, 0.5), "Spool": _clip(spool, 0.01)})
+        f2 = self._emu.encode(
+            "SENSOR_AUX",
+            {
+                "LoadPressure": _clip(pressure, 4e7),
+                "CoilCurrent": _clip(coil, 1.0),
+                "ValveEnabled": 1,
+                "CmdTimeout": 0,
+                "CurrentSaturated": int(saturated),
+            },
+        )
         if lost:
             return None
         d1, d2 = self._ctrl.classify(f1), self._ctrl.classify(f2)
         if not (d1.verdict.usable and d2.verdict.usable) or d1.values is None or d2.values is None:
             return None
-        return (float(d1.values["Position"]), float(d1.values["Spool"]),
-                float(d2.values["LoadPressure"]), float(d2.values["CoilCurrent"]))
+        return (
+            float(d1.values["Position"]),
+            float(d1.values["Spool"]),
+            float(d2.values["LoadPressure"]),
+            float(d2.values["CoilCurrent"]),
+        )
 
     def command(self, current_a: float, k: int, lost: bool) -> float | None:
         """Encode VALVE_CMD on the controller side, classify it on the emulator side unless
         ``lost``."""
-        f = self._ctrl.encode("VALVE_CMD", {"CurrentSetpoint": _clip(current_a, 1.0), "Enable": 1,
-                                            "SensorCounterEcho": k & 0xF,
-                                            "CycleCount": k & 0xFFFF})
+        f = self._ctrl.encode(
+            "VALVE_CMD",
+            {
+                "CurrentSetpoint": _clip(current_a, 1.0),
+                "Enable": 1,
+                "SensorCounterEcho": k & 0xF,
+                "CycleCount": k & 0xFFFF,
+            },
+        )
         if lost:
             return None
         d = self._emu.classify(f)
