@@ -6,9 +6,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-from .commands.report import metrics_row, write_markdown
 from .errors import OutputError
 from .report.logdata import load_log_run, log_metrics
+from .report.markdown import metrics_row, write_markdown
 from .scenario import load_scenario
 
 

@@ -76,3 +76,50 @@ def test_control_knows_nothing_of_scenarios_configs_frames_or_files() -> None:
         )
     )
     assert not leaked, leaked
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Which top-level unit of ehpss_hil (subpackage or module) imports which, from the source."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent / "ehpss_hil"
+    edges: dict[str, set[str]] = {}
+    for f in root.rglob("*.py"):
+        rel = f.relative_to(root.parent).with_suffix("").parts
+        mod = ".".join(rel[:-1] if rel[-1] == "__init__" else rel)
+        unit = mod.split(".")[1] if "." in mod else "ehpss_hil"
+        pkg = mod if f.name == "__init__.py" else mod.rsplit(".", 1)[0]
+        for node in ast.walk(ast.parse(f.read_text())):
+            targets: list[str] = []
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = pkg.split(".")[: len(pkg.split(".")) - node.level + 1]
+                    targets = [".".join(base + ([node.module] if node.module else []))]
+                elif node.module:
+                    targets = [node.module]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            for t in targets:
+                if t.startswith("ehpss_hil.") and t.split(".")[1] != unit:
+                    edges.setdefault(unit, set()).add(t.split(".")[1])
+    return edges
+
+
+def test_package_import_graph_has_no_cycles_and_no_library_imports_a_command() -> None:
+    edges = _import_graph()
+    state: dict[str, int] = {}
+
+    def visit(u: str, path: list[str]) -> None:
+        state[u] = 1
+        for v in sorted(edges.get(u, ())):
+            assert state.get(v) != 1, f"import cycle: {' -> '.join([*path, u, v])}"
+            if v not in state:
+                visit(v, [*path, u])
+        state[u] = 2
+
+    for u in sorted(edges):
+        if u not in state:
+            visit(u, [])
+    users = sorted(u for u, vs in edges.items() if "commands" in vs)
+    assert users == ["cli"], users

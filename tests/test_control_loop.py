@@ -19,9 +19,9 @@ from ehpss_hil.errors import ModelError
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.physics.plant import PlantStepper
+from ehpss_hil.report.result import SimResult
 from ehpss_hil.scenario import Noise, load_scenario
 from ehpss_hil.sim import run_scenario
-from ehpss_hil.sim.result import SimResult
 
 PARAMS = load_params()
 TS = 1e-3

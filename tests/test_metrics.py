@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ehpss_hil.report.metrics import compute_metrics, recovery_time_s
-from ehpss_hil.sim.result import N_SLOTS, SimResult
+from ehpss_hil.report.result import N_SLOTS, SimResult
 
 TS = 1e-3
 

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import EhpssError
-from ..sim.result import SimResult
+from .result import SimResult
 
 
 def _pyplot() -> Any:

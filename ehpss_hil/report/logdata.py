@@ -34,9 +34,9 @@ from ..physics.params import Params, load_params
 from ..physics.reference import ReferenceModel
 from ..runtime.status_frames import MODE_CODE
 from ..scenario import Scenario
-from ..sim.result import N_SLOTS, SimResult
 from .logmeta import RunInfo, reference_of, run_info
 from .metrics import RunMetrics, compute_metrics
+from .result import N_SLOTS, SimResult
 
 __all__ = ["LogMetrics", "LogRun", "load_log_run", "log_metrics", "reference_of"]
 

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from ..sim.result import SimResult
+from .result import SimResult
 
 #: recovery band (m): 2 % of the 1 mm reference
 RECOVERY_BAND_M = 20e-6

@@ -12,9 +12,9 @@ from ..blas import limit_blas_threads
 from ..control.tuning import ControlTuning
 from ..physics.params import Params, load_params
 from ..report.metrics import RunMetrics, compute_metrics
+from ..report.result import SimResult
 from ..scenario import Scenario, load_scenario
 from .lockstep import run_scenario
-from .result import SimResult
 
 
 @dataclass(frozen=True)

@@ -30,8 +30,8 @@ from ..errors import ConfigError
 from ..physics.faults import FaultState
 from ..physics.params import Params, load_params
 from ..physics.reference import ReferenceModel
+from ..report.result import N_SLOTS, SimResult
 from ..scenario import Scenario
-from .result import N_SLOTS, SimResult
 from .transport import FramesTransport, QuantizeTransport
 
 TRANSPORTS = ("quantize", "frames")

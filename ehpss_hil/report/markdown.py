@@ -1,0 +1,106 @@
+"""The run report in words: the metric lines of ``report.md`` and the JSON row of a log's
+metrics (shared by ``ehpss-hil report`` and ``ehpss-hil run``)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from .logdata import LogMetrics, LogRun
+
+
+def _um(v: float | None) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "—" if v is None or math.isnan(v) else "∞"
+    return f"{v * 1e6:.2f} µm"
+
+
+def _ms(v: float) -> str:
+    return "never (∞)" if math.isinf(v) else f"{v * 1e3:.1f} ms"
+
+
+def _metrics_lines(m: LogMetrics) -> list[str]:
+    lines = ["## Metrics (docs/design.md §10)", ""]
+    if m.run is not None:
+        r = m.run
+        lines += [
+            "| metric | value |",
+            "|---|---|",
+            f"| RMS error (x − y_m) | {_um(r.rms_error_m)} |",
+            f"| pre-fault max error | {_um(r.pre_fault_max_m)} |",
+            f"| model switches (seen at CTRL_STATUS rate) | {r.switches} |",
+            "",
+        ]
+        if r.events:
+            lines += [
+                "| event t (s) | peak error (0.3 s) | recovery (< 20 µm) | switches | active model at end |",
+                "|---|---|---|---|---|",
+            ]
+            lines += [
+                f"| {e.t_s:g} | {_um(e.peak_error_m)} | {_ms(e.recovery_s)} | "
+                f"{e.switches} | {e.active_model} |"
+                for e in r.events
+            ]
+            lines.append("")
+    for u in m.unavailable:
+        lines.append(f"- **not available:** {u}")
+    if m.unavailable:
+        lines.append("")
+    lines += ["Also from the log:", ""]
+    x = m.extra
+    labels = {
+        "samples": "controller samples",
+        "switches_counter": "model switches (CTRL_STATUS Switches counter)",
+        "overruns": "loop overruns (CTRL_STATS)",
+        "cycle_time_max_s": "max cycle compute time (s)",
+        "sensor_rms_error_m": "sensor-based RMS y_s − y_m (indication only)",
+        "x_true_filled_samples": "samples without PLANT_TRUTH (held)",
+    }
+    for key, label in labels.items():
+        if key in x:
+            v = _um(x[key]) if key.endswith("_m") else x[key]
+            lines.append(f"- {label}: {v}")
+    lines.append(
+        "- frames a live receiver would reject, by verdict (WRONG_SEQUENCE data is still "
+        f"used here: the frame itself is intact): {x['rejected_frames'] or 'none'}"
+    )
+    return [*lines, ""]
+
+
+def write_markdown(run: LogRun, m: LogMetrics, figures: list[Path], out_dir: Path) -> Path:
+    """``report.md`` in ``out_dir`` embedding ``figures`` (relative links)."""
+    r, side = run.result, run.sidecar or {}
+    frames = ", ".join(f"{n} {len(f['t_s'])}" for n, f in sorted(run.frames.items()))
+    lines = [
+        f"# Run report: {r.scenario} / {r.controller}",
+        "",
+        f"- log: `{run.log_path}` ({len(r.t_s)} samples at Ts = {r.ts_s * 1e3:g} ms)",
+        f"- sidecar: {'yes' if run.sidecar else 'none'}; started "
+        f"{side.get('start_time_utc', '?')}; versions {side.get('versions', '?')}",
+        f"- DBC sha256: {(side.get('dbc') or {}).get('sha256', '?')}",
+        f"- ground truth (PLANT_TRUTH): {'yes' if run.has_truth else 'NO'}; reference: "
+        f"{'yes' if run.has_reference else 'NO'}; events at {list(r.event_times_s)} s",
+        f"- frames decoded: {frames}",
+        "",
+    ]
+    if run.notes:
+        lines += ["## Notes", ""] + [f"- {n}" for n in run.notes] + [""]
+    lines += _metrics_lines(m)
+    if figures:
+        lines += ["## Figures", ""]
+        lines += [f"![{p.stem}]({p.relative_to(out_dir).as_posix()})\n" for p in figures]
+    path = out_dir / "report.md"
+    path.write_text("\n".join(lines), encoding="utf-8")
+    return path
+
+
+def metrics_row(run: LogRun, m: LogMetrics) -> dict[str, object]:
+    """The docs/design.md §10 JSON row (plus ``extra`` and ``unavailable``)."""
+    row: dict[str, object] = (
+        m.run.to_json()
+        if m.run is not None
+        else {"scenario": run.result.scenario, "controller": run.result.controller}
+    )
+    row["extra"] = m.extra
+    row["unavailable"] = m.unavailable
+    return row
