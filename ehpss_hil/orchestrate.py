@@ -30,10 +30,10 @@ from typing import Any
 import yaml
 
 from . import PROJECT_ROOT, __version__
+from .bus.netns import PrivateNetns, netns_unavailable_reason
 from .canlog.sidecar import write_json_atomic
 from .config import DEFAULT_MULTICAST_GROUP
 from .errors import BusUnavailableError, EhpssError, OutputError, ProcessFailedError
-from .netns import PrivateNetns, netns_unavailable_reason
 from .rundir import prepare_run_dir, record_outputs
 from .scenario import Scenario, load_scenario
 from .schema import load_yaml

@@ -24,9 +24,9 @@ from pathlib import Path
 from _dbc import signal_values
 from _proc import EHPSS_HIL, FIRMWARE_SIM, ROOT, Proc
 
+from ehpss_hil.bus.netns import PrivateNetns
 from ehpss_hil.canlog import read_log
 from ehpss_hil.codec import FrameCodec
-from ehpss_hil.netns import PrivateNetns
 
 EMU_CFG = str(ROOT / "configs" / "emulator.yaml")
 #: the bench's watchdog (``ehpss-hil run``: 10 cycles, auto recover) and a reference of 0.2 mm,

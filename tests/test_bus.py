@@ -13,9 +13,9 @@ import pytest
 from _proc import EMU_CFG_PATH, FIRMWARE_SIM, ROOT
 
 from ehpss_hil.bus import af_can_available, open_bus
+from ehpss_hil.bus.netns import netns_prefix, netns_unavailable_reason
 from ehpss_hil.config import BusConfig
 from ehpss_hil.errors import BusUnavailableError, ConfigError
-from ehpss_hil.netns import netns_prefix, netns_unavailable_reason
 
 NETNS_SKIP = netns_unavailable_reason()
 netns = pytest.mark.skipif(NETNS_SKIP is not None, reason=f"needs a namespace: {NETNS_SKIP}")

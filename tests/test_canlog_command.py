@@ -15,10 +15,10 @@ import can
 import pytest
 from _dbc import signal_values
 
+from ehpss_hil.bus.netns import netns_prefix, netns_unavailable_reason
 from ehpss_hil.canlog import CandumpLogger, read_log, read_sidecar
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.commands import log as log_cmd
-from ehpss_hil.netns import netns_prefix, netns_unavailable_reason
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN_LOG_CMD = (

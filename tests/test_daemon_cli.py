@@ -12,7 +12,7 @@ import pytest
 from _proc import EHPSS_HIL, FIRMWARE_SIM, ROOT, Proc
 
 from ehpss_hil.bus import af_can_available
-from ehpss_hil.netns import PrivateNetns, netns_unavailable_reason
+from ehpss_hil.bus.netns import PrivateNetns, netns_unavailable_reason
 
 CTRL_CFG = str(ROOT / "configs" / "controller.yaml")
 EMU_CFG = str(ROOT / "configs" / "emulator.yaml")

@@ -11,7 +11,7 @@ import pytest
 from _proc import CLIENT, FIRMWARE_SIM, ROOT, Proc
 
 from ehpss_hil.bus import af_can_available
-from ehpss_hil.netns import PrivateNetns, netns_unavailable_reason
+from ehpss_hil.bus.netns import PrivateNetns, netns_unavailable_reason
 
 EMU_CFG = str(ROOT / "configs" / "emulator.yaml")
 NETNS_SKIP = netns_unavailable_reason()

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from ehpss_hil import PROJECT_ROOT
+from ehpss_hil.bus.netns import netns_unavailable_reason
 from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.errors import ConfigError
-from ehpss_hil.netns import netns_unavailable_reason
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.reliability.loss import process_loss, sim_loss
 from ehpss_hil.scenario import FrameLoss, load_scenario

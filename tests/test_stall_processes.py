@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from _stall import BENCH_YAML, Pair, controller_log, resumed_at, truth, x_d
 
-from ehpss_hil.netns import PrivateNetns, netns_unavailable_reason
+from ehpss_hil.bus.netns import PrivateNetns, netns_unavailable_reason
 
 ROOT = Path(__file__).resolve().parent.parent
 NETNS_SKIP = netns_unavailable_reason()

@@ -1,7 +1,7 @@
 """Real OS processes for the reliability trials: controller, emulator and a bus logger.
 
 Everything runs on the embedded ``udp_multicast`` bus inside a private network namespace
-(:class:`~ehpss_hil.netns.PrivateNetns`; hop limit 0 as in the shipped configs), so no frame can
+(:class:`~ehpss_hil.bus.netns.PrivateNetns`; hop limit 0 as in the shipped configs), so no frame can
 leave the host or reach another trial. Each child's stdout+stderr go to ``<name>.out`` in the
 trial directory; readiness is read from there. :class:`Trial` ends every child it started (by
 its own Popen handle) when it closes.
@@ -20,7 +20,7 @@ from types import TracebackType
 from typing import Any
 
 from .. import PROJECT_ROOT
-from ..netns import PrivateNetns, netns_unavailable_reason
+from ..bus.netns import PrivateNetns, netns_unavailable_reason
 from ..orchestrate import write_config
 from ..schema import load_yaml
 

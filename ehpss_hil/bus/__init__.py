@@ -28,7 +28,7 @@ For loops that drain the bus every cycle: :func:`frame_reader` (one non-blocking
 ``udp_multicast`` without python-can's ``select()`` per frame), :func:`frame_writer` (on
 ``udp_multicast`` without a dict and ``msgpack.packb`` per frame) and :func:`suppress_own_echoes`
 (on ``udp_multicast`` a kernel filter for the process's own datagrams), all in
-:mod:`ehpss_hil.bus_udp`.
+:mod:`ehpss_hil.bus.udp`.
 """
 
 from __future__ import annotations
@@ -42,10 +42,10 @@ from typing import Any
 import can
 from can.interfaces.udp_multicast import UdpMulticastBus
 
-from .bus_udp import GuardedUdpMulticastBus, UdpReader, UdpWriter, attach_own_source_filter
-from .config import BusConfig
-from .errors import BusUnavailableError
-from .udp_rejects import DatagramRejects
+from ..config import BusConfig
+from ..errors import BusUnavailableError
+from .rejects import DatagramRejects
+from .udp import GuardedUdpMulticastBus, UdpReader, UdpWriter, attach_own_source_filter
 
 log = logging.getLogger(__name__)
 
@@ -162,7 +162,7 @@ def stamps_receive_time(bus: can.BusABC) -> bool:
 
 def frame_reader(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callable[[], can.Message | None]:
     """One pending frame or None, never waiting: ``bus.recv(0.0)``, or on ``udp_multicast`` the
-    same read without its ``select()`` system call (:class:`~ehpss_hil.bus_udp.UdpReader`),
+    same read without its ``select()`` system call (:class:`~ehpss_hil.bus.udp.UdpReader`),
     with the templates of ``shapes`` (frames like those to come) built now, not on arrival."""
     if UdpReader.supports(bus):
         reader = UdpReader(bus)
@@ -173,7 +173,7 @@ def frame_reader(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callabl
 
 def frame_writer(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callable[[can.Message], None]:
     """Send one frame: ``bus.send``, or on ``udp_multicast`` the same datagram built from a
-    per-frame-shape template (:class:`~ehpss_hil.bus_udp.UdpWriter`; the templates of
+    per-frame-shape template (:class:`~ehpss_hil.bus.udp.UdpWriter`; the templates of
     ``shapes`` built now, not on the first send)."""
     if isinstance(bus, GuardedUdpMulticastBus):
         writer = UdpWriter(bus)

@@ -46,7 +46,7 @@ import msgpack
 from can.interfaces.udp_multicast import UdpMulticastBus
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
-from .udp_rejects import MAX_REJECTS_PER_READ, DatagramRejects, reject_reason
+from .rejects import MAX_REJECTS_PER_READ, DatagramRejects, reject_reason
 
 SO_ATTACH_FILTER = getattr(socket, "SO_ATTACH_FILTER", 26)
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
