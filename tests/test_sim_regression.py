@@ -11,6 +11,7 @@ from functools import cache
 import pytest
 
 from ehpss_hil import PROJECT_ROOT
+from ehpss_hil.bench.control import UNSEEN
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.report.metrics import RunMetrics, compute_metrics
 from ehpss_hil.scenario import load_scenario
@@ -69,14 +70,7 @@ def test_case4_disturbance() -> None:
 
 @pytest.mark.parametrize(
     "name",
-    [
-        "unseen-loe35",
-        "unseen-drift1p4",
-        "unseen-combined",
-        "unseen-noise1pct",
-        "unseen-frameloss2pct",
-        "unseen-blackouts",
-    ],
+    UNSEEN,
 )
 def test_unseen_faults(name: str) -> None:
     assert metrics(name, "mmac").rms_error_m <= 20 * UM

@@ -9,6 +9,7 @@ its own Popen handle) when it closes.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -34,6 +35,16 @@ READY = {
     "controller": "first sensor data: ACTIVE",
     "controller-lockstep": "(lockstep)",
 }
+
+
+def read_json_object(path: Path) -> dict[str, Any]:
+    """A JSON object written by a process of a trial (a summary, a sidecar); {} when it is
+    missing, unreadable or not an object."""
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
 
 
 def skip_reason() -> str | None:

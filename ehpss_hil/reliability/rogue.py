@@ -12,7 +12,6 @@ from x_d. ``python -m ehpss_hil.reliability.rogue --trial DIR`` runs one trial a
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from dataclasses import dataclass, field
@@ -20,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config import BusConfig
-from .procs import PY, Trial
+from .procs import PY, Trial, read_json_object
 
 #: the piston's largest deviation from x_d (m) while a rogue commands the valve
 MAX_DEVIATION_M = 1e-3
@@ -110,14 +109,6 @@ class RogueResult:
         )
 
 
-def _json(path: Path) -> dict[str, Any]:
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
-    return data if isinstance(data, dict) else {}
-
-
 def _truth(log: Path) -> tuple[float, int, bool]:
     """(max |PLANT_TRUTH Position| (m), samples, any SENSOR_AUX with CommandConflict) of the
     emulator's log (x_d is 0 in the trial)."""
@@ -172,8 +163,8 @@ def rogue_trial(out: Path, rogue_s: float = 1.0, duration_s: float = 3.0) -> Rog
             res.error = f"rogue: {rogue.text()[-200:]}"
         res.exits["emulator"] = emu.wait(60.0 + duration_s)
         res.exits["controller"] = ctl.terminate()
-    res.controller = _json(out / "controller.json")
-    res.emulator = _json(out / "emulator.json")
+    res.controller = read_json_object(out / "controller.json")
+    res.emulator = read_json_object(out / "emulator.json")
     res.max_deviation_m, res.truth_samples, res.command_conflict_seen = _truth(out / "emulator.log")
     return res
 

@@ -10,7 +10,6 @@ each of them as a rejected datagram (exit summary, log sidecar).
 from __future__ import annotations
 
 import argparse
-import json
 import socket
 import sys
 import time
@@ -22,7 +21,7 @@ import msgpack
 from can.interfaces.udp_multicast.utils import pack_message
 
 from ..config import BusConfig
-from .procs import PY, Trial
+from .procs import PY, Trial, read_json_object
 
 
 def _truncated_frame() -> bytes:
@@ -86,14 +85,6 @@ class StrayResult:
 EMULATOR_LIMIT_S = 120.0
 
 
-def _json(path: Path) -> dict[str, Any]:
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
-    return data if isinstance(data, dict) else {}
-
-
 def _total(d: dict[str, Any]) -> int:
     r = d.get("rejected_datagrams")
     return int(r.get("total", -1)) if isinstance(r, dict) else -1
@@ -137,10 +128,10 @@ def stray_trial(out: Path, rounds: int = 4) -> StrayResult:
         for n in ("emulator", "controller", "logger"):
             res.exits[n] = procs[n].terminate()
     res.counted = {
-        "controller": _total(_json(out / "controller.json")),
-        "emulator": _total(_json(out / "emulator.json")),
-        "logger": _total(_json(out / "bus.log.json")),
-        "controller log": _total(_json(out / "controller.log.json")),
+        "controller": _total(read_json_object(out / "controller.json")),
+        "emulator": _total(read_json_object(out / "emulator.json")),
+        "logger": _total(read_json_object(out / "bus.log.json")),
+        "controller log": _total(read_json_object(out / "controller.log.json")),
     }
     return res
 
