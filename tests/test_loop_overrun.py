@@ -123,17 +123,21 @@ def test_stale_frames_are_counted_not_used() -> None:
     never used: the position is not taken, the cycle is one without data (echo 0); a fresh frame
     after them is used."""
     r = Rig("stale", Watchdog(timeout_cycles=3))
-    r.loop.check_age = True  # virtual: the timestamp is the (in-process) send time
+    # virtual: the timestamp is the (in-process) send time. Which frames are stale is set by the
+    # window, not by how long a loaded host takes between send and drain: no window while the
+    # loop starts, a zero window for the stale frames, a huge one for the fresh frame after them
     try:
         _activate(r, 20)
         r.sensors(1e-4)
         r.cycle()
+        r.loop.check_age, r.loop.stale_after_s = True, 0.0
         for _ in range(3):
             r.sensors(9e-3)
-        time.sleep(0.01)  # older than the window however loaded the host
+        time.sleep(0.001)  # the receive time is strictly past the send time
         cmd = r.cycle()["VALVE_CMD"]
         assert r.loop.stale_frames == 6 and r.loop.meas.position_m == pytest.approx(1e-4)
         assert cmd["SensorCounterEcho"] == 0 and r.loop.wd.stale_cycles == 1
+        r.loop.stale_after_s = 1e9
         fresh = r.sensors(2e-4)
         cmd = r.cycle()["VALVE_CMD"]
         assert cmd["SensorCounterEcho"] == fresh.data[1] & 0x0F
@@ -144,12 +148,12 @@ def test_stale_frames_are_counted_not_used() -> None:
 
 def test_stale_frames_lead_to_sensor_timeout() -> None:
     r = Rig("stale-timeout", Watchdog(timeout_cycles=3))
-    r.loop.check_age = True
     try:
         _activate(r, 20)
+        r.loop.check_age, r.loop.stale_after_s = True, 0.0  # every frame from now on is stale
         for _ in range(3):
             r.sensors(9e-3)
-            time.sleep(0.01)
+            time.sleep(0.001)
             r.cycle()
         assert r.loop.life.state is State.FAULT
         assert r.loop.life.reason is FailsafeReason.SENSOR_TIMEOUT
