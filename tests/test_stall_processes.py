@@ -5,7 +5,8 @@ namespace, with the bench watchdog (10 cycles, auto recover).
 What must hold under any host load (nothing here is a timing target; the waits have generous
 limits only so that a broken run fails instead of hanging):
 - after each stop the controller is in fail-safe before it controls again, with the right
-  reason (controller stopped: LOOP_OVERRUN; emulator stopped: SENSOR_TIMEOUT, or LOOP_OVERRUN
+  reason (controller stopped: LOOP_OVERRUN, or E2E_ERRORS on a backlog its socket dropped part
+  of; emulator stopped: SENSOR_TIMEOUT, or LOOP_OVERRUN
   when the loaded host also starved the controller);
 - no enabled VALVE_CMD sent after a stop echoes a sensor frame received before the stop ended
   minus the watchdog window (such a frame is stale at any moment after it);
@@ -59,7 +60,11 @@ def _check(pair: Pair) -> list[str]:
         n0 = resumed_at(cmds, s)
         before = [st for st in stats if st.t < s.t_stop]
         faulted = before[-1].reason if before and before[-1].state == "FAULT" else None
-        allowed = {"LOOP_OVERRUN"} if s.who == "controller" else {"SENSOR_TIMEOUT", "LOOP_OVERRUN"}
+        # a stopped controller: LOOP_OVERRUN, or E2E_ERRORS when its socket dropped part of the
+        # backlog first (a loaded host: the counters then jump beyond the E2E window)
+        allowed = (
+            {"LOOP_OVERRUN", "E2E_ERRORS"} if s.who == "controller" else {"SENSOR_TIMEOUT", "LOOP_OVERRUN"}
+        )
         if faulted is not None:
             allowed.add(faulted)  # already in fail-safe when it stopped: the reason stays
         # statuses from the stop (emulator) resp. from the first cycle after it (controller)
@@ -139,7 +144,7 @@ def test_a_cpu_hog_beside_the_controller(tmp_path: Path, mode: str) -> None:
             pair.kill()
     cmds, stats = controller_log(tmp_path / "ctl.log")
     reasons = {st.reason for st in stats if st.state == "FAULT"}
-    assert reasons <= {"LOOP_OVERRUN", "SENSOR_TIMEOUT"}, reasons
+    assert reasons <= {"LOOP_OVERRUN", "SENSOR_TIMEOUT", "E2E_ERRORS"}, reasons
     xs = truth(tmp_path / "emu.log")
     t_active = next(c.t for c in cmds if c.enable)
     dev = max(abs(x - x_d(cmds, t)) for t, x in xs if t > t_active)
