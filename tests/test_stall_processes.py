@@ -5,9 +5,9 @@ namespace, with the bench watchdog (10 cycles, auto recover).
 What must hold under any host load (nothing here is a timing target; the waits have generous
 limits only so that a broken run fails instead of hanging):
 - after each stop the controller is in fail-safe before it controls again, with the right
-  reason (controller stopped: LOOP_OVERRUN, or E2E_ERRORS on a backlog its socket dropped part
-  of; emulator stopped: SENSOR_TIMEOUT, or LOOP_OVERRUN
-  when the loaded host also starved the controller);
+  reason (controller stopped: LOOP_OVERRUN; emulator stopped: SENSOR_TIMEOUT; on a loaded host
+  LOOP_OVERRUN when it also starved the controller, or E2E_ERRORS when the sensor counters
+  jumped beyond the E2E window first);
 - no enabled VALVE_CMD sent after a stop echoes a sensor frame received before the stop ended
   minus the watchdog window (such a frame is stale at any moment after it);
 - the true piston position (PLANT_TRUTH) never gets more than 1 mm from x_d.
@@ -60,11 +60,13 @@ def _check(pair: Pair) -> list[str]:
         n0 = resumed_at(cmds, s)
         before = [st for st in stats if st.t < s.t_stop]
         faulted = before[-1].reason if before and before[-1].state == "FAULT" else None
-        # a stopped controller: LOOP_OVERRUN, or E2E_ERRORS when its socket dropped part of the
-        # backlog first (a loaded host: the counters then jump beyond the E2E window)
-        allowed = (
-            {"LOOP_OVERRUN", "E2E_ERRORS"} if s.who == "controller" else {"SENSOR_TIMEOUT", "LOOP_OVERRUN"}
-        )
+        # a stopped controller: LOOP_OVERRUN; a stopped emulator: SENSOR_TIMEOUT. On a loaded host
+        # another check may trip first: LOOP_OVERRUN (the controller starved too) or E2E_ERRORS (the
+        # sensor counters jumped beyond the E2E window: a backlog the socket dropped part of, or the
+        # samples the emulator skipped when it caught up)
+        allowed = {"LOOP_OVERRUN", "E2E_ERRORS"}
+        if s.who == "emulator":
+            allowed.add("SENSOR_TIMEOUT")
         if faulted is not None:
             allowed.add(faulted)  # already in fail-safe when it stopped: the reason stays
         # statuses from the stop (emulator) resp. from the first cycle after it (controller)
