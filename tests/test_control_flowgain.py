@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from ehpss_hil.control.flowgain import FlowGainMonitor
+from ehpss_hil.control.tuning import ControlTuning
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.physics.plant import PlantStepper
@@ -14,17 +15,29 @@ PARAMS = load_params()
 TS = 1e-3
 
 
-def _run(k_q: float, k_dft: float, n: int = 400, noise_pa: float = 1e4) -> list[bool]:
-    """Random coil current through the plant; the monitor sees the echo, P_L and θ_pos."""
+def _run(
+    k_q: float,
+    k_dft: float,
+    n: int = 400,
+    noise_pa: float = 1e4,
+    converge: int = 0,
+    theta_l_wrong: int = 0,
+) -> list[bool]:
+    """Random coil current through the plant; the monitor sees the echo, P_L and θ_pos.
+
+    ``converge``: θ_pos moves linearly from 0.96 to k_Q·k_DFT over that many samples (an
+    estimate still converging); ``theta_l_wrong``: k̂_LOE is 1 instead of 0.8 for that many."""
     plant = PlantStepper(PARAMS, TS)
     plant.set_faults(FaultState(k_loe=0.8, k_q=k_q, k_dft=k_dft))
     mon = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3)
     rng = np.random.default_rng(7)
     out = []
     current = 0.0
-    for _ in range(n):
+    target = k_q * k_dft
+    for k in range(n):
         p = plant.load_pressure_pa + noise_pa * rng.standard_normal()
-        mon.update(current, p, theta_l=0.8, theta_pos=k_q * k_dft)
+        theta = target + (0.96 - target) * max(0.0, 1.0 - k / converge) if converge else target
+        mon.update(current, p, theta_l=1.0 if k < theta_l_wrong else 0.8, theta_pos=theta)
         out.append(mon.flow_fault)
         current = 1e-4 * rng.standard_normal()
         plant.step(current)
@@ -40,6 +53,37 @@ def test_flow_gain_loss_is_recognized() -> None:
 def test_sensor_drift_is_not_taken_for_a_flow_loss() -> None:
     assert not any(_run(k_q=1.0, k_dft=0.7))
     assert not any(_run(k_q=1.0, k_dft=0.0))  # a failed sensor is never a flow-gain loss
+
+
+def test_evidence_is_kept_while_the_product_converges() -> None:
+    """A deviation still converging (0.96 → 0.7 over 40 samples) is one hypothesis pair: the
+    window is not emptied as θ_pos moves, so H_Q comes once the minimum evidence is in (a window
+    restarted at every 0.05 of movement could not decide before sample 70)."""
+    decided = _run(k_q=0.7, k_dft=1.0, converge=40)
+    first = decided.index(True)
+    assert 30 <= first < 60
+    assert all(decided[first:])
+
+
+def test_evidence_taken_before_k_loe_was_identified_counts_with_the_identified_value() -> None:
+    """The window holds k̂_LOE-free sums: samples taken while k̂_LOE was still 1 (a power-on LOE
+    of 0.8 not identified yet) are weighed with 0.8 once it is known — the same Λ as a monitor
+    that knew 0.8 from the start."""
+    plant = PlantStepper(PARAMS, TS)
+    plant.set_faults(FaultState(k_loe=0.8, k_q=1.0, k_dft=0.7))
+    late = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3)
+    known = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3)
+    rng = np.random.default_rng(3)
+    current = 0.0
+    for k in range(60):
+        p = plant.load_pressure_pa + 1e4 * rng.standard_normal()
+        late.update(current, p, theta_l=1.0 if k < 25 else 0.8, theta_pos=0.7)
+        known.update(current, p, theta_l=0.8, theta_pos=0.7)
+        current = 1e-4 * rng.standard_normal()
+        plant.step(current)
+    assert known.llr < -ControlTuning().flow_gain_threshold
+    assert late.llr == pytest.approx(known.llr, rel=1e-9)
+    assert not late.flow_fault and late.sensor_decided
 
 
 def test_no_decision_without_a_deviation() -> None:

@@ -185,13 +185,13 @@ class MmacController(LoopBase):
         fl = self.flow
         prod = fl.product(meas.position_m, y_v, self.clock.span, self._spool_hold == 0)
         spool_model = self.spool_sup.active
-        if spool_model != self._flow_spool_model or self._warm_left > 0:
-            # the pressure prediction scales with k̂_LOE: evidence taken with another (or a not yet
-            # identified) k̂_LOE favours the wrong hypothesis
+        if spool_model != self._flow_spool_model:
+            # the pressure prediction scales with k̂_LOE: evidence taken with another k̂_LOE
+            # favours the wrong hypothesis
             self._flow_spool_model = spool_model
             fl.restart()
             fl.hold_off(self._flow_hold)
-        fl.update(self.clock.echo, meas.load_pressure_pa, tl, prod)
+        fl.update(self.clock.echo, meas.load_pressure_pa, self._flow_theta_l(tl), prod)
         if fl.flow_fault:
             self.k_q_hat = prod
             self.k_loe_hat = tl * prod
@@ -206,6 +206,14 @@ class MmacController(LoopBase):
             self.pos_bank.seed_ria(prod)
             self.pos_sup.force(self.pos_bank.ria)
             self.k_dft_hat = self.pos_bank.theta[self.pos_bank.ria]
+
+    def _flow_theta_l(self, tl: float) -> float:
+        """k̂_LOE for the pressure test: the spool model in use, or while the spool channel is
+        still in its warm-up the best-scoring one (a power-on LOE is not switched to yet)."""
+        if self._warm_left > 0 or self.spool_sup.guarded:
+            j = self.spool_bank.j
+            return self.spool_bank.theta[j.index(min(j))]
+        return tl
 
     def _watch(self, tl: float) -> None:
         """The do-no-harm monitor on this sample; nominal compensation while it says so."""

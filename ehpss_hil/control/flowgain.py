@@ -14,13 +14,17 @@ content, so a likelihood test decides within tens of milliseconds between
 * H_D (sensor): k_Q = 1, k_DFT = θ_pos, and
 * H_Q (flow gain): k_Q = θ_pos, k_DFT = 1,
 
-where θ_pos is the (offset-free, accurate) estimate of the product. The evidence window is
-emptied whenever θ_pos moves by more than ``min_deviation`` (the hypotheses changed) and is not
-kept at all while θ_pos is within ``min_deviation`` of 1 (nothing to attribute). The statistic
-is the
-log-likelihood ratio over an exponentially weighted window,
-``Λ = (E_D − E_Q)/(2σ̂²)``, ``E_h = Σ w·(P_L − θ_h·φ)²`` with θ_D = 1, θ_Q = θ_pos and
-``σ̂² = min(E_D, E_Q)/Σw``; H_Q is entered when ``Λ > Λ_on`` and left when ``Λ < −Λ_on``.
+where θ_pos is the (offset-free, accurate) estimate of the product. The window holds
+k̂_LOE-free sums of ``u = (m/A_h)·ẍ₁``: ``Σw·u²``, ``Σw·u·P_L``, ``Σw·P_L²``, so evidence taken before
+the spool channel identified k̂_LOE (a power-on LOE) counts with the value known when deciding.
+It is kept empty while θ_pos is within ``min_deviation`` of 1 (nothing to attribute); from the
+moment a deviation appears it is kept while θ_pos converges, and emptied only when the spool
+model changes (the pressure model changed) or when an attributed deviation moves by more than
+``min_deviation`` (a new fault; the attribution stands until the new evidence overturns it).
+The statistic is the log-likelihood ratio over an exponentially weighted window,
+``Λ = (E_D − E_Q)/(2σ̂²)``, ``E_h = Σ w·(P_L − g_h·u)²`` with g_D = k̂_LOE, g_Q = k̂_LOE·θ_pos and
+``σ̂² = min(E_D, E_Q)/Σw``; H_Q is entered when ``Λ > Λ_on`` and left when ``Λ < −Λ_on``; H_D is
+decided when ``Λ < −Λ_on``.
 The compensation always uses θ_pos; only its split between the sensor and the flow gain comes
 from the pressure, so the pressure noise never enters the loop directly.
 """
@@ -64,10 +68,10 @@ class FlowGainMonitor:
         "_on",
         "_pa",
         "_prev",
-        "_sff",
-        "_sfy",
+        "_spp",
         "_stale",
-        "_syy",
+        "_sup",
+        "_suu",
         "_theta_ref",
         "_vs",
         "_w",
@@ -76,6 +80,7 @@ class FlowGainMonitor:
         "k_q",
         "llr",
         "s",
+        "sensor_decided",
         "theta_prod",
     )
 
@@ -117,6 +122,7 @@ class FlowGainMonitor:
         self._int = self._prev = 0.0
         self._hold = 0
         self._stale = 0  # updates since the product estimate last had an excited increment
+        self.sensor_decided = False
         self.restart()
 
     @property
@@ -135,8 +141,9 @@ class FlowGainMonitor:
         return self._stale <= self._m
 
     def restart(self) -> None:
-        """Empty the evidence window (the product moved: the hypotheses changed)."""
-        self._sff = self._sfy = self._syy = self._w = 0.0
+        """Empty the evidence window (the hypotheses or the pressure model changed); the
+        decision stands until new evidence overturns it."""
+        self._suu = self._sup = self._spp = self._w = 0.0
 
     def hold_off(self, samples: int) -> None:
         """Take no evidence for the next ``samples`` updates (the decision stands): after
@@ -197,29 +204,40 @@ class FlowGainMonitor:
             return self.k_q
         if not self.flow_fault and abs(theta_pos - 1.0) < self._min_dev:
             # no deviation: H_D whatever the evidence; start the window afresh when it appears
-            if self._w > 0.0 or self._theta_ref != 1.0:
+            if self._w > 0.0 or self.sensor_decided:
                 self._theta_ref = 1.0
+                self.sensor_decided = False
                 self.restart()
             self.llr = 0.0
             self.k_q = 1.0
             return 1.0
-        phi = theta_l * self._pa * self.s[0]
-        if abs(theta_pos - self._theta_ref) > self._min_dev:
+        if self.attributed and abs(theta_pos - self._theta_ref) > self._min_dev:
+            # an attributed deviation moved: gather evidence afresh (the attribution stands until
+            # the new evidence overturns it); while unattributed the product is still converging
+            # on the one deviation and the evidence is kept
             self._theta_ref = theta_pos
             self.restart()
+        u = self._pa * self.s[0]
         d = self._d
-        self._sff = d * self._sff + phi * phi
-        self._sfy = d * self._sfy + phi * pressure_pa
-        self._syy = d * self._syy + pressure_pa * pressure_pa
+        self._suu = d * self._suu + u * u
+        self._sup = d * self._sup + u * pressure_pa
+        self._spp = d * self._spp + pressure_pa * pressure_pa
         self._w = d * self._w + 1.0
-        self.llr = self._llr(theta_pos)
+        self.llr = self._llr(theta_l, theta_l * theta_pos)
         self._decide(theta_pos)
         self.k_q = theta_pos if self.flow_fault else 1.0
         return self.k_q
 
-    def _llr(self, theta: float) -> float:
-        e_d = self._syy - 2.0 * self._sfy + self._sff
-        e_q = self._syy - 2.0 * theta * self._sfy + theta * theta * self._sff
+    @property
+    def attributed(self) -> bool:
+        """The present deviation of the product has been attributed (H_Q entered or H_D
+        decided on enough evidence)."""
+        return self.flow_fault or self.sensor_decided
+
+    def _llr(self, g_d: float, g_q: float) -> float:
+        """Λ for P_L = g·u with g = g_d (H_D) against g = g_q (H_Q)."""
+        e_d = self._spp - 2.0 * g_d * self._sup + g_d * g_d * self._suu
+        e_q = self._spp - 2.0 * g_q * self._sup + g_q * g_q * self._suu
         var = min(e_d, e_q) / self._w
         return (e_d - e_q) / (2.0 * var) if var > 0.0 else 0.0
 
@@ -229,9 +247,17 @@ class FlowGainMonitor:
         loss)."""
         if theta < self._failed_below:
             self.flow_fault = False
-        elif self._w < self._min_evidence:
             return
-        elif self.flow_fault:
+        if self._w < self._min_evidence:
+            return
+        was = self.attributed
+        if self.flow_fault:
             self.flow_fault = self.llr > -self._on
         else:
             self.flow_fault = self.llr > self._on and abs(theta - 1.0) >= self._min_dev
+        if self.flow_fault:
+            self.sensor_decided = False
+        elif self.llr < -self._on:
+            self.sensor_decided = True
+        if self.attributed and not was:
+            self._theta_ref = theta
