@@ -48,18 +48,17 @@ class _Stream:
     def __init__(self, seed: int, stream: int, kind: str) -> None:
         self._rng = np.random.default_rng([seed, stream])
         self._kind = kind
-        self._buf = np.empty(0)
+        self._buf: list[float] = []
         self._i = 0
 
     def next(self) -> float:
-        if self._i >= len(self._buf):
-            self._buf = (
-                self._rng.standard_normal(_BLOCK) if self._kind == "normal" else self._rng.random(_BLOCK)
-            )
-            self._i = 0
-        v = self._buf[self._i]
-        self._i += 1
-        return float(v)
+        i = self._i
+        if i >= len(self._buf):
+            block = self._rng.standard_normal(_BLOCK) if self._kind == "normal" else self._rng.random(_BLOCK)
+            self._buf = block.tolist()  # Python floats: indexing a list is cheaper than an array
+            i = 0
+        self._i = i + 1
+        return self._buf[i]
 
 
 class PlantEmulation:
@@ -147,7 +146,8 @@ class PlantEmulation:
     def measure(self) -> SensorSample:
         """The sensor sample y[k] (draws this sample's noise; call exactly once per sample)."""
         nz = self.scenario.noise
-        n_pos, n_spool, n_p = (s.next() for s in self._noise)
+        s_pos, s_spool, s_p = self._noise
+        n_pos, n_spool, n_p = s_pos.next(), s_spool.next(), s_p.next()
         if self.plant.faults.stuck:
             pos = self._stuck_value_m
         else:
