@@ -3,9 +3,10 @@ from the package: no CDN, benches are often offline) and pushes the bus state ov
 
 Endpoints: ``/`` the page; ``/static/…``; ``/ws`` a WebSocket that sends, ``refresh_hz`` times a
 second, ``{"rows": {column: [values…]}, "status": {…}}`` with the rows added since its last
-message (:class:`~.state.MonitorState`); ``/api/config``; ``/api/status`` (one snapshot, for
-scripts); ``POST /api/inject`` ``{"kind": "k_loe", "value": 0.5}`` → one FAULT_INJECT frame
-(403 unless the monitor was started with ``--allow-inject``).
+message (:class:`~.state.MonitorState`); ``/api/config`` (options, kinds, row fields, the
+process id); ``/api/status`` (one snapshot, for scripts); ``POST /api/inject``
+``{"kind": "k_loe", "value": 0.5}`` → one FAULT_INJECT frame (403 unless the monitor was started
+with ``--allow-inject``).
 
 The event loop only copies snapshots out of the state and serializes them; decoding happens in
 the listener's thread, so the page's cost does not grow with the bus's frame rate.
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import signal
 import time
 from importlib import resources
@@ -46,6 +48,7 @@ def make_app(listener: BusListener, refresh_hz: float = REFRESH_HZ, title: str =
         "refresh_hz": refresh_hz,
         "fields": list(ROW_FIELDS),
         "title": title,
+        "pid": os.getpid(),  # for benchmarks that measure the monitor's CPU use
     }
     app.router.add_get("/", _index)
     app.router.add_get("/ws", _websocket)
