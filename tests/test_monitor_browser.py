@@ -70,10 +70,8 @@ def bench(tmp_path: Path) -> Iterator[str]:
             emu = Proc(ns.prefix() + FIRMWARE_SIM + ["-c", EMU_CFG_PATH, "--truth", "--fault-inject"])
             procs.append(emu)
             assert emu.wait_for("realtime on"), emu.text
-            ctl = Proc(ns.prefix() + EHPSS_HIL + ["controller", "-c", str(cfg)])
-            procs.append(ctl)
-            assert ctl.wait_for("first sensor data: ACTIVE"), ctl.text + emu.text
             netns = f"/proc/{ns.pid}/ns/net"
+            # the monitor before the controller: it sees the first ACTIVE cycle, so x_d is aligned
             mon = Proc(
                 [
                     *EHPSS_HIL,
@@ -91,6 +89,9 @@ def bench(tmp_path: Path) -> Iterator[str]:
             assert mon.wait_for("monitor: http://"), mon.text
             url = re.search(r"http://[\d.]+:\d+/", mon.text)
             assert url is not None, mon.text
+            ctl = Proc(ns.prefix() + EHPSS_HIL + ["controller", "-c", str(cfg)])
+            procs.append(ctl)
+            assert ctl.wait_for("first sensor data: ACTIVE"), ctl.text + emu.text
             yield url.group(0)
         finally:
             for p in reversed(procs):
@@ -147,6 +148,7 @@ def test_fault_injected_from_the_page_reconfigures_the_controller(bench: str) ->
             driver.find_element(By.CSS_SELECTOR, f'#inject button[data-kind="{kind}"]').click()  # type: ignore[attr-defined]
 
         _until("mode mmac", lambda: text("mode") == "mmac")
+        assert text("ref-note") == ""  # x_d and y_m aligned with the controller's reference
         _until(
             "k̂_LOE 1 and k̂_DFT 1",
             lambda: _number(text("k-loe-hat")) == 1.0 and _number(text("k-dft-hat")) == 1.0,

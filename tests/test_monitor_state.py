@@ -19,6 +19,7 @@ from ehpss_hil.errors import InjectError
 from ehpss_hil.monitor.listener import BusListener
 from ehpss_hil.monitor.reference import CHUNK_SAMPLES, ReferenceTrack
 from ehpss_hil.monitor.state import FRAME_OVERHEAD_BITS, MonitorState, choice_names
+from ehpss_hil.monitor.tui import render
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.physics.reference import ReferenceModel
 from ehpss_hil.scenario import Reference
@@ -100,6 +101,21 @@ def test_rows_are_decimated_and_x_d_follows_the_controller_cycle(codec: FrameCod
     assert s["frames_per_s"] == pytest.approx(2000, rel=0.01)
     assert s["bus_load"] == pytest.approx(2000 * (FRAME_OVERHEAD_BITS + 64) / 1e6, rel=0.01)
     assert st.rows_since(st.seq) == {f: [] for f in rows}
+    assert s["reference"] == "aligned"
+
+
+def test_attached_to_an_active_controller_no_x_d_is_shown(codec: FrameCodec) -> None:
+    """The reference starts at the controller's first ACTIVE cycle; a monitor that only heard
+    enabled commands does not know that cycle and shows no x_d rather than a shifted one."""
+    prm = load_params()
+    st = MonitorState(choice_names(codec), ReferenceTrack(Reference(), prm, TS))
+    tx, rx = FrameCodec(), FrameCodec()
+    for k in range(50):
+        _feed(st, rx, tx.encode("VALVE_CMD", {"Enable": 1, "CycleCount": 4000 + k}), 10.0 + k * TS)
+    s = st.status()
+    assert s["reference"] == "attached late" and s["values"]["x_d_m"] is None
+    text = render(s, "virtual:x")
+    assert "x_d – mm (attached late)" in text and "[WARN] no CTRL_STATUS from the controller" in text
 
 
 def test_reference_track_over_chunks_and_back() -> None:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..bus import open_listener_bus
 from ..config import BusConfig, ControllerConfig, load_controller_config
-from ..errors import ConfigError
+from ..errors import ConfigError, EhpssError
 
 NAME = "monitor"
 #: the page's default TCP port
@@ -93,7 +93,11 @@ def run(args: argparse.Namespace) -> int:
 
             run_tui(listener, where, args.duration)
         else:
-            from ..monitor.server import serve
+            try:
+                from ..monitor.server import serve
+            except ImportError as exc:
+                why = f"the monitor's page needs aiohttp ({exc}): pip install 'ehpss-hil[monitor]'"
+                raise EhpssError(f"{why}, or use --tui") from exc
 
             if args.host not in ("127.0.0.1", "localhost", "::1"):
                 print(f"warning: the page is reachable from other hosts on {args.host}", file=sys.stderr)

@@ -135,6 +135,7 @@ class MonitorState:
         self._cycle_raw: int | None = None
         self._cycle = 0  # unwrapped CycleCount
         self._cycle0: int | None = None  # CycleCount at the first Enable = 1
+        self._saw_disabled = False  # a VALVE_CMD with Enable = 0 came before any with 1
 
     # ---- input ---------------------------------------------------------------------------------
     def feed(self, d: Decoded, dlc: int, t_s: float) -> None:
@@ -193,7 +194,12 @@ class MonitorState:
         if self._cycle_raw is not None:
             self._cycle += (raw - self._cycle_raw) % 65536
         self._cycle_raw = raw
-        if self._cycle0 is None and v["Enable"]:
+        if not v["Enable"]:
+            self._saw_disabled = True
+        elif self._cycle0 is None and self._saw_disabled:
+            # the controller's first ACTIVE cycle, seen: its reference starts here (k = 0). A
+            # monitor that attached to an already ACTIVE controller never knows k and shows no
+            # x_d rather than a shifted one
             self._cycle0 = self._cycle
         if self.reference is not None and self._cycle0 is not None:
             lat["x_d_m"], lat["y_m_m"] = self.reference.at(self._cycle - self._cycle0)
@@ -244,6 +250,15 @@ class MonitorState:
     def _fault_inject(self, v: dict[str, Any], t_s: float) -> None:
         self.injects_seen += 1
 
+    def _reference_state(self) -> str:
+        """``aligned``, ``none`` (no reference given), ``waiting`` (no enabled command yet) or
+        ``attached late`` (the controller was ACTIVE before the monitor heard it: k unknown)."""
+        if self.reference is None:
+            return "none"
+        if self._cycle0 is not None:
+            return "aligned"
+        return "attached late" if self._cycle_raw is not None and not self._saw_disabled else "waiting"
+
     # ---- output --------------------------------------------------------------------------------
     def rows_since(self, seq: int) -> dict[str, list[float | None]]:
         """The rows after sequence number ``seq``, by column (NaN as None)."""
@@ -281,6 +296,7 @@ class MonitorState:
             "injects_seen": self.injects_seen,
             "silent_s": _json_float(silent_s) if math.isfinite(silent_s) else None,
             "seq": self.seq,
+            "reference": self._reference_state(),
         }
         out["banner"] = banner(out, silent_s)
         return out

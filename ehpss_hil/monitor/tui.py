@@ -24,10 +24,14 @@ def _f(v: Any, scale: float = 1.0, digits: int = 3) -> str:
     return f"{float(v) * scale:.{digits}f}"
 
 
+def _g(v: Any) -> str:
+    return "–" if v is None else f"{float(v):.3g}"
+
+
 def render(st: dict[str, Any], where: str) -> str:
     """The screen for one status snapshot (:meth:`~.state.MonitorState.status`)."""
     v = st["values"]
-    idx = "  ".join(f"M{r['slot']}:θ{_f(r['theta'])} J{_f(r['j'], 1, 3)}" for r in st["index"]) or "–"
+    idx = "  ".join(f"M{r['slot']}:θ{_f(r['theta'])} J{_g(r['j'])}" for r in st["index"]) or "–"
     verdicts = "  ".join(f"{k} {n}" for k, n in st["verdicts"].items() if n) or "–"
     lines = [
         f"ehpss-hil monitor · {where}",
@@ -40,7 +44,8 @@ def render(st: dict[str, Any], where: str) -> str:
         f"   switches {st.get('switches', '–')}",
         f"k̂_LOE {_f(v['k_loe_hat'])}  k̂_DFT {_f(v['k_dft_hat'])}   true k_LOE {_f(v['k_loe_true'])} "
         f"k_Q {_f(st.get('k_q_true'))} k_DFT {_f(v['k_dft_true'])}",
-        f"x {_f(v['x_true_m'], 1e3)} mm   y_s {_f(v['y_s_m'], 1e3)} mm   x_d {_f(v['x_d_m'], 1e3)} mm"
+        f"x {_f(v['x_true_m'], 1e3)} mm   y_s {_f(v['y_s_m'], 1e3)} mm   "
+        f"x_d {_f(v['x_d_m'], 1e3)} mm ({st['reference']})"
         f"   e {_f(v['e_m'], 1e6, 1)} µm   i {_f(v['i_cmd_a'], 1e3, 2)} mA",
         f"J  {idx}",
         f"overruns {st.get('overruns', '–')}   CycleTimeMax {_f(st.get('cycle_time_max_s'), 1e6, 0)} µs"

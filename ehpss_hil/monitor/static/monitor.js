@@ -92,6 +92,9 @@ function showStatus(s) {
   document.querySelector("#index tbody").innerHTML = s.index.map((r) =>
     `<tr class="${active.includes(r.slot) ? "active" : ""}"><td>${r.slot}</td><td>${fmt(r.theta, 3)}</td>` +
     `<td>${r.j === null ? "–" : Number(r.j).toPrecision(3)}</td></tr>`).join("");
+  const refNote = { none: " · x_d, y_m: start with --config", "attached late":
+    " · x_d, y_m unknown: attached after the controller went ACTIVE", waiting: "", aligned: "" };
+  set("ref-note", refNote[s.reference] ?? "");
   document.getElementById("err-title").innerHTML = v.x_true_m === null
     ? "Tracking error y<sub>s</sub> − y<sub>m</sub>, sensor (µm)" : "Tracking error x − y<sub>m</sub> (µm)";
 }
