@@ -25,6 +25,14 @@ def _ms(v: float) -> str:
     return "never (∞)" if math.isinf(v) else f"{v * 1e3:.1f} ms"
 
 
+def _models(active: dict[str, int] | None) -> str:
+    return ", ".join(f"{ch} {slot}" for ch, slot in active.items()) if active else "—"
+
+
+def _versions(v: Any) -> str:
+    return ", ".join(f"{k} {val}" for k, val in v.items()) if isinstance(v, dict) else str(v)
+
+
 def seconds(t: float) -> str:
     """A time on the run's axis to the millisecond (its sample resolution): ``3.502 s``."""
     return f"{t:.3f} s"
@@ -57,7 +65,7 @@ def _metrics_lines(m: LogMetrics) -> list[str]:
             ]
             lines += [
                 f"| {e.t_s:.3f} | {_um(e.peak_error_m)} | {_ms(e.recovery_s)} | "
-                f"{e.switches} | {e.active_model} |"
+                f"{e.switches} | {_models(e.active_model)} |"
                 for e in r.events
             ]
             lines.append("")
@@ -134,7 +142,7 @@ def write_markdown(
         "",
         f"- log: `{run.log_path}` ({len(r.t_s)} samples at Ts = {r.ts_s * 1e3:g} ms)",
         f"- sidecar: {'yes' if run.sidecar else 'none'}; started "
-        f"{side.get('start_time_utc', '?')}; versions {side.get('versions', '?')}",
+        f"{side.get('start_time_utc', '?')}; versions {_versions(side.get('versions', '?'))}",
         f"- DBC sha256: {(side.get('dbc') or {}).get('sha256', '?')}",
         f"- ground truth (PLANT_TRUTH): {'yes' if run.has_truth else 'NO'}; reference: "
         f"{'yes' if run.has_reference else 'NO'}",
