@@ -107,4 +107,6 @@ def run(args: argparse.Namespace) -> int:
             serve(listener, args.host, args.port, args.refresh_hz, title=f"ehpss-hil monitor · {where}")
     finally:
         listener.stop()
+    if listener.error is not None:
+        raise listener.error
     return 0

@@ -95,8 +95,15 @@ class BusListener:
         self._opened.set()
         try:
             self._receive(self._bus)
+        except (OSError, can.CanError) as exc:  # the bus went away: the command reports it
+            self._error = BusUnavailableError(f"the bus failed while listening: {exc}")
         finally:
             self._bus.shutdown()
+
+    @property
+    def error(self) -> BaseException | None:
+        """What ended the receive thread other than :meth:`stop` (None: nothing)."""
+        return self._error
 
     def _receive(self, bus: can.BusABC) -> None:
         classify, feed, lock = self.codec.classify, self.state.feed, self.lock
