@@ -85,6 +85,18 @@ class OutputError(EhpssError, OSError):
     exit_code = 2
 
 
+class InjectError(EhpssError, ValueError):
+    """The monitor refuses a fault injection request (off, unknown kind, bad value, not sent)."""
+
+    exit_code = 2
+
+
+class ServeError(EhpssError, OSError):
+    """The monitor's web server cannot listen where it was told (port taken, bad address)."""
+
+    exit_code = 2
+
+
 class ProcessFailedError(EhpssError):
     """A child process of ``ehpss-hil run`` ended badly; the exit code is the child's when it
     has a meaning of its own (2 bad config or output, 3 missing interface), else 1."""

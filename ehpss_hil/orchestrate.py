@@ -82,6 +82,11 @@ class RunPlan:
     #: a non-empty directory that is no run directory: replace the files a run writes (by
     #: exact name) instead of refusing it
     overwrite: bool = False
+    #: serve ``ehpss-hil monitor`` on this port of 127.0.0.1 for the run (None: no monitor); it
+    #: listens inside the run's namespace and stops with the run
+    monitor_port: int | None = None
+    #: the monitor's fault-injection buttons (and the emulator accepting FAULT_INJECT)
+    monitor_inject: bool = False
 
 
 @dataclass
@@ -170,6 +175,7 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
             "mode": emu_mode,
             "scenario": str(Path(plan.scenario_path).resolve()),
             "truth": plan.truth,
+            **({"fault_inject": True} if plan.monitor_inject else {}),
             "rate_hz": 1.0 / sc.sample_time_s,
         },
     )
@@ -217,6 +223,23 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
             *plan.extra_emulator_args,
         ],
     }
+
+
+def _monitor_command(plan: RunPlan, out: Path, netns: PrivateNetns | None) -> list[str]:
+    """``ehpss-hil monitor`` for the run: started outside the namespace (its page on the host's
+    127.0.0.1), listening inside it (``--netns``)."""
+    return [
+        sys.executable,
+        "-m",
+        "ehpss_hil.cli",
+        "monitor",
+        "--config",
+        str(out / "controller.yaml"),
+        "--port",
+        str(plan.monitor_port),
+        *(["--netns", f"/proc/{netns.pid}/ns/net"] if netns is not None else []),
+        *(["--allow-inject"] if plan.monitor_inject else []),
+    ]
 
 
 def _spawn(argv: list[str], prefix: list[str], out: Path, name: str) -> subprocess.Popen[bytes]:
@@ -308,6 +331,12 @@ def execute(plan: RunPlan) -> RunResult:
         if plan.bus_logger:
             procs["logger"] = _spawn(cmds["logger"], prefix, out, "logger")
             _wait_for_line(out / "logger.out", "logging ", plan.startup_timeout_s, procs)
+        if plan.monitor_port is not None:
+            cmds["monitor"] = _monitor_command(plan, out, netns)
+            procs["monitor"] = _spawn(cmds["monitor"], [], out, "monitor")
+            _wait_for_line(out / "monitor.out", "monitor: http://", plan.startup_timeout_s, procs)
+            if not plan.quiet:
+                print(_last_line(out / "monitor.out"), file=sys.stderr, flush=True)
         procs["controller"] = _spawn(cmds["controller"], prefix, out, "controller")
         node = int((load_yaml(out / "controller.yaml").get("ids") or {}).get("controller_node", 1))
         hb = f"{0x700 + node:03X}#"  # the controller's own boot-up heartbeat: it is on the bus
@@ -322,6 +351,8 @@ def execute(plan: RunPlan) -> RunResult:
         res.exit_codes["controller"] = _stop(procs["controller"])
         if "logger" in procs:
             res.exit_codes["logger"] = _stop(procs["logger"])
+        if "monitor" in procs:
+            res.exit_codes["monitor"] = _stop(procs["monitor"])
     finally:
         for p in procs.values():
             _stop(p, 2.0)

@@ -34,7 +34,8 @@ def metrics_from_run(out_dir: Path, plot: bool = False, written: list[Path] | No
             rep = out_dir / "report"
             figs = draw_all(lr, rep / "figures")
             written += figs
-            written.append(write_markdown(lr, m, figs, rep))
+            md = write_markdown(lr, m, figs, rep)
+            written += [md, md.with_suffix(".html")]
     except OSError as exc:
         (out_dir / "metrics.json").unlink(missing_ok=True)
         raise OutputError(f"{out_dir}: cannot write the metrics: {exc.strerror or exc}") from exc

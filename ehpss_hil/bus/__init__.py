@@ -81,6 +81,25 @@ def open_bus(cfg: BusConfig, can_filters: list[dict[str, Any]] | None = None) ->
     raise BusUnavailableError(f"unsupported bus interface {cfg.interface!r}")
 
 
+#: interfaces :func:`open_listener_bus` opens through :func:`open_bus` (the project's own set-up)
+PROJECT_INTERFACES = ("udp_multicast", "socketcan", "virtual")
+
+
+def open_listener_bus(interface: str, channel: str, port: int | None = None) -> can.BusABC:
+    """Open a bus to listen on (logger, monitor): the project's factory for its own interfaces,
+    python-can's ``can.Bus`` for any other. ``port``: the udp_multicast port (None: default).
+
+    Raises :class:`BusUnavailableError` when it cannot be opened.
+    """
+    if interface in PROJECT_INTERFACES:
+        kw: dict[str, Any] = {"port": port} if port is not None else {}
+        return open_bus(BusConfig(interface=interface, channel=channel, **kw))  # type: ignore[arg-type]
+    try:
+        return can.Bus(interface=interface, channel=channel)
+    except (OSError, can.CanError, ImportError, ValueError) as exc:
+        raise BusUnavailableError(f"{interface}:{channel}: cannot open ({exc})") from exc
+
+
 def _open_socketcan(cfg: BusConfig, can_filters: list[dict[str, Any]] | None) -> can.BusABC:
     if not af_can_available():
         raise BusUnavailableError(

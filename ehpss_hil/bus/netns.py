@@ -108,3 +108,26 @@ class PrivateNetns:
         self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.close()
+
+
+#: Linux ``CLONE_NEWNET`` (``setns`` namespace type)
+_CLONE_NEWNET = 0x40000000
+
+
+def enter_netns(path: str) -> None:
+    """Move the **calling thread** into the network namespace at ``path`` (``/proc/PID/ns/net``).
+
+    Sockets opened by this thread afterwards belong to that namespace; sockets opened before, and
+    the other threads, stay where they were (the monitor keeps its web server on the host's
+    loopback and listens to a run's private bus). Needs CAP_SYS_ADMIN (root). Raises OSError.
+    """
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+    try:
+        if libc.setns(fd, _CLONE_NEWNET) != 0:
+            err = ctypes.get_errno()
+            raise OSError(err, f"setns({path}): {os.strerror(err)}")
+    finally:
+        os.close(fd)

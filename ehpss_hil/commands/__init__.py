@@ -18,6 +18,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "the bench demo: case 3 (drift, then LOE), NRC vs MMAC on two real processes, metrics, figures",
     ),
     "log": ("log", "log every frame of a CAN bus to a candump -L file (+ JSON sidecar), rotated by size"),
+    "monitor": (
+        "monitor",
+        "live bench monitor: decode the bus and show it in a local web page (or --tui); listen-only",
+    ),
     "replay": (
         "replay",
         "feed a log's sensor frames through the controller offline; compare with its VALVE_CMDs",

@@ -17,17 +17,15 @@ import threading
 import time
 from pathlib import Path
 from types import FrameType
-from typing import Any
 
 import can
 
-from ..bus import datagram_rejects
+from ..bus import datagram_rejects, open_listener_bus
 from ..canlog import CandumpLogger
-from ..errors import BusUnavailableError, OutputError
+from ..errors import OutputError
 
 NAME = "log"
 
-_PROJECT_INTERFACES = ("udp_multicast", "socketcan", "virtual")
 _CLOCKS = {
     "socketcan": "kernel receive timestamp (SO_TIMESTAMP), wall clock, s since the Unix epoch",
     "udp_multicast": "receive socket timestamp (SO_TIMESTAMPNS), wall clock, s since the Unix epoch",
@@ -61,23 +59,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-bytes", type=int, default=256 * 2**20, help="rotate above this size")
     p.add_argument("--backups", type=int, default=5, help="rotated files kept (0: never rotate)")
     p.add_argument("--queue-lines", type=int, default=200_000, help="writer queue bound (frames)")
-
-
-def open_log_bus(interface: str, channel: str, port: int | None = None) -> can.BusABC:
-    """Open a bus for listening: the project's factory for its own interfaces, python-can else.
-
-    Raises :class:`BusUnavailableError` when it cannot be opened.
-    """
-    if interface in _PROJECT_INTERFACES:
-        from ..bus import open_bus
-        from ..config import BusConfig
-
-        kw: dict[str, Any] = {"port": port} if port is not None else {}
-        return open_bus(BusConfig(interface=interface, channel=channel, **kw))  # type: ignore[arg-type]
-    try:
-        return can.Bus(interface=interface, channel=channel)
-    except (OSError, can.CanError, ImportError, ValueError) as exc:
-        raise BusUnavailableError(f"{interface}:{channel}: cannot open ({exc})") from exc
 
 
 class _StopFlag:
@@ -125,7 +106,7 @@ def drain(bus: can.BusABC, logger: CandumpLogger, limit: int = 1_000_000) -> int
 
 def run(args: argparse.Namespace) -> int:
     """Open the bus, log until stopped, print counts."""
-    bus = open_log_bus(args.interface, args.channel, args.port)
+    bus = open_listener_bus(args.interface, args.channel, args.port)
     iface = args.iface or (args.channel if args.interface == "socketcan" else "can0")
     meta = {
         "bus": {"interface": args.interface, "channel": args.channel},

@@ -30,6 +30,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--json", type=Path, default=None, help="also write the metrics row here")
     p.add_argument("--no-figures", action="store_true", help="metrics and report.md only")
+    p.add_argument(
+        "--compare",
+        type=Path,
+        action="append",
+        default=[],
+        metavar="LOG",
+        help="another run of the scenario (log or directory, repeatable): overlaid in compare.png "
+        "(e.g. NRC vs MMAC, as the paper's Figs 4-7) and tabled beside this one",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,12 +48,16 @@ def run(args: argparse.Namespace) -> int:
     out_dir = args.out if args.out is not None else lr.log_path.parent / "report"
     out_dir.mkdir(parents=True, exist_ok=True)
     m = log_metrics(lr)
+    others = [load_log_run(p, scenario=scenario) for p in args.compare]
     figures: list[Path] = []
     if not args.no_figures:
-        from ..report.logfigures import draw_all
+        from ..report.logfigures import draw_all, fig_compare
 
         figures = draw_all(lr, out_dir / "figures")
-    md = write_markdown(lr, m, figures, out_dir)
+        both = fig_compare([lr, *others], out_dir / "figures")
+        figures = [both, *figures] if both is not None else figures
+    compare = [(lr, m), *((o, log_metrics(o)) for o in others)] if others else None
+    md = write_markdown(lr, m, figures, out_dir, compare)
     row = metrics_row(lr, m)
     text = json.dumps([row], indent=1, default=str)
     (out_dir / "metrics.json").write_text(text)
@@ -57,5 +70,5 @@ def run(args: argparse.Namespace) -> int:
             f"RMS error {m.run.rms_error_m * 1e6:.2f} µm, pre-fault max "
             f"{m.run.pre_fault_max_m * 1e6:.2f} µm, switches {m.run.switches}"
         )
-    print(f"report: {md} ({len(figures)} figures)")
+    print(f"report: {md} and {md.with_suffix('.html')} (self-contained) ({len(figures)} figures)")
     return 0

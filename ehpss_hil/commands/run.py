@@ -58,6 +58,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "after watchdog.recovery_cycles fresh cycles)",
     )
 
+    p.add_argument(
+        "--monitor",
+        type=int,
+        metavar="PORT",
+        help="serve the live monitor (ehpss-hil monitor) on 127.0.0.1:PORT during the run",
+    )
+    p.add_argument(
+        "--monitor-allow-inject",
+        action="store_true",
+        help="with --monitor: the page's fault-injection buttons (the emulator accepts FAULT_INJECT)",
+    )
+
 
 def run(args: argparse.Namespace) -> int:
     out = args.out or Path("out/runs") / f"{args.scenario.stem}-{args.mode}"
@@ -72,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
         watchdog_cycles=args.watchdog_cycles or None,
         sensor_age_us=None if args.sensor_age_us < 0 else args.sensor_age_us,
         overwrite=args.overwrite,
+        monitor_port=args.monitor,
+        monitor_inject=args.monitor_allow_inject,
     )
     res = execute(plan)
     check_exit_codes(res)

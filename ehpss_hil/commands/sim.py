@@ -10,7 +10,8 @@ from pathlib import Path
 
 from ..control.registry import MODES
 from ..report.metrics import RunMetrics
-from ..sim.campaign import Job, default_jobs, run_campaign, scenario_paths
+from ..scenario import Scenario
+from ..sim.campaign import Job, JobOutcome, default_jobs, run_campaign, scenario_paths
 from ..sim.lockstep import TRANSPORTS
 
 NAME = "sim"
@@ -30,7 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--plot",
         metavar="FILE.png",
-        help="figure like the paper's Fig 5 (several runs: FILE-<scenario>-<mode>.png)",
+        help="figure like the paper's Figs 4-7, every mode of a scenario overlaid, written to FILE "
+        "(several scenarios: FILE-<scenario>.png each); prints every file written",
     )
     p.add_argument(
         "--transport",
@@ -82,8 +84,26 @@ def speed_line(rows: list[RunMetrics], wall_s: float, processes: int) -> str:
     return text
 
 
-def _plot_name(base: Path, many: bool, scenario: str, mode: str) -> Path:
-    return base.with_name(f"{base.stem}-{scenario}-{mode}{base.suffix or '.png'}") if many else base
+def plot_name(base: Path, many: bool, scenario: str) -> Path:
+    """Where ``--plot base`` writes the figure of ``scenario``: ``base`` itself for one scenario,
+    ``base-<scenario>.png`` (same suffix) when several are drawn."""
+    return base.with_name(f"{base.stem}-{scenario}{base.suffix or '.png'}") if many else base
+
+
+def write_plots(outcomes: list[JobOutcome], base: Path) -> list[Path]:
+    """One figure per scenario with every mode run on it overlaid (:func:`plot_name`)."""
+    from ..report.figures import RunView, plot_runs
+    from ..scenario import load_scenario
+
+    by_scenario: dict[str, list[RunView]] = {}
+    for o in outcomes:
+        if o.result is None:
+            continue
+        sc = o.job.scenario if isinstance(o.job.scenario, Scenario) else load_scenario(o.job.scenario)
+        by_scenario.setdefault(o.result.scenario, []).append(RunView.of(o.result, sc.events))
+    return [
+        plot_runs(views, plot_name(base, len(by_scenario) > 1, name)) for name, views in by_scenario.items()
+    ]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -100,13 +120,6 @@ def run(args: argparse.Namespace) -> int:
         Path(args.json).write_text(json.dumps([m.to_json() for m in rows], indent=2) + "\n")
         print(f"wrote {args.json}")
     if args.plot:
-        from ..report.figures import plot_run
-
-        for o in outcomes:
-            if o.result is not None:
-                out = plot_run(
-                    o.result,
-                    _plot_name(Path(args.plot), len(outcomes) > 1, o.result.scenario, o.result.controller),
-                )
-                print(f"wrote {out}")
+        for out in write_plots(outcomes, Path(args.plot)):
+            print(f"wrote {out}")
     return 0

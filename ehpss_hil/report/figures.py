@@ -1,17 +1,50 @@
-"""Figures like the paper's Figs 4–7: response, control input, active models, estimates.
+"""Figures like the paper's Figs 4–7 for one run or several overlaid (NRC vs MMAC): response,
+tracking error, control input, active models, estimates.
 
-matplotlib is optional (``pip install ehpss-hil[plot]``); it is imported only when a figure is made.
+Every fault event is a dashed line named above the top panel ("LOE 50 %", "drift 0.8"); the
+intervals a run spent in FAULT or on its nominal fallback are shaded with their reason; samples
+the metrics did not count are drawn as gaps over a grey band, never as if they counted. Legends
+sit outside the axes, never over data. matplotlib is optional (``pip install ehpss-hil[plot]``);
+it is imported only when a figure is made.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import EhpssError
+from .annotate import Interval, event_labels, fallback_intervals, runs_of
 from .result import SimResult
+
+#: line colour per controller mode (the same mode keeps its colour in every figure)
+MODE_COLORS = {"nrc": "C3", "smac": "C2", "mmac-paper": "C4", "mmac": "C0", "oracle": "C5"}
+#: shading per interval kind
+SHADE_COLORS = {"FAULT": "red", "fallback": "orange"}
+
+
+@dataclass
+class RunView:
+    """One run as a figure draws it: the result, its line label, the events in words, the FAULT
+    and fallback intervals, and which samples the metrics counted (empty: all)."""
+
+    result: SimResult
+    label: str = ""
+    events: list[tuple[float, str]] = field(default_factory=list)
+    intervals: list[Interval] = field(default_factory=list)
+    counted: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    @classmethod
+    def of(cls, r: SimResult, scenario_events: tuple[Any, ...] = ()) -> RunView:
+        """A lockstep result: events from the scenario (or the true gains), fallback intervals."""
+        return cls(r, r.controller, event_labels(r, scenario_events), fallback_intervals(r))
+
+    @property
+    def color(self) -> str:
+        return MODE_COLORS.get(self.result.controller, "C1")
 
 
 def _pyplot() -> Any:
@@ -25,56 +58,120 @@ def _pyplot() -> Any:
     return plt
 
 
-def plot_run(r: SimResult, path: str | Path, title: str | None = None) -> Path:
-    """Write a 5-panel PNG of one run: (a) x, y_m, x_d; (b) e = x − y_m; (c) coil current;
-    (d) active model slot per channel; (e) k̂_LOE, k̂_DFT against the true values."""
+def _masked(v: np.ndarray, counted: np.ndarray) -> np.ndarray:
+    """``v`` with the samples the metrics did not count as gaps (NaN)."""
+    if len(counted) != len(v):
+        return v
+    return np.where(counted, v, np.nan)
+
+
+def mark_events(axes: list[Any], events: list[tuple[float, str]]) -> None:
+    """Dashed lines at the events on every axis; their names above the top one (not over data)."""
+    for ax in axes:
+        for t, _ in events:
+            ax.axvline(t, color="0.35", ls="--", lw=0.8)
+    for i, (t, words) in enumerate(events):
+        axes[0].annotate(
+            words,
+            xy=(t, 1.0),
+            xycoords=("data", "axes fraction"),
+            xytext=(2, 2 + 10 * (i % 2)),
+            textcoords="offset points",
+            fontsize=8,
+            color="0.15",
+            va="bottom",
+        )
+
+
+def shade(axes: list[Any], views: list[RunView], several: bool) -> None:
+    """Shade each view's FAULT/fallback intervals (labelled once in the legend of the last axis,
+    with the mode when several runs are drawn) and the samples its metrics left out."""
+    labelled: set[str] = set()
+    for v in views:
+        r = v.result
+        for iv in v.intervals:
+            label = f"{r.controller} {iv.label}" if several else iv.label
+            for ax in axes:
+                ax.axvspan(
+                    iv.t0_s,
+                    iv.t1_s,
+                    color=SHADE_COLORS.get(iv.kind, "0.5"),
+                    alpha=0.18,
+                    lw=0,
+                    label=label if ax is axes[-1] and label not in labelled else None,
+                )
+            labelled.add(label)
+        if len(v.counted) == len(r.t_s) and not v.counted.all():
+            label = "not in the metrics"
+            for i0, i1 in runs_of(~v.counted):
+                t1 = r.t_s[i1] if i1 < len(r.t_s) else r.t_s[-1] + r.ts_s
+                for ax in axes:
+                    ax.axvspan(
+                        r.t_s[i0],
+                        t1,
+                        color="0.6",
+                        alpha=0.25,
+                        hatch="//",
+                        lw=0,
+                        label=label if ax is axes[-1] and label not in labelled else None,
+                    )
+                labelled.add(label)
+
+
+def _outside_legend(ax: Any) -> None:
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+
+
+def plot_runs(views: list[RunView], path: str | Path, title: str | None = None) -> Path:
+    """Write a 5-panel PNG of one or several runs of one scenario: (a) x of each run with x_d
+    and y_m; (b) e = x − y_m; (c) coil current; (d) active model slot per channel; (e) k̂_LOE,
+    k̂_DFT with the true gains. Several runs share the reference and the events (the first
+    run's)."""
     plt = _pyplot()
-    t = r.t_s
-    fig, ax = plt.subplots(5, 1, figsize=(9, 12), sharex=True)
-    ax[0].plot(t, r.x_d_m * 1e3, "k:", lw=1, label="x_d")
-    ax[0].plot(t, r.y_m_m * 1e3, "b-", lw=1, label="y_m (reference model)")
-    ax[0].plot(t, r.x_true_m * 1e3, "r--", lw=1, label="x (true)")
-    ax[0].set_ylabel("position (mm)")
-    ax[0].legend(loc="upper right", fontsize=8)
-    ax[1].plot(t, r.error_m * 1e6, "r-", lw=0.8)
-    ax[1].set_ylabel("x − y_m (µm)")
-    ax[2].plot(t, r.current_a * 1e3, "g-", lw=0.8)
-    ax[2].set_ylabel("coil current (mA)")
-    ax[3].step(t, r.active_spool, where="post", label="spool / joint")
-    if not np.array_equal(r.active_spool, r.active_position):
-        ax[3].step(t, r.active_position, where="post", label="position")
-    ax[3].set_ylabel("active model slot")
-    ax[3].legend(loc="upper right", fontsize=8)
-    ax[4].plot(t, r.true_k_loe * r.true_k_q, "k-", lw=1, label="k_LOE·k_Q (true)")
-    ax[4].plot(t, r.true_k_dft, "k--", lw=1, label="k_DFT (true)")
-    ax[4].plot(t, r.k_loe_hat, "b-", lw=0.8, label="k̂_LOE")
-    ax[4].plot(t, r.k_dft_hat, "r-", lw=0.8, label="k̂_DFT")
-    ax[4].set_ylabel("fault gains")
-    ax[4].set_xlabel("t (s)")
-    ax[4].legend(loc="upper right", fontsize=8)
-    fb = r.fallback
-    for a in ax:
+    several = len(views) > 1
+    first = views[0].result
+    fig, ax = plt.subplots(5, 1, figsize=(11, 12.5), sharex=True, layout="constrained")
+    ax[0].plot(first.t_s, first.x_d_m * 1e3, color="0.55", ls=":", lw=1, label="x_d")
+    ax[0].plot(first.t_s, first.y_m_m * 1e3, "k-", lw=1, label="y_m (reference model)")
+    for v in views:
+        r, c = v.result, v.color
+        name = f" {v.label}" if several else ""
+        ax[0].plot(r.t_s, _masked(r.x_true_m, v.counted) * 1e3, color=c, ls="--", lw=1, label=f"x{name}")
+        ax[1].plot(r.t_s, _masked(r.error_m, v.counted) * 1e6, color=c, lw=0.8, label=f"e{name}")
+        ax[2].plot(r.t_s, r.current_a * 1e3, color=c, lw=0.8, label=f"i{name}")
+        if np.any(r.active_spool >= 0) or np.any(r.active_position >= 0):
+            ax[3].step(r.t_s, r.active_spool, where="post", color=c, label=f"spool / joint{name}")
+            if not np.array_equal(r.active_spool, r.active_position):
+                ax[3].step(r.t_s, r.active_position, where="post", color=c, ls="--", label=f"position{name}")
+        ax[4].plot(r.t_s, r.k_loe_hat, color=c, lw=0.9, label=f"k̂_LOE{name}")
+        ax[4].plot(r.t_s, r.k_dft_hat, color=c, lw=0.9, ls="-.", label=f"k̂_DFT{name}")
+    ax[4].plot(
+        first.t_s, first.true_k_loe * first.true_k_q, "k-", lw=1.2, alpha=0.6, label="k_LOE·k_Q (true)"
+    )
+    ax[4].plot(first.t_s, first.true_k_dft, "k--", lw=1.2, alpha=0.6, label="k_DFT (true)")
+    for a, ylabel in zip(
+        ax,
+        ("position (mm)", "e = x − y_m (µm)", "coil current (mA)", "active model slot", "fault gains"),
+        strict=True,
+    ):
+        a.set_ylabel(ylabel)
         a.grid(True, alpha=0.3)
-        for te in r.event_times_s:
-            a.axvline(te, color="0.6", lw=0.6)
-        if len(fb) == len(t) and fb.any():  # the do-no-harm monitor's nominal fallback
-            a.fill_between(
-                t,
-                0,
-                1,
-                where=fb,
-                transform=a.get_xaxis_transform(),
-                color="orange",
-                alpha=0.25,
-                lw=0,
-                label="nominal fallback" if a is ax[3] else None,
-            )
-    if len(fb) == len(t) and fb.any():
-        ax[3].legend(loc="upper right", fontsize=8)
-    fig.suptitle(title or f"{r.scenario} — {r.controller}")
-    fig.tight_layout()
+    ax[4].set_xlabel("t (s)")
+    mark_events(list(ax), views[0].events)
+    shade(list(ax), views, several)
+    for a in ax:
+        _outside_legend(a)
+    modes = " vs ".join(v.label or v.result.controller for v in views)
+    fig.suptitle(title or f"{first.scenario} — {modes}")
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
+
+
+def plot_run(r: SimResult, path: str | Path, title: str | None = None) -> Path:
+    """:func:`plot_runs` of one lockstep result (events in words from its true gains)."""
+    return plot_runs([RunView.of(r)], path, title)

@@ -1,12 +1,18 @@
-"""The run report in words: the metric lines of ``report.md`` and the JSON row of a log's
-metrics (shared by ``ehpss-hil report`` and ``ehpss-hil run``)."""
+"""The run report in words: the metric lines of ``report.md`` (and its self-contained HTML
+twin, :mod:`.html`) and the JSON row of a log's metrics (shared by ``ehpss-hil report`` and
+``ehpss-hil run``). Numbers are written to the resolution they carry: times to the sample (ms),
+errors to 0.01 µm, cycle times to the µs; no float is printed raw."""
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
+from .annotate import Interval
+from .html import write_html
 from .logdata import LogMetrics, LogRun
+from .logviews import log_view
 
 
 def _um(v: float | None) -> str:
@@ -17,6 +23,27 @@ def _um(v: float | None) -> str:
 
 def _ms(v: float) -> str:
     return "never (∞)" if math.isinf(v) else f"{v * 1e3:.1f} ms"
+
+
+def _models(active: dict[str, int] | None) -> str:
+    return ", ".join(f"{ch} {slot}" for ch, slot in active.items()) if active else "—"
+
+
+def _versions(v: Any) -> str:
+    return ", ".join(f"{k} {val}" for k, val in v.items()) if isinstance(v, dict) else str(v)
+
+
+def seconds(t: float) -> str:
+    """A time on the run's axis to the millisecond (its sample resolution): ``3.502 s``."""
+    return f"{t:.3f} s"
+
+
+def _extra_value(key: str, v: Any) -> str:
+    if key.endswith("_s") and isinstance(v, float):
+        return f"{v * 1e6:.0f} µs"
+    if key.endswith("_m"):
+        return _um(v)
+    return str(v)
 
 
 def _metrics_lines(m: LogMetrics) -> list[str]:
@@ -37,8 +64,8 @@ def _metrics_lines(m: LogMetrics) -> list[str]:
                 "|---|---|---|---|---|",
             ]
             lines += [
-                f"| {e.t_s:g} | {_um(e.peak_error_m)} | {_ms(e.recovery_s)} | "
-                f"{e.switches} | {e.active_model} |"
+                f"| {e.t_s:.3f} | {_um(e.peak_error_m)} | {_ms(e.recovery_s)} | "
+                f"{e.switches} | {_models(e.active_model)} |"
                 for e in r.events
             ]
             lines.append("")
@@ -52,14 +79,13 @@ def _metrics_lines(m: LogMetrics) -> list[str]:
         "samples": "controller samples",
         "switches_counter": "model switches (CTRL_STATUS Switches counter)",
         "overruns": "loop overruns (CTRL_STATS)",
-        "cycle_time_max_s": "max cycle compute time (s)",
+        "cycle_time_max_s": "max cycle compute time",
         "sensor_rms_error_m": "sensor-based RMS y_s − y_m (indication only)",
         "x_true_filled_samples": "samples without PLANT_TRUTH (held)",
     }
     for key, label in labels.items():
         if key in x:
-            v = _um(x[key]) if key.endswith("_m") else x[key]
-            lines.append(f"- {label}: {v}")
+            lines.append(f"- {label}: {_extra_value(key, x[key])}")
     lines.append(
         "- frames a live receiver would reject, by verdict (WRONG_SEQUENCE data is still "
         f"used here: the frame itself is intact): {x['rejected_frames'] or 'none'}"
@@ -67,8 +93,48 @@ def _metrics_lines(m: LogMetrics) -> list[str]:
     return [*lines, ""]
 
 
-def write_markdown(run: LogRun, m: LogMetrics, figures: list[Path], out_dir: Path) -> Path:
-    """``report.md`` in ``out_dir`` embedding ``figures`` (relative links)."""
+def _interval_lines(items: list[Interval]) -> list[str]:
+    if not items:
+        return []
+    lines = ["## Fail-safe and fallback intervals", "", "| from | to | state | reason |", "|---|---|---|---|"]
+    lines += [f"| {seconds(iv.t0_s)} | {seconds(iv.t1_s)} | {iv.kind} | {iv.reason or '—'} |" for iv in items]
+    return [*lines, ""]
+
+
+def _compare_lines(runs: list[tuple[LogRun, LogMetrics]]) -> list[str]:
+    if len(runs) < 2:
+        return []
+    lines = [
+        "## Modes compared",
+        "",
+        "| mode | RMS error | pre-fault max | worst event peak | longest recovery | switches | log |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for lr, m in runs:
+        r = m.run
+        if r is None:
+            lines.append(f"| {lr.result.controller} | — | — | — | — | — | `{lr.log_path}` |")
+            continue
+        peak = max((e.peak_error_m for e in r.events), default=0.0)
+        rec = max((e.recovery_s for e in r.events), default=0.0)
+        lines.append(
+            f"| {r.controller} | {_um(r.rms_error_m)} | {_um(r.pre_fault_max_m)} | {_um(peak)} | "
+            f"{_ms(rec)} | {r.switches} | `{lr.log_path}` |"
+        )
+    return [*lines, ""]
+
+
+def write_markdown(
+    run: LogRun,
+    m: LogMetrics,
+    figures: list[Path],
+    out_dir: Path,
+    compare: list[tuple[LogRun, LogMetrics]] | None = None,
+) -> Path:
+    """``report.md`` in ``out_dir`` embedding ``figures`` (relative links), and ``report.html``
+    beside it with the figures inside (one file to send). ``compare``: this run and the runs
+    it was overlaid with, for a table of their metrics."""
+    view = log_view(run)
     r, side = run.result, run.sidecar or {}
     frames = ", ".join(f"{n} {len(f['t_s'])}" for n, f in sorted(run.frames.items()))
     lines = [
@@ -76,21 +142,25 @@ def write_markdown(run: LogRun, m: LogMetrics, figures: list[Path], out_dir: Pat
         "",
         f"- log: `{run.log_path}` ({len(r.t_s)} samples at Ts = {r.ts_s * 1e3:g} ms)",
         f"- sidecar: {'yes' if run.sidecar else 'none'}; started "
-        f"{side.get('start_time_utc', '?')}; versions {side.get('versions', '?')}",
+        f"{side.get('start_time_utc', '?')}; versions {_versions(side.get('versions', '?'))}",
         f"- DBC sha256: {(side.get('dbc') or {}).get('sha256', '?')}",
         f"- ground truth (PLANT_TRUTH): {'yes' if run.has_truth else 'NO'}; reference: "
-        f"{'yes' if run.has_reference else 'NO'}; events at {list(r.event_times_s)} s",
+        f"{'yes' if run.has_reference else 'NO'}",
+        "- events: " + ("; ".join(f"{words} at {seconds(t)}" for t, words in view.events) or "none"),
         f"- frames decoded: {frames}",
         "",
     ]
     if run.notes:
         lines += ["## Notes", ""] + [f"- {n}" for n in run.notes] + [""]
+    lines += _compare_lines(compare or [])
     lines += _metrics_lines(m)
+    lines += _interval_lines(view.intervals)
     if figures:
         lines += ["## Figures", ""]
         lines += [f"![{p.stem}]({p.relative_to(out_dir).as_posix()})\n" for p in figures]
     path = out_dir / "report.md"
     path.write_text("\n".join(lines), encoding="utf-8")
+    write_html(lines, out_dir, path.with_suffix(".html"), title=f"Run report: {r.scenario} / {r.controller}")
     return path
 
 

@@ -1,0 +1,182 @@
+"""The live monitor in a real browser (issue #20): emulator (truth + FAULT_INJECT accepted) and
+an ``mmac`` controller run realtime in a private network namespace; ``ehpss-hil monitor
+--netns … --allow-inject`` listens there and serves its page on the host's 127.0.0.1; headless
+Chromium (Debian's ``chromium`` + ``chromium-driver``, driven by selenium) opens the page, clicks
+"LOE 50 %" then "drift 0.8", and the page's k̂ and active models must follow: k̂_LOE → 0.5 with
+an active spool model of θ ≈ 0.5, then k̂_DFT → 0.8 with an active position model of θ ≈ 0.8.
+A screenshot is saved (its path printed). Waits have generous limits only; nothing is timed.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from _proc import EHPSS_HIL, EMU_CFG_PATH, FIRMWARE_SIM, ROOT, Proc
+
+from ehpss_hil.bus.netns import PrivateNetns, netns_unavailable_reason
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMEDRIVER = shutil.which("chromedriver")
+try:
+    import selenium  # noqa: F401
+
+    SELENIUM = True
+except ImportError:
+    SELENIUM = False
+
+
+def _skip_reason() -> str | None:
+    if (why := netns_unavailable_reason()) is not None:
+        return f"cross-process test: {why}"
+    if CHROMIUM is None or CHROMEDRIVER is None:
+        return (
+            "headless browser test: chromium and chromedriver not installed "
+            "(apt-get install chromium chromium-driver)"
+        )
+    if not SELENIUM:
+        return "headless browser test: selenium not installed (pip install -e '.[test]')"
+    return None
+
+
+pytestmark = [pytest.mark.netns, pytest.mark.skipif(_skip_reason() is not None, reason=str(_skip_reason()))]
+
+CTL_YAML = """\
+bus: {{interface: udp_multicast, channel: 239.74.163.2}}
+mode: mmac
+rate_hz: 1000
+reference: {{kind: sine, amplitude_m: 0.001, omega_rad_s: 5.0}}
+watchdog: {{timeout_cycles: 10, recovery_cycles: 50, auto_recover: true, failsafe: zero}}
+params: {root}/configs/params.yaml
+dbc: {root}/dbc/ehpss.dbc
+"""
+#: a generous limit for anything to show on a loaded host (s); not a timing requirement
+WAIT_S = 90.0
+SCREENSHOT = ROOT / "out" / "monitor-browser.png"
+
+
+@pytest.fixture
+def bench(tmp_path: Path) -> Iterator[str]:
+    """Emulator + controller in a namespace and the monitor attached; yields the page's URL."""
+    cfg = tmp_path / "controller.yaml"
+    cfg.write_text(CTL_YAML.format(root=ROOT))
+    procs: list[Proc] = []
+    with PrivateNetns() as ns:
+        try:
+            emu = Proc(ns.prefix() + FIRMWARE_SIM + ["-c", EMU_CFG_PATH, "--truth", "--fault-inject"])
+            procs.append(emu)
+            assert emu.wait_for("realtime on"), emu.text
+            netns = f"/proc/{ns.pid}/ns/net"
+            # the monitor before the controller: it sees the first ACTIVE cycle, so x_d is aligned
+            mon = Proc(
+                [
+                    *EHPSS_HIL,
+                    "monitor",
+                    "--netns",
+                    netns,
+                    "--config",
+                    str(cfg),
+                    "--port",
+                    "0",
+                    "--allow-inject",
+                ]
+            )
+            procs.append(mon)
+            assert mon.wait_for("monitor: http://"), mon.text
+            url = re.search(r"http://[\d.]+:\d+/", mon.text)
+            assert url is not None, mon.text
+            ctl = Proc(ns.prefix() + EHPSS_HIL + ["controller", "-c", str(cfg)])
+            procs.append(ctl)
+            assert ctl.wait_for("first sensor data: ACTIVE"), ctl.text + emu.text
+            yield url.group(0)
+        finally:
+            for p in reversed(procs):
+                p.terminate()
+            for p in reversed(procs):
+                p.wait()
+
+
+def _browser() -> object:
+    from selenium import webdriver
+    from selenium.webdriver.chrome.options import Options
+    from selenium.webdriver.chrome.service import Service
+
+    opts = Options()
+    opts.binary_location = str(CHROMIUM)
+    for a in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1500,1150"):
+        opts.add_argument(a)
+    return webdriver.Chrome(service=Service(executable_path=str(CHROMEDRIVER)), options=opts)
+
+
+def _until(what: str, check: Callable[[], bool]) -> None:
+    end = time.monotonic() + WAIT_S
+    while time.monotonic() < end:
+        if check():
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"the page never showed {what} within {WAIT_S:g} s")
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text.split()[0])
+    except (ValueError, IndexError):
+        return float("nan")
+
+
+def _theta(text: str) -> float:
+    """θ of a model cell "M2 (θ 0.500)" (NaN when not shown)."""
+    m = re.search(r"θ ([-\d.]+)", text)
+    return float(m.group(1)) if m else float("nan")
+
+
+def test_fault_injected_from_the_page_reconfigures_the_controller(bench: str) -> None:
+    from selenium.webdriver.common.by import By
+
+    driver = _browser()
+    try:
+        driver.get(bench)  # type: ignore[attr-defined]
+
+        def text(elem_id: str) -> str:
+            return str(driver.find_element(By.ID, elem_id).text)  # type: ignore[attr-defined]
+
+        def click(kind: str) -> None:
+            driver.find_element(By.CSS_SELECTOR, f'#inject button[data-kind="{kind}"]').click()  # type: ignore[attr-defined]
+
+        _until("mode mmac", lambda: text("mode") == "mmac")
+        assert text("ref-note") == ""  # x_d and y_m aligned with the controller's reference
+        _until(
+            "k̂_LOE 1 and k̂_DFT 1",
+            lambda: _number(text("k-loe-hat")) == 1.0 and _number(text("k-dft-hat")) == 1.0,
+        )
+        spool_before, pos_before = text("active-spool"), text("active-position")
+        assert _theta(spool_before) == pytest.approx(1.0, abs=0.01), spool_before
+        assert _theta(pos_before) == pytest.approx(1.0, abs=0.01), pos_before
+
+        click("k_loe")
+        _until("the inject sent", lambda: text("inject-result").startswith("sent: FAULT_INJECT k_loe = 0.5"))
+        _until("true k_LOE 0.5", lambda: text("k-true").startswith("0.500"))
+        _until("k̂_LOE ≈ 0.5", lambda: abs(_number(text("k-loe-hat")) - 0.5) <= 0.05)
+        _until("an active spool model with θ ≈ 0.5", lambda: abs(_theta(text("active-spool")) - 0.5) <= 0.05)
+        assert text("active-spool") != spool_before
+
+        click("k_dft")
+        _until("true k_DFT 0.8", lambda: text("k-true").endswith("0.800"))
+        _until("k̂_DFT ≈ 0.8", lambda: abs(_number(text("k-dft-hat")) - 0.8) <= 0.05)
+        _until(
+            "an active position model with θ ≈ 0.8",
+            lambda: abs(_theta(text("active-position")) - 0.8) <= 0.05,
+        )
+        assert abs(_number(text("k-loe-hat")) - 0.5) <= 0.05  # the spool channel keeps its estimate
+        _until("the page refreshing", lambda: _number(text("refresh-rate")) > 0)
+        time.sleep(1.0)  # a full plot window after the drift, for the screenshot only
+        driver.execute_script("window.scrollTo(0, 0)")  # type: ignore[attr-defined]
+        SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
+        driver.save_screenshot(str(SCREENSHOT))  # type: ignore[attr-defined]
+        print(f"\nmonitor screenshot: {SCREENSHOT} (page refresh {text('refresh-rate')} Hz)")
+    finally:
+        driver.quit()  # type: ignore[attr-defined]
