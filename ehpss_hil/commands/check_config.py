@@ -65,7 +65,7 @@ def _prepare_controller(path: Path, c: ControllerConfig) -> None:
     from ..runtime.frameio import process_codec
 
     params = load_params(c.params or None)
-    process_codec(c.dbc, c.ids, str(path))
+    process_codec(c.dbc, c.ids, str(path), c.protocol, c.dbc_map)
     loop_options(c)
     default_factory(c.mode, params, 1.0 / c.rate_hz, c)
 
@@ -75,7 +75,7 @@ def _prepare_emulator(path: Path, e: EmulatorConfig) -> None:
     from ..runtime.frameio import process_codec
 
     params = load_params(e.params or None)
-    process_codec(e.dbc, e.ids, str(path))
+    process_codec(e.dbc, e.ids, str(path), e.protocol, e.dbc_map)
     if e.scenario:
         _prepare_scenario(load_scenario(e.scenario), params)
 

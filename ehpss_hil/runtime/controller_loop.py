@@ -179,7 +179,7 @@ class ControllerLoop:
             self._stale_in_cycle += 1
             return d.verdict
         if fid == self._id_pos:
-            counter = msg.data[1] & 0x0F
+            counter = d.counter or 0
             if self._lockstep and d.verdict is Verdict.OK_SOME_LOST:
                 self.catch_up((counter - self._last_pos_counter - 1) & 0x0F, overrun=False)
             self._last_pos_counter = counter
@@ -191,7 +191,7 @@ class ControllerLoop:
             self._aux_fresh = True
             self._aux_ts = msg.timestamp
             self.driver.aux(float(v["CoilCurrent"]), float(v["LoadPressure"]))
-            self.guard.command_conflict(bool(v["CommandConflict"]))
+            self.guard.command_conflict(bool(v.get("CommandConflict", 0)))
         else:
             override, x_d = bool(v["Override"]), self.driver.override_m
             if self.setpoints.admit(
