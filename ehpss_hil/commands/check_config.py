@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..config import ControllerConfig, EmulatorConfig, load_controller_config, load_emulator_config
+from ..config import ControllerConfig, DbcMap, EmulatorConfig, load_controller_config, load_emulator_config
 from ..errors import ConfigError, EhpssError, one_line
 from ..physics.params import Params, load_params
 from ..scenario import Scenario, load_scenario
@@ -80,6 +80,13 @@ def _prepare_emulator(path: Path, e: EmulatorConfig) -> None:
         _prepare_scenario(load_scenario(e.scenario), params)
 
 
+def _protocol_text(protocol: str, m: DbcMap | None) -> str:
+    """``, protocol dbc-map (vendor.dbc, E2E p02)`` for a mapped profile; nothing for native."""
+    if m is None:
+        return ""
+    return f", protocol {protocol} ({Path(m.dbc).name}, E2E {m.e2e.profile})"
+
+
 def summarize(path: Path) -> str:
     """Load ``path`` as whatever it is and return a one-line summary (raises ConfigError
     naming ``path``)."""
@@ -115,12 +122,14 @@ def _summarize(path: Path) -> str:
         return (
             f"emulator: {e.bus.interface}:{e.bus.channel} at {e.rate_hz:g} Hz, {e.mode}, "
             f"command timeout {e.command_timeout_s * 1e3:g} ms, truth {e.truth}"
+            + _protocol_text(e.protocol, e.dbc_map)
         )
     c = load_controller_config(path, data)
     _prepare_controller(path, c)
     return (
         f"controller: {c.bus.interface}:{c.bus.channel} at {c.rate_hz:g} Hz, mode {c.mode}, "
         f"watchdog {c.watchdog.timeout_cycles} cycles -> {c.watchdog.failsafe}"
+        + _protocol_text(c.protocol, c.dbc_map)
     )
 
 
