@@ -262,3 +262,12 @@ def test_a_map_without_its_protocol_and_the_shipped_configs(tmp_path: Path) -> N
         check=False,
     )
     assert out.returncode == 0 and "protocol dbc-map" in out.stdout, out
+
+
+def test_a_valve_without_spool_actual_is_refused(tmp_path: Path) -> None:
+    """No degraded mode: the map needs the spool (docs/hardware.md §1)."""
+    p = _config(tmp_path)
+    p.write_text(p.read_text().replace("    spool: AMP_FEEDBACK.SpoolPos\n", ""))
+    with pytest.raises(ConfigError) as exc:
+        _codec(p)
+    assert exc.value.key_path == "dbc_map.signals.spool" and "missing required key" in exc.value.reason
