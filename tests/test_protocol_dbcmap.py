@@ -271,3 +271,16 @@ def test_a_valve_without_spool_actual_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as exc:
         _codec(p)
     assert exc.value.key_path == "dbc_map.signals.spool" and "missing required key" in exc.value.reason
+
+
+def test_current_resolution_leaves_the_sample_clock_its_echo_match() -> None:
+    """A setpoint and its echo, each rounded to half of the coarsest LSB accepted, differ by at
+    most one such LSB: within the sample clock's WIRE_MATCH_A, so the echo still confirms."""
+    from ehpss_hil.control.sampleclock import WIRE_MATCH_A
+    from ehpss_hil.protocol.logical import CURRENT_RESOLUTION_A, LOGICAL_SIGNALS
+
+    assert CURRENT_RESOLUTION_A / 2 + CURRENT_RESOLUTION_A / 2 < WIRE_MATCH_A
+    assert {s.key: s.resolution for s in LOGICAL_SIGNALS if s.quantity == "current"} == {
+        "coil_current": CURRENT_RESOLUTION_A,
+        "current_setpoint": CURRENT_RESOLUTION_A,
+    }

@@ -184,6 +184,12 @@ class MappedCodec(FrameCodec):
         r = self._role_by_id.get((can_id, False)) or self._role_by_id.get((can_id, True))
         return r.f.role if r is not None else super().name_of(can_id)
 
+    def message(self, name: str) -> DbcMessage:
+        """The cantools message of frame ``name``: the vendor's (its own signal names) for a
+        mapped logical frame."""
+        r = self._roles.get(name)
+        return r.msg if r is not None else super().message(name)
+
     def shape(self, name: str) -> can.Message:
         r = self._roles.get(name)
         return r.shape if r is not None else super().shape(name)

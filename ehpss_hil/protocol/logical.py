@@ -17,7 +17,9 @@ signal at the native LSB (figures: docs/hardware.md):
 * load pressure: read by the flow-gain attribution (a slow regression); 0.1 bar;
 * currents (setpoint and echo): the loop gain makes these the tightest: the PI's proportional
   path asks 4.4 µA per µm of error (K_f·k_p·k_a), and a 30 µA LSB (a 16-bit ±1 A field) already
-  more than doubles the fault-free RMS; 10 µA keeps it within a tenth of a µm.
+  more than doubles the fault-free RMS; 10 µA keeps it within a tenth of a µm. The sample clock
+  also takes an echo within ``WIRE_MATCH_A`` (30 µA) of a kept command as confirming it, which
+  the two roundings of a 10 µA setpoint and a 10 µA echo (10 µA at most) leave room for.
 """
 
 from __future__ import annotations
