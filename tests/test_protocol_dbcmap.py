@@ -284,3 +284,61 @@ def test_current_resolution_leaves_the_sample_clock_its_echo_match() -> None:
         "coil_current": CURRENT_RESOLUTION_A,
         "current_setpoint": CURRENT_RESOLUTION_A,
     }
+
+
+_P05_DBC = """VERSION ""
+NS_ :
+BS_:
+BU_: AMP PLC
+BO_ 300 P5_POS: 8 AMP
+ SG_ Crc : 0|16@1+ (1,0) [0|65535] "" PLC
+ SG_ Alive : 16|8@1+ (1,0) [0|255] "" PLC
+ SG_ Pos : 24|20@1- (0.001,0) [-500|500] "mm" PLC
+ SG_ Spool : 44|20@1- (0.0001,0) [-10|10] "mm" PLC
+BO_ 301 P5_AUX: 8 AMP
+ SG_ Crc : 0|16@1+ (1,0) [0|65535] "" PLC
+ SG_ Alive : 16|8@1+ (1,0) [0|255] "" PLC
+ SG_ PL : 24|16@1- (100,0) [-3000000|3000000] "Pa" PLC
+ SG_ I : 40|20@1- (5e-06,0) [-1|1] "A" PLC
+BO_ 302 P5_CMD: 8 PLC
+ SG_ Crc : 0|16@1+ (1,0) [0|65535] "" AMP
+ SG_ Alive : 16|8@1+ (1,0) [0|255] "" AMP
+ SG_ En : 24|1@1+ (1,0) [0|1] "" AMP
+ SG_ I : 32|20@1- (5e-06,0) [-1|1] "A" AMP
+"""
+_P05_MAP = """\
+protocol: dbc-map
+dbc_map:
+  dbc: p05.dbc
+  signals: {position: P5_POS.Pos, spool: P5_POS.Spool, load_pressure: P5_AUX.PL, coil_current: P5_AUX.I,
+            current_setpoint: P5_CMD.I, enable: P5_CMD.En}
+  e2e:
+    profile: p05
+    sensor_pos: {counter: P5_POS.Alive, crc: P5_POS.Crc, data_ids: [4660]}
+    sensor_aux: {counter: P5_AUX.Alive, crc: P5_AUX.Crc, data_ids: [4661]}
+    valve_cmd: {counter: P5_CMD.Alive, crc: P5_CMD.Crc, data_ids: [4662]}
+"""
+
+
+def test_p05_with_an_8_bit_counter(tmp_path: Path) -> None:
+    """AUTOSAR profile 5 (CRC16 over bytes 2.., a 16-bit DataID) via cantools, an 8-bit counter:
+    its low 4 bits run the sequence check through the wrap at 256."""
+    (tmp_path / "p05.dbc").write_text(_P05_DBC)
+    cfg = tmp_path / "controller.yaml"
+    cfg.write_text(_P05_MAP)
+    emu, ctrl = _codec(cfg), _codec(cfg)
+    verdicts = []
+    for k in range(300):
+        if k == 200:
+            emu.skip("SENSOR_AUX")  # one lost on the way
+        f = emu.encode("SENSOR_AUX", {"LoadPressure": 1e5, "CoilCurrent": 0.012345})
+        assert end_to_end.check_profile5_crc(bytes(f.data), 4661)
+        d = ctrl.classify(f)
+        verdicts.append(d.verdict)
+        assert d.counter == (k + (k >= 200)) % 256 & 0x0F
+        assert d.values is not None and d.values["CoilCurrent"] == pytest.approx(0.012345)
+    assert verdicts.count(Verdict.OK_SOME_LOST) == 1 and verdicts[200] is Verdict.OK_SOME_LOST
+    assert verdicts.count(Verdict.OK) == 299
+    bad = emu.encode("SENSOR_AUX", {"LoadPressure": 1e5, "CoilCurrent": 0.0})
+    bad.data[6] ^= 0x10
+    assert ctrl.classify(bad).verdict is Verdict.CRC_ERROR
