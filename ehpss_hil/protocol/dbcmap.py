@@ -8,9 +8,16 @@ not know which profile runs. Scaling is the vendor DBC's (cantools: any width, I
 Motorola, multiplexed messages: the mapped page's multiplexer is set on encode, a frame of
 another page is classified OK without values); the DBC unit picks the SI factor. E2E per the
 map: none (the receiver numbers the frames it gets: a lost one is not seen), a counter (the
-profile-2 style sequence check on its low 4 bits), AUTOSAR p02/p05 CRCs computed and checked by
-``cantools.autosar.end_to_end``. Status, heartbeat, SETPOINT and bench frames stay native at
+profile-2 style sequence check on its low 4 bits), AUTOSAR p02/p05 CRCs (cantools'
+``autosar.end_to_end`` functions, below). Status, heartbeat, SETPOINT and bench frames stay native at
 ``id_base`` (no vendor ID may clash with them: :func:`.mapcheck.check_id_clash`).
+
+The hot path is the native codec's: each vendor message's bit layout
+(:class:`~ehpss_hil.codec.layout.BitLayout`) packs and unpacks exactly as cantools does
+(cantools itself for anything outside it), and the P02 CRC is the table CRC of
+:mod:`ehpss_hil.codec.e2e`, the function ``cantools.autosar.end_to_end.compute_profile2_crc``
+computes (tests check the vendor frames with cantools' own decode and ``check_profile2_crc``);
+P05 runs through cantools.
 """
 
 from __future__ import annotations
@@ -26,6 +33,8 @@ from cantools.autosar import end_to_end
 from cantools.database.can import Message as DbcMessage
 
 from ..codec import CounterCheck, Decoded, E2EState, FrameCodec, Verdict
+from ..codec.e2e import profile2_crc
+from ..codec.layout import BitLayout, LayoutMiss
 from ..codec.ratelimit import RateLimit
 from ..errors import FrameError
 from .mapcheck import MappedFrame
@@ -67,6 +76,8 @@ class _Role:
         self.rx_frames = 0  # frames received (the counter when the map has none)
         self.check = CounterCheck(max_delta_counter) if f.counter else None
         self.rate: tuple[str, RateLimit] | None = None
+        #: the precomputed bit layout (cantools' encode/decode as shifts and masks; None: cantools)
+        self.layout = BitLayout.of(f.msg, frozenset((f.crc,)) if f.crc else frozenset())
         self.shape = can.Message(
             arbitration_id=f.msg.frame_id,
             is_extended_id=f.msg.is_extended_frame,
@@ -93,9 +104,9 @@ class _Role:
             data[f.counter] = counter
         if f.crc is not None:
             data[f.crc] = 0
-        payload = bytearray(f.msg.encode(data, scaling=True, padding=False, strict=False))
+        payload = bytearray(self._pack(data))
         if f.profile == "p02":
-            payload = end_to_end.apply_profile2_crc(bytes(payload), f.data_ids[counter & 0x0F]) or payload
+            payload[0] = profile2_crc(payload, f.data_ids[counter & 0x0F])
         elif f.profile == "p05":
             payload = end_to_end.apply_profile5_crc(bytes(payload), f.data_ids[0]) or payload
         return can.Message(
@@ -106,10 +117,28 @@ class _Role:
             timestamp=timestamp_s,
         )
 
+    def _pack(self, data: dict[str, Any]) -> bytes:
+        if self.layout is not None:
+            try:
+                return self.layout.encode(data)
+            except LayoutMiss:
+                pass  # cantools decides (and raises what it always raised)
+        return self.f.msg.encode(data, scaling=True, padding=False, strict=False)
+
+    def _unpack(self, data: bytes) -> dict[str, Any]:
+        if self.layout is not None:
+            try:
+                return self.layout.decode(data)
+            except LayoutMiss:
+                pass
+        return self.f.msg.decode(  # type: ignore[return-value]
+            data, decode_choices=False, scaling=True, allow_truncated=False
+        )
+
     def crc_ok(self, data: bytes, counter: int) -> bool:
         f = self.f
         if f.profile == "p02":
-            return bool(end_to_end.check_profile2_crc(data, f.data_ids[counter & 0x0F]))
+            return data[0] == profile2_crc(data, f.data_ids[counter & 0x0F])
         if f.profile == "p05":
             return bool(end_to_end.check_profile5_crc(data, f.data_ids[0]))
         return True
@@ -119,9 +148,7 @@ class _Role:
         data = bytes(frame.data)
         if frame.dlc != f.msg.length or len(data) != f.msg.length:
             return Decoded(Verdict.BAD_DLC, f.role, None, ts)
-        raw: dict[str, Any] = f.msg.decode(  # type: ignore[assignment]
-            data, decode_choices=False, scaling=True, allow_truncated=False
-        )
+        raw = self._unpack(data)
         verdict = Verdict.OK
         if self.check is not None and f.counter is not None:
             counter = int(raw[f.counter])
