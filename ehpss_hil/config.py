@@ -130,6 +130,65 @@ class SetpointPolicy:
     max_step_m: float = field(default=0.005, metadata=rng(0.0, 1.0))
 
 
+#: the protocol profiles a process may speak to the valve electronics (docs/hardware.md)
+PROTOCOLS = ("native", "dbc-map")
+Protocol = Literal["native", "dbc-map"]
+
+
+@dataclass(frozen=True)
+class SignalMap:
+    """The controller's logical signals, each as ``MESSAGE.Signal`` of the mapped DBC. Units come
+    from the DBC's unit strings (docs/hardware.md lists the ones understood)."""
+
+    position: str  #: piston position sensor (length)
+    spool: str  #: spool position, LVDT (length)
+    load_pressure: str  #: load pressure P_L (pressure)
+    coil_current: str  #: coil current the amplifier applied, its echo (current)
+    current_setpoint: str  #: coil current command (current)
+    enable: str = ""  #: amplifier enable (0/1); empty: the vendor frame has none
+
+
+@dataclass(frozen=True)
+class E2EFrameMap:
+    """E2E fields of one logical frame: ``MESSAGE.Signal`` of its counter and CRC; DataIDs (p02:
+    16, one per counter value; p05: 1)."""
+
+    counter: str = ""
+    crc: str = ""
+    data_ids: tuple[int, ...] = field(default=(), metadata=rng(0, 0xFFFF, length=(0, 16)))
+
+
+@dataclass(frozen=True)
+class E2EMap:
+    """End-to-end protection of the mapped frames: ``none``, ``counter`` (a sequence counter
+    only), ``p02``/``p05`` (AUTOSAR profile 2/5 CRC through ``cantools.autosar.end_to_end``)."""
+
+    profile: Literal["none", "counter", "p02", "p05"] = "none"
+    sensor_pos: E2EFrameMap = field(default_factory=E2EFrameMap)
+    sensor_aux: E2EFrameMap = field(default_factory=E2EFrameMap)
+    valve_cmd: E2EFrameMap = field(default_factory=E2EFrameMap)
+
+
+@dataclass(frozen=True)
+class DbcMap:
+    """``protocol: dbc-map``: a vendor DBC (``dbc``, relative to the config file) and the map of
+    the logical signals onto its messages (ehpss_hil/protocol/, docs/hardware.md)."""
+
+    dbc: str
+    signals: SignalMap
+    e2e: E2EMap = field(default_factory=E2EMap)
+
+
+def _check_protocol(protocol: str, dbc_map: DbcMap | None) -> None:
+    """``dbc_map`` is given exactly when ``protocol`` is ``dbc-map``."""
+    if protocol == "dbc-map" and dbc_map is None:
+        raise ConfigError(
+            "", "dbc_map", "required with protocol: dbc-map (the vendor DBC and its signal map)"
+        )
+    if protocol != "dbc-map" and dbc_map is not None:
+        raise ConfigError("", "dbc_map", f"only read with protocol: dbc-map (protocol is {protocol})")
+
+
 @dataclass(frozen=True)
 class ControllerConfig:
     """``configs/controller.yaml``."""
@@ -149,8 +208,11 @@ class ControllerConfig:
     tuning: ControlTuning = field(default_factory=ControlTuning)
     params: str = ""
     dbc: str = ""
+    protocol: Protocol = "native"
+    dbc_map: DbcMap | None = None
 
     def __post_init__(self) -> None:
+        _check_protocol(self.protocol, self.dbc_map)
         if self.mode not in DAEMON_MODES:
             raise ConfigError(
                 "",
@@ -189,6 +251,11 @@ class EmulatorConfig:
     log: LogConfig = field(default_factory=LogConfig)
     params: str = ""
     dbc: str = ""
+    protocol: Protocol = "native"
+    dbc_map: DbcMap | None = None
+
+    def __post_init__(self) -> None:
+        _check_protocol(self.protocol, self.dbc_map)
 
 
 def apply_overrides(
@@ -246,6 +313,15 @@ def _resolve(base: Path, value: str) -> str:
     return str(p if p.is_absolute() else (base / p).resolve())
 
 
+def _resolve_map(src: Path, base: Path, m: DbcMap | None) -> DbcMap | None:
+    """``dbc_map`` with its DBC path resolved against the config's directory and checked."""
+    if m is None:
+        return None
+    from dataclasses import replace
+
+    return replace(m, dbc=_existing(src, "dbc_map.dbc", _resolve(base, m.dbc)))
+
+
 def load_controller_config(path: str | Path, data: object = None) -> ControllerConfig:
     """Load ``controller.yaml`` (``data``: its parsed content, when the caller read it already);
     relative ``params``/``dbc``/``reference.path`` paths resolve against its directory
@@ -260,6 +336,7 @@ def load_controller_config(path: str | Path, data: object = None) -> ControllerC
         cfg,
         params=_existing(p, "params", _resolve(base, cfg.params)),
         dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)),
+        dbc_map=_resolve_map(p, base, cfg.dbc_map),
         reference=cfg.reference.loaded(base, str(p)),
     )
 
@@ -276,5 +353,6 @@ def load_emulator_config(path: str | Path, data: object = None) -> EmulatorConfi
         cfg,
         params=_existing(p, "params", _resolve(base, cfg.params)),
         dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)),
+        dbc_map=_resolve_map(p, base, cfg.dbc_map),
         scenario=_existing(p, "scenario", _resolve(base, cfg.scenario)),
     )

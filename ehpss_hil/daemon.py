@@ -147,7 +147,7 @@ def run_daemon(a: DaemonArgs) -> int:
     """Configure, run until stopped, shut down fail-safe; returns the exit code (0)."""
     cfg = resolve_config(a)
     params = load_params(cfg.params or None)
-    codec = process_codec(cfg.dbc, cfg.ids, str(a.config))
+    codec = process_codec(cfg.dbc, cfg.ids, str(a.config), cfg.protocol, cfg.dbc_map)
     limit_sensor_rate(codec, params.plant.piston_speed_max_m_s, 1.0 / cfg.rate_hz)
     controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
     bus = open_bus(cfg.bus)

@@ -119,6 +119,9 @@ def write_config(src: Path, dst: Path, overrides: dict[str, Any]) -> Path:
         v = data.get(key)
         if isinstance(v, str) and v and not Path(v).is_absolute():
             data[key] = str((base / v).resolve())
+    m = data.get("dbc_map")
+    if isinstance(m, dict) and isinstance(m.get("dbc"), str) and not Path(m["dbc"]).is_absolute():
+        m["dbc"] = str((base / m["dbc"]).resolve())
     for dotted, value in overrides.items():
         node = data
         *parents, leaf = dotted.split(".")

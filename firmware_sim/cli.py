@@ -124,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     """Configure, run until the end/stop signal, print the counters; returns the exit code."""
     cfg, scenario = _resolve(args)
     params = load_params(cfg.params or None)
-    codec = process_codec(cfg.dbc, cfg.ids, str(args.config))
+    codec = process_codec(cfg.dbc, cfg.ids, str(args.config), cfg.protocol, cfg.dbc_map)
     emu = PlantEmulation(params, scenario)
     bus = open_bus(cfg.bus)
     logger = open_process_logger(

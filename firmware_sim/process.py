@@ -77,10 +77,7 @@ class EmulatorProcess:
         self._id_inject = self.codec.can_id("FAULT_INJECT")
         self._hb_every = max(1, round(rate_hz / opts.heartbeat_rate_hz))
         self._faults_every = max(1, round(rate_hz / opts.faults_rate_hz))
-        self._bounds = {
-            n: {s.name: (s.minimum, s.maximum) for s in self.codec.message(n).signals}
-            for n in ("SENSOR_POS", "SENSOR_AUX", "PLANT_TRUTH")
-        }
+        self._bounds = {n: self.codec.signal_bounds(n) for n in ("SENSOR_POS", "SENSOR_AUX", "PLANT_TRUTH")}
         self.stats = LoopStats(opts.stats_capacity)
         self.periods = 0
         #: periods slept through by overruns, the plant advanced without frames (step_period)
@@ -103,8 +100,9 @@ class EmulatorProcess:
             d = self.codec.classify(msg)
             chk, was = self.commanders, self.commanders.conflict
             if d.verdict.usable and d.values is not None:
-                in_order = chk.usable(int(d.values["CycleCount"]))
-                cmd = (float(d.values["CurrentSetpoint"]), bool(d.values["Enable"]))
+                cycle = d.values.get("CycleCount")  # a vendor command frame may have none
+                in_order = cycle is None or chk.usable(int(cycle))
+                cmd = (float(d.values["CurrentSetpoint"]), bool(d.values.get("Enable", 1)))
             else:
                 if d.verdict in (Verdict.REPEATED, Verdict.WRONG_SEQUENCE):
                     chk.rejected_sequence()
@@ -155,7 +153,7 @@ class EmulatorProcess:
     def _clip(self, name: str, values: dict[str, Any]) -> dict[str, Any]:
         b = self._bounds[name]
         for sig, v in values.items():
-            lo, hi = b[sig]
+            lo, hi = b.get(sig, (None, None))  # a signal the profile's frame does not carry
             if lo is not None and v < lo:
                 values[sig] = lo
                 self.clipped += 1

@@ -57,12 +57,14 @@ class Verdict(IntEnum):
 
 @dataclass(slots=True)
 class Decoded:
-    """A classified frame: its verdict, its DBC name (None if unknown) and its physical values."""
+    """A classified frame: its verdict, its DBC name (None if unknown), its physical values and
+    its sequence counter's low 4 bits (None: not E2E protected, or not usable)."""
 
     verdict: Verdict
     name: str | None
     values: dict[str, Any] | None
     timestamp_s: float = 0.0
+    counter: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -188,6 +190,17 @@ class FrameCodec:
     def names(self) -> list[str]:
         """All frame names of the DBC."""
         return list(self._by_name)
+
+    def shape(self, name: str) -> can.Message:
+        """An all-zero frame of ``name``: its ID, ID format and length (a bus's send template)."""
+        spec = self._by_name[name]
+        return can.Message(
+            arbitration_id=spec.can_id, is_extended_id=False, dlc=spec.length, data=bytes(spec.length)
+        )
+
+    def signal_bounds(self, name: str) -> dict[str, tuple[float | None, float | None]]:
+        """Each signal's DBC range (physical units; None: not given) of frame ``name``."""
+        return {s.name: (s.minimum, s.maximum) for s in self._by_name[name].msg.signals}
 
     def data_ids(self, name: str) -> tuple[int, ...] | None:
         """The 16 E2E DataIDs of frame ``name`` (None when it is not protected)."""
@@ -345,7 +358,7 @@ class FrameCodec:
         rate = self._rate.get(spec.can_id)
         if rate is not None and not rate[1].check(float(values[rate[0]]), data[1] & 0x0F):
             return Decoded(Verdict.OUT_OF_RANGE, name, None, ts)
-        return Decoded(verdict, name, values, ts)
+        return Decoded(verdict, name, values, ts, data[1] & 0x0F if spec.data_ids is not None else None)
 
     def reset_rx(self) -> None:
         """Forget all receive sequence state (e.g. after a bus restart)."""

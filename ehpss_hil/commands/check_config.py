@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..config import ControllerConfig, EmulatorConfig, load_controller_config, load_emulator_config
+from ..config import ControllerConfig, DbcMap, EmulatorConfig, load_controller_config, load_emulator_config
 from ..errors import ConfigError, EhpssError, one_line
 from ..physics.params import Params, load_params
 from ..scenario import Scenario, load_scenario
@@ -65,7 +65,7 @@ def _prepare_controller(path: Path, c: ControllerConfig) -> None:
     from ..runtime.frameio import process_codec
 
     params = load_params(c.params or None)
-    process_codec(c.dbc, c.ids, str(path))
+    process_codec(c.dbc, c.ids, str(path), c.protocol, c.dbc_map)
     loop_options(c)
     default_factory(c.mode, params, 1.0 / c.rate_hz, c)
 
@@ -75,9 +75,16 @@ def _prepare_emulator(path: Path, e: EmulatorConfig) -> None:
     from ..runtime.frameio import process_codec
 
     params = load_params(e.params or None)
-    process_codec(e.dbc, e.ids, str(path))
+    process_codec(e.dbc, e.ids, str(path), e.protocol, e.dbc_map)
     if e.scenario:
         _prepare_scenario(load_scenario(e.scenario), params)
+
+
+def _protocol_text(protocol: str, m: DbcMap | None) -> str:
+    """``, protocol dbc-map (vendor.dbc, E2E p02)`` for a mapped profile; nothing for native."""
+    if m is None:
+        return ""
+    return f", protocol {protocol} ({Path(m.dbc).name}, E2E {m.e2e.profile})"
 
 
 def summarize(path: Path) -> str:
@@ -115,12 +122,14 @@ def _summarize(path: Path) -> str:
         return (
             f"emulator: {e.bus.interface}:{e.bus.channel} at {e.rate_hz:g} Hz, {e.mode}, "
             f"command timeout {e.command_timeout_s * 1e3:g} ms, truth {e.truth}"
+            + _protocol_text(e.protocol, e.dbc_map)
         )
     c = load_controller_config(path, data)
     _prepare_controller(path, c)
     return (
         f"controller: {c.bus.interface}:{c.bus.channel} at {c.rate_hz:g} Hz, mode {c.mode}, "
         f"watchdog {c.watchdog.timeout_cycles} cycles -> {c.watchdog.failsafe}"
+        + _protocol_text(c.protocol, c.dbc_map)
     )
 
 

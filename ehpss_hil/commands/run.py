@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..canlog import read_sidecar
 from ..control.registry import DAEMON_MODES
-from ..orchestrate import RunPlan, check_exit_codes, execute
+from ..orchestrate import CONTROLLER_YAML, EMULATOR_YAML, RunPlan, check_exit_codes, execute
 from ..run_metrics import metrics_from_run
 from ..rundir import RUN_LOGS, record_outputs
 
@@ -38,6 +38,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--lockstep", action="store_true", help="emulator advances one period per VALVE_CMD (deterministic)"
     )
     p.add_argument("--plot", action="store_true", help="also draw the report figures")
+    p.add_argument(
+        "--controller-config",
+        type=Path,
+        default=CONTROLLER_YAML,
+        help="the controller's config (default configs/controller.yaml; e.g. configs/controller-vendor.yaml)",
+    )
+    p.add_argument(
+        "--emulator-config",
+        type=Path,
+        default=EMULATOR_YAML,
+        help="the emulator's config (default configs/emulator.yaml; e.g. configs/emulator-vendor.yaml)",
+    )
     p.add_argument(
         "--watchdog-cycles",
         type=int,
@@ -86,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         monitor_port=args.monitor,
         monitor_inject=args.monitor_allow_inject,
+        controller_yaml=args.controller_config,
+        emulator_yaml=args.emulator_config,
     )
     res = execute(plan)
     check_exit_codes(res)

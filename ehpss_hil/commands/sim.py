@@ -41,6 +41,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="frame layer: DBC quantization (fast) or real encoded frames with E2E",
     )
     p.add_argument(
+        "--protocol",
+        metavar="CONTROLLER.yaml",
+        default="",
+        help="speak the protocol profile of this controller config on both sides (implies "
+        "--transport frames), e.g. configs/controller-vendor.yaml",
+    )
+    p.add_argument(
         "--jobs",
         "-j",
         type=int,
@@ -109,7 +116,16 @@ def write_plots(outcomes: list[JobOutcome], base: Path) -> list[Path]:
 def run(args: argparse.Namespace) -> int:
     modes = args.controller or ["mmac"]
     paths = scenario_paths(args.scenarios)
-    jobs = [Job(p, m, args.transport, keep_result=bool(args.plot)) for p in paths for m in modes]
+    transport = "frames" if args.protocol else args.transport
+    if args.protocol:
+        from ..sim.lockstep import config_codec
+
+        config_codec(args.protocol)  # a bad config or map: exit 2 before any run
+    jobs = [
+        Job(p, m, transport, keep_result=bool(args.plot), protocol_config=args.protocol)
+        for p in paths
+        for m in modes
+    ]
     t0 = time.perf_counter()
     outcomes = run_campaign(jobs, args.jobs)
     wall = time.perf_counter() - t0

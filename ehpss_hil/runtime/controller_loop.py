@@ -19,7 +19,6 @@ per received sensor pair (triggered by SENSOR_AUX, which the emulator sends afte
 from __future__ import annotations
 
 import logging
-import resource
 import time
 from dataclasses import dataclass, field
 
@@ -31,14 +30,14 @@ from ..control.base import Controller, Measurement
 from ..control.sampleclock import RESYNC_SAMPLES
 from ..driver import ControllerDriver
 from ..scenario import Reference, ReferenceBlocks
-from .deadline import DeadlineTimer, socket_wake
 from .foreign import CollisionGuard, SetpointGate
 from .frameio import FrameIO
 from .lifecycle import FailsafeReason, Lifecycle, State
-from .phaselock import PhaseLock
+from .loop_run import loop_summary, run_lockstep, run_realtime
+from .periodic import PeriodicFrames
 from .signals import StopFlag
 from .stats import LoopStats
-from .status_frames import FrameSchedule, StatusReporter
+from .status_frames import StatusReporter
 from .watchdog import SensorWatchdog
 
 log = logging.getLogger("ehpss_hil.controller")
@@ -103,16 +102,12 @@ class ControllerLoop:
         self.guard = CollisionGuard(opts.watchdog, io.collisions)
         self.setpoints = SetpointGate(opts.setpoint)
         self.stats = LoopStats(opts.stats_capacity)
-        self._id_pos = self.codec.can_id("SENSOR_POS")
-        self._id_aux = self.codec.can_id("SENSOR_AUX")
+        #: the sensor pair's CAN IDs under this loop's protocol profile
+        self.id_pos = self.codec.can_id("SENSOR_POS")
+        self.id_aux = self.codec.can_id("SENSOR_AUX")
         self._id_setpoint = self.codec.can_id("SETPOINT")
-        self.schedule = FrameSchedule(
-            round(opts.rate_hz / opts.status_rate_hz),
-            round(opts.rate_hz / opts.stats_rate_hz),
-            round(opts.rate_hz / opts.heartbeat_rate_hz),
-        )
-        self._log_every = round(opts.stats_interval_s * opts.rate_hz)
-        self._interval_compute_max_s = 0.0
+        #: CTRL_STATUS/CTRL_INDEX/CTRL_STATS/heartbeat after each cycle, the log's counter line
+        self.periodic = PeriodicFrames(opts)
         self.cycles = 0
         self.failsafe_cycles = 0
         #: grid periods skipped by overruns, stepped without a frame (:meth:`catch_up`)
@@ -124,11 +119,10 @@ class ControllerLoop:
         self.overruns = 0
         self.last_current_a = 0.0
         self.last_enable = False
-        self._compute_max_s = 0.0
         self.reporter = StatusReporter(io)
-        self._logged_cycle = 0  # self.cycles at the last _periodic
-        self._rx_ids = frozenset((self._id_pos, self._id_aux, self._id_setpoint))
-        self._lockstep = False
+        self._rx_ids = frozenset((self.id_pos, self.id_aux, self._id_setpoint))
+        #: one cycle per received sensor pair (set by :func:`.loop_run.run_lockstep`)
+        self.lockstep = False
         self._last_pos_counter = 0  # counter of the newest usable SENSOR_POS (lockstep gaps)
         self._reset_cycle_rx()
 
@@ -159,7 +153,7 @@ class ControllerLoop:
         if fid not in self._rx_ids:
             return None
         d = self.codec.classify(msg)
-        if fid == self._id_pos:
+        if fid == self.id_pos:
             self.guard.sensor.add(d.verdict in _SEQUENCE_VERDICTS)
         if not d.verdict.usable or d.values is None:
             if fid != self._id_setpoint:
@@ -172,26 +166,26 @@ class ControllerLoop:
         if (
             self.check_age
             and fid != self._id_setpoint
-            and not self._lockstep
+            and not self.lockstep
             and self._rx_now - msg.timestamp > self.stale_after_s
         ):
             self.stale_frames += 1
             self._stale_in_cycle += 1
             return d.verdict
-        if fid == self._id_pos:
-            counter = msg.data[1] & 0x0F
-            if self._lockstep and d.verdict is Verdict.OK_SOME_LOST:
+        if fid == self.id_pos:
+            counter = d.counter or 0
+            if self.lockstep and d.verdict is Verdict.OK_SOME_LOST:
                 self.catch_up((counter - self._last_pos_counter - 1) & 0x0F, overrun=False)
             self._last_pos_counter = counter
             self.driver.position(float(v["Position"]), float(v["Spool"]), counter)
             self._fresh = True
             self._pos_counter = counter
             self._pos_ts = msg.timestamp
-        elif fid == self._id_aux:
+        elif fid == self.id_aux:
             self._aux_fresh = True
             self._aux_ts = msg.timestamp
             self.driver.aux(float(v["CoilCurrent"]), float(v["LoadPressure"]))
-            self.guard.command_conflict(bool(v["CommandConflict"]))
+            self.guard.command_conflict(bool(v.get("CommandConflict", 0)))
         else:
             override, x_d = bool(v["Override"]), self.driver.override_m
             if self.setpoints.admit(
@@ -317,9 +311,7 @@ class ControllerLoop:
         Returns the receive timestamp (wall-clock s) of the SENSOR_POS frame used, or None."""
         self.catch_up(skipped)
         if drain:
-            self._rx_now = time.time()
-            for msg in self.io.drain():
-                self.on_frame(msg)
+            self.drain()
         used = self._pos_ts if self._fresh else None
         self._late = late
         self.cycle()
@@ -334,7 +326,7 @@ class ControllerLoop:
             self.stats.latency.add(time.time() - self._pos_ts)
         self._reset_cycle_rx()
         self.cycles += 1
-        self._periodic()
+        self.periodic.after_cycle(self)
         self.io.idle()
 
     def send_command(self, current_a: float, enable: bool) -> None:
@@ -352,50 +344,6 @@ class ControllerLoop:
         self.last_enable = enable
 
     # ---- status frames ----------------------------------------------------------------------
-    def _periodic(self) -> None:
-        """The periodic frames due in this cycle (:class:`FrameSchedule`: at most one of
-        CTRL_STATUS, CTRL_STATS, heartbeat, CTRL_INDEX) and the counter line of the log."""
-        c = self.cycles
-        due = self.schedule.next(c, bool(self.reporter.pending))
-        if due.status:
-            self.send_status()
-        if due.stats:
-            self.io.send(
-                "CTRL_STATS",
-                {
-                    "FallbackReason": self.reporter.fallback_reason & 0xF,
-                    "Overruns": self.overruns & 0xFFFF,
-                    "RejectedFrames": self.codec.rejected & 0xFFFF,
-                    "CycleTimeMax": min(self._compute_max_s, 0.065535),
-                },
-            )
-            self._compute_max_s = 0.0
-        if due.heartbeat:
-            self.io.send("HEARTBEAT_CTRL", {"NmtState": self.life.nmt_state})
-        if due.ctrl_index:
-            self.reporter.send_next_index()
-        prev, self._logged_cycle = self._logged_cycle, c
-        if self._log_every and c // self._log_every > prev // self._log_every:
-            self._log_counters()
-
-    def _log_counters(self) -> None:
-        """Cheap counters only (no percentiles in the cycle: they would cost an overrun)."""
-        log.info(
-            "cycles %d, state %s, overruns %d, rejected frames %d, stale frames %d, "
-            "fail-safe cycles %d, ID collisions: %s, second-transmitter episodes %d, "
-            "max compute %.0f µs in the last interval",
-            self.cycles,
-            self.life.state.name,
-            self.overruns,
-            self.codec.rejected,
-            self.stale_frames,
-            self.failsafe_cycles,
-            self.io.collisions.text(),
-            self.guard.episodes,
-            self._interval_compute_max_s * 1e6,
-        )
-        self._interval_compute_max_s = 0.0
-
     def send_status(self, all_index: bool = False) -> None:
         """CTRL_STATUS now, its CTRL_INDEX frames one per following cycle (or all at once)."""
         self.reporter.send(self.controller, self.life, all_index)
@@ -406,84 +354,34 @@ class ControllerLoop:
         self.io.send("HEARTBEAT_CTRL", {"NmtState": 0})
 
     def run_realtime(self, stop: StopFlag, n_cycles: int | None = None) -> None:
-        """Cycles on the deadline grid until ``stop`` or ``n_cycles``."""
-        timer = DeadlineTimer(self.ts_s, name="controller")
-        target = min(self.opts.sensor_age_target_s, 0.5 * self.ts_s)
-        lock = PhaseLock(self.ts_s, target) if target > 0.0 else None
-        wake = socket_wake(self.io.bus, self._drain_for_wake) if self.opts.wake_on_sensor else None
-        self._drain_backlog()
-        timer.start()
-        perf = time.perf_counter
-        while not stop and (n_cycles is None or self.cycles < n_cycles):
-            lateness = timer.wait(wake)
-            t0 = perf()
-            woken = lateness < 0.0
-            if woken:  # by the sensor pair: lateness from its arrival
-                self.woken_by_sensor += 1
-                lateness = max(0.0, self._woke_wall_s - self._aux_ts)
-            # woken: the bus was drained to its last frame microseconds ago (and no period was
-            # skipped); another read would only learn that nothing is pending
-            rx_wall = self.poll_cycle(timer.last_skipped, drain=not woken, late=timer.last_late)
-            if lock is not None and rx_wall is not None:
-                arrival = rx_wall - (time.time() - time.monotonic())
-                timer.shift(lock.correction(timer.next_deadline_s - self.ts_s, arrival))
-            dt = perf() - t0
-            self.stats.compute.add(dt)
-            self.stats.lateness.add(lateness)
-            self._compute_max_s = max(self._compute_max_s, dt)
-            self._interval_compute_max_s = max(self._interval_compute_max_s, dt)
-            self.overruns = timer.overruns
-        self.stats.overruns = timer.overruns
-        self.stats.skipped = timer.skipped
-
-    def _drain_backlog(self, batch: int = 1000) -> None:
-        """The frames queued since the bus opened (the emulator sends ~3000/s): classified before
-        the grid starts (the stale ones dropped), not in the first cycle, which they would make
-        several periods late — a LOOP_OVERRUN right at the start."""
-        n = batch
-        while n == batch:
-            self._rx_now = time.time()
-            n = 0
-            for msg in self.io.drain(batch):
-                self.on_frame(msg)
-                n += 1
-
-    def _drain_for_wake(self) -> bool:
-        """The bus became readable before the deadline: consume what arrived (this cycle's
-        drain, done early); True once the cycle has a usable sensor pair."""
-        self._woke_wall_s = self._rx_now = time.time()
-        for msg in self.io.drain():
-            self.on_frame(msg)
-        return self._fresh and self._aux_fresh
+        """Cycles on the deadline grid until ``stop`` or ``n_cycles`` (:func:`.loop_run.run_realtime`)."""
+        run_realtime(self, stop, n_cycles)
 
     def run_lockstep(self, stop: StopFlag, n_cycles: int | None = None) -> None:
-        """One cycle per received sensor pair, until ``stop``, ``n_cycles`` or the bus is idle
-        for ``lockstep_idle_s`` after the first frame (before it, the loop waits for the peer
-        however long it takes to start).
+        """One cycle per received sensor pair (:func:`.loop_run.run_lockstep`)."""
+        run_lockstep(self, stop, n_cycles)
 
-        A cycle follows each SENSOR_AUX after a SENSOR_POS that was not a REPEATED copy (a
-        duplicate must not step the law or answer twice; a corrupted or out-of-sequence one is
-        still answered, as a cycle without data, so that the emulator's period completes)."""
-        perf = time.perf_counter
-        pending = False
-        started = False
-        self._lockstep = True
-        while not stop and (n_cycles is None or self.cycles < n_cycles):
-            msg = self.io.recv(self.opts.lockstep_idle_s if started else 0.5)
-            if msg is None:
-                if not started:
-                    continue
-                log.info("lockstep: bus idle for %.1f s; ending", self.opts.lockstep_idle_s)
-                return
-            started = True
-            t0 = perf()
-            verdict = self.on_frame(msg)
-            if msg.arbitration_id == self._id_pos:
-                pending = verdict is not Verdict.REPEATED
-            if msg.arbitration_id == self._id_aux and pending:
-                pending = False
-                self.cycle()
-                self.stats.compute.add(perf() - t0)
+    @property
+    def wake_lateness_s(self) -> float:
+        """A cycle woken by its sensor pair: how long after the pair's SENSOR_AUX (s) it woke."""
+        return max(0.0, self._woke_wall_s - self._aux_ts)
+
+    def drain(self, limit: int = 1000) -> int:
+        """Consume the frames pending now (at most ``limit``), aged against this moment
+        (:meth:`on_frame`); returns how many were read."""
+        self._rx_now = time.time()
+        n = 0
+        for msg in self.io.drain(limit):
+            self.on_frame(msg)
+            n += 1
+        return n
+
+    def drain_for_wake(self) -> bool:
+        """The bus became readable before the deadline: consume what arrived (this cycle's
+        drain, done early); True once the cycle has a usable sensor pair."""
+        self.drain()
+        self._woke_wall_s = self._rx_now
+        return self._fresh and self._aux_fresh
 
     def shutdown(self) -> None:
         """Zero current with Enable 0, state STOPPED, final status and heartbeat."""
@@ -494,31 +392,6 @@ class ControllerLoop:
         self.send_status(all_index=True)
         self.io.send("HEARTBEAT_CTRL", {"NmtState": self.life.nmt_state})
 
-    def _fallbacks(self) -> int:
-        """Entries of the controller's do-no-harm monitor into nominal compensation."""
-        count = getattr(self.controller, "fallback_count", None)
-        return int(count()) if callable(count) else 0
-
     def summary(self) -> dict[str, object]:
-        """Counters and loop statistics (JSON-able)."""
-        return {
-            "cycles": self.cycles,
-            "skipped_periods": self.skipped_periods,
-            "stale_frames": self.stale_frames,
-            "woken_by_sensor": self.woken_by_sensor,
-            "state": self.life.state.name,
-            "failsafe_reason": self.life.reason.name,
-            "watchdog_trips": self.wd.trips,
-            "failsafe_cycles": self.failsafe_cycles,
-            "saturations": self.saturations,
-            "nominal_fallbacks": self._fallbacks(),
-            "frames_sent": dict(self.io.sent),
-            "tx_errors": self.io.tx_errors,
-            "frames_received": self.io.received,
-            "id_collisions": dict(self.io.collisions.by_name),
-            "second_transmitter": self.guard.summary(),
-            "setpoints": {"accepted": self.setpoints.accepted, "rejected": self.setpoints.rejected},
-            "received_by_verdict": {v.name: n for v, n in self.codec.counts.items()},
-            "stats": self.stats.summary(),
-            "max_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
-        }
+        """Counters and loop statistics (JSON-able; :func:`.loop_run.loop_summary`)."""
+        return loop_summary(self)

@@ -32,8 +32,9 @@ from ..bus import (
 )
 from ..codec import FrameCodec
 from ..codec.ratelimit import RateLimit, position_step_bound_m
-from ..config import BusConfig, CanIds, LogConfig
-from ..errors import ConfigError, FrameError, FrameIdError
+from ..config import BusConfig, CanIds, DbcMap, LogConfig
+from ..errors import ConfigError, FrameError
+from ..protocol import make_codec
 from .collisions import IdCollisions, SentFrames
 
 log = logging.getLogger(__name__)
@@ -71,21 +72,13 @@ def open_can_logger(
     return logger
 
 
-def process_codec(dbc: str, ids: CanIds, config_path: str) -> FrameCodec:
-    """The frame codec with a process config's DBC (empty: the shipped one) and ID layout; a DBC
-    that cannot be loaded is a :class:`ConfigError` naming ``dbc``, an ID layout that does not
-    fit it one naming ``ids.id_base`` (exit 2)."""
-    try:
-        return FrameCodec(
-            dbc or None,
-            id_base=ids.id_base,
-            node_ids={"HEARTBEAT_CTRL": ids.controller_node, "HEARTBEAT_EMU": ids.emulator_node},
-            max_delta_counter=ids.max_delta_counter,
-        )
-    except FrameIdError as exc:
-        raise ConfigError(config_path, "ids.id_base", str(exc)) from exc
-    except ValueError as exc:  # FrameError, or cantools on a file that is no DBC
-        raise ConfigError(config_path, "dbc", f"cannot load {dbc}: {exc}") from exc
+def process_codec(
+    dbc: str, ids: CanIds, config_path: str, protocol: str = "native", dbc_map: DbcMap | None = None
+) -> FrameCodec:
+    """The frame codec of a process config (:func:`ehpss_hil.protocol.make_codec`): its DBC
+    (empty: the shipped one), ID layout and protocol profile; a bad DBC, map or ID layout is a
+    :class:`ConfigError` naming its key (exit 2)."""
+    return make_codec(protocol, dbc, ids, config_path, dbc_map)
 
 
 def limit_sensor_rate(codec: FrameCodec, speed_max_m_s: float, ts_s: float) -> RateLimit:
@@ -139,15 +132,7 @@ class FrameIO:
         #: True when a received frame's timestamp is its receive time (wall clock)
         self.receive_timestamps = stamps_receive_time(bus)
         # every DBC frame's datagram template built now, not in the first cycles (udp_multicast)
-        shapes = {
-            n: can.Message(
-                arbitration_id=codec.can_id(n),
-                is_extended_id=False,
-                dlc=codec.message(n).length,
-                data=bytes(codec.message(n).length),
-            )
-            for n in codec.names
-        }
+        shapes = {n: codec.shape(n) for n in codec.names}
         self._read = frame_reader(bus, (m for n, m in shapes.items() if n not in own_names))
         self._write = frame_writer(bus, (shapes[n] for n in own_names))
         self.sent: dict[str, int] = {n: 0 for n in own_names}

@@ -25,6 +25,8 @@ class Job:
     mode: str
     transport: str = "quantize"
     keep_result: bool = False
+    #: a controller config whose protocol profile both sides speak (frames transport); "": native
+    protocol_config: str = ""
 
 
 @dataclass
@@ -48,7 +50,7 @@ def _init(params: Params | None, tuning: ControlTuning | None) -> None:
 
 def _run(job: Job) -> JobOutcome:
     sc = job.scenario if isinstance(job.scenario, Scenario) else load_scenario(job.scenario)
-    res = run_scenario(sc, job.mode, _PARAMS, _TUNING, job.transport)
+    res = run_scenario(sc, job.mode, _PARAMS, _TUNING, job.transport, job.protocol_config)
     return JobOutcome(job, compute_metrics(res), res if job.keep_result else None)
 
 

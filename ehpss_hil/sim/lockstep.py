@@ -41,15 +41,28 @@ _QUANTIZE: QuantizeTransport | None = None
 _Y_M: dict[tuple[Params, float, bytes], np.ndarray] = {}
 
 
-def _transport(kind: str) -> QuantizeTransport | FramesTransport:
+def _transport(kind: str, protocol_config: str = "") -> QuantizeTransport | FramesTransport:
     global _QUANTIZE  # stateless, built once per process (the DBC parse is slow)
+    if protocol_config and kind != "frames":
+        raise ConfigError("", "transport", "a protocol profile runs with the frames transport only")
     if kind == "quantize":
         if _QUANTIZE is None:
             _QUANTIZE = QuantizeTransport(FrameCodec())
         return _QUANTIZE
     if kind == "frames":
+        if protocol_config:
+            return FramesTransport(config_codec(protocol_config), config_codec(protocol_config))
         return FramesTransport(FrameCodec(), FrameCodec())
     raise ConfigError("", "transport", f"unknown transport {kind!r}; choose {', '.join(TRANSPORTS)}")
+
+
+def config_codec(path: str) -> FrameCodec:
+    """The codec of the protocol profile of controller config ``path`` (ConfigError naming it)."""
+    from ..config import load_controller_config
+    from ..protocol import make_codec
+
+    cfg = load_controller_config(path)
+    return make_codec(cfg.protocol, cfg.dbc, cfg.ids, path, cfg.dbc_map)
 
 
 def reference_output(params: Params, ts_s: float, x_d: np.ndarray) -> np.ndarray:
@@ -71,14 +84,17 @@ def run_scenario(
     params: Params | None = None,
     tuning: ControlTuning | None = None,
     transport: str = "quantize",
+    protocol_config: str = "",
 ) -> SimResult:
-    """Simulate ``scenario`` with controller ``mode``; returns every per-sample array."""
+    """Simulate ``scenario`` with controller ``mode``; returns every per-sample array.
+    ``protocol_config``: a controller config whose protocol profile the frames transport speaks
+    on both sides (the emulator impersonating the mapped electronics)."""
     limit_blas_threads(1)
     prm = params if params is not None else load_params()
     ts = scenario.sample_time_s
     ctrl = make_controller(mode, prm, ts, tuning, scenario.reference)
     emu = PlantEmulation(prm, scenario)
-    tr = _transport(transport)
+    tr = _transport(transport, protocol_config)
     x_d = scenario.reference_samples()
     y_m = reference_output(prm, ts, x_d)
     rows: list[tuple] = []

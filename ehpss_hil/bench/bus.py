@@ -1,0 +1,116 @@
+"""``ehpss-hil bench bus``: worst-case bus load of each protocol profile at 1 and 2 kHz on 1 Mbit/s
+and 500 kbit/s (:mod:`ehpss_hil.protocol.busload`), PASS/FAIL against
+:data:`~ehpss_hil.protocol.busload.BUS_LOAD_LIMIT`. Computed, not measured: bits per frame with
+worst-case stuffing × the frames a deployment sends."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from ..config import load_controller_config
+from ..orchestrate import PROJECT_ROOT
+from ..protocol import make_codec
+from ..protocol.busload import BUS_LOAD_LIMIT, PERIODIC_FRAMES, FrameRate, frame_bits, load
+from .common import write_json
+
+NAME = "bus"
+HELP = "worst-case CAN bus load of each protocol profile at 1/2 kHz on 1 Mbit/s and 500 kbit/s"
+
+RATES_HZ = (1000.0, 2000.0)
+BITRATES_BPS = (1_000_000, 500_000)
+#: models reported in CTRL_INDEX after each CTRL_STATUS, per mode (the controllers' index slots)
+INDEX_FRAMES = {"nrc": 0, "smac": 1, "mmac-paper": 5, "mmac": 9}
+#: CTRL_STATS rate (Hz): the controller loop's fixed stats rate
+STATS_RATE_HZ = 10.0
+#: the emulator's heartbeat rate (Hz), configs/emulator.yaml
+EMULATOR_HEARTBEAT_HZ = 10.0
+DEFAULT_CONFIGS = ("configs/controller.yaml", "configs/controller-vendor.yaml")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--config",
+        action="append",
+        metavar="CONTROLLER.yaml",
+        help="a controller config whose profile to rate (repeatable; default the shipped native and vendor)",
+    )
+    p.add_argument(
+        "--mode", default="mmac", choices=sorted(INDEX_FRAMES), help="controller mode (CTRL_INDEX frames)"
+    )
+    p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
+
+
+def profile_frames(config: str, rate_hz: float, mode: str, extended: bool | None = None) -> list[FrameRate]:
+    """The frames a deployment of controller config ``config`` puts on the bus per second at
+    ``rate_hz``; ``extended`` forces the valve frames' ID format (None: the profile's)."""
+    cfg = load_controller_config(config)
+    codec = make_codec(cfg.protocol, cfg.dbc, cfg.ids, config, cfg.dbc_map)
+    out = []
+    for name in PERIODIC_FRAMES:
+        shape = codec.shape(name)
+        ext = shape.is_extended_id if extended is None else extended
+        out.append(FrameRate(name, shape.dlc, ext, rate_hz))
+    status = cfg.status_rate_hz
+    for name, hz in (
+        ("CTRL_STATUS", status),
+        ("CTRL_INDEX", status * INDEX_FRAMES[mode]),
+        ("CTRL_STATS", STATS_RATE_HZ),
+        ("HEARTBEAT_CTRL", cfg.heartbeat_rate_hz),
+        ("HEARTBEAT_EMU", EMULATOR_HEARTBEAT_HZ),
+    ):
+        if hz > 0:
+            out.append(FrameRate(name, codec.shape(name).dlc, False, hz))
+    return out
+
+
+def _profiles(configs: list[str]) -> list[tuple[str, str, bool | None]]:
+    """(label, config, forced ID format): each config, and a mapped one again with 29-bit IDs."""
+    out: list[tuple[str, str, bool | None]] = []
+    for c in configs:
+        cfg = load_controller_config(c)
+        label = f"{cfg.protocol} ({Path(cfg.dbc_map.dbc if cfg.dbc_map else cfg.dbc or 'ehpss.dbc').name})"
+        out.append((label, c, None))
+        if cfg.dbc_map is not None:
+            out.append((f"{label}, 29-bit IDs", c, True))
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    configs = args.config or [str(PROJECT_ROOT / c) for c in DEFAULT_CONFIGS]
+    rows: list[dict[str, Any]] = []
+    print(
+        f"worst-case stuffing: 8-byte frame {frame_bits(8, False)} bits (11-bit ID), "
+        f"{frame_bits(8, True)} bits (29-bit ID); limit {BUS_LOAD_LIMIT:.0%}; mode {args.mode}"
+    )
+    print(
+        f"{'profile':44} {'rate':>6} {'valve bit/s':>12} {'all bit/s':>11} "
+        f"{'1 Mbit/s':>14} {'500 kbit/s':>14}"
+    )
+    for label, config, ext in _profiles(configs):
+        for rate in RATES_HZ:
+            frames = profile_frames(config, rate, args.mode, ext)
+            valve = sum(f.bits_per_s for f in frames if f.name in PERIODIC_FRAMES)
+            total = sum(f.bits_per_s for f in frames)
+            cells = []
+            for bps in BITRATES_BPS:
+                x = load(frames, bps)
+                verdict = "PASS" if x <= BUS_LOAD_LIMIT else "FAIL"
+                cells.append(f"{x:6.1%} {verdict}")
+                rows.append(
+                    {"profile": label, "rate_hz": rate, "bitrate_bps": bps, "load": x, "verdict": verdict}
+                )
+            print(f"{label:44} {rate:5.0f}  {valve:12.0f} {total:11.0f} {cells[0]:>14} {cells[1]:>14}")
+        sizes = ", ".join(
+            f"{f.name} {f.data_bytes} B {frame_bits(f.data_bytes, f.extended)} bit" for f in frames[:3]
+        )
+        print(f"{'':44} ({sizes})")
+    fits = [
+        f"{r['profile']} {r['rate_hz'] / 1e3:g} kHz on {r['bitrate_bps'] / 1e6:g} Mbit/s"
+        for r in rows
+        if r["verdict"] == "PASS"
+    ]
+    print(f"fits within {BUS_LOAD_LIMIT:.0%}: " + ("; ".join(fits) if fits else "nothing"))
+    write_json(args.json, rows)
+    return 0

@@ -1,0 +1,57 @@
+"""Protocol profiles: how the controller's logical frames travel on the bus.
+
+A profile is a :class:`~ehpss_hil.codec.FrameCodec`: the controller's loop, the emulator's
+process and the lockstep transport encode and classify the logical frames SENSOR_POS, SENSOR_AUX
+and VALVE_CMD by their native names and SI signals (:mod:`.logical`), and the profile decides
+which bytes carry them. ``native``: our own DBC (``dbc/ehpss.dbc``). ``dbc-map``: a vendor DBC
+and a map of the logical signals onto its messages (:mod:`.dbcmap`, checked by :mod:`.mapcheck`).
+A further profile (CANopen CiA 408) is one more entry here: its codec maps the same logical
+frames onto PDOs, and whatever it must do before the first cycle (NMT, SDO configuration) goes
+into its own start-up step.
+"""
+
+from __future__ import annotations
+
+from ..codec import FrameCodec
+from ..config import PROTOCOLS, CanIds, DbcMap
+from ..errors import ConfigError, FrameIdError
+
+__all__ = ["PROTOCOLS", "make_codec"]
+
+
+def _native(dbc: str, ids: CanIds, src: str) -> FrameCodec:
+    try:
+        return FrameCodec(
+            dbc or None,
+            id_base=ids.id_base,
+            node_ids={"HEARTBEAT_CTRL": ids.controller_node, "HEARTBEAT_EMU": ids.emulator_node},
+            max_delta_counter=ids.max_delta_counter,
+        )
+    except FrameIdError as exc:
+        raise ConfigError(src, "ids.id_base", str(exc)) from exc
+    except ValueError as exc:  # FrameError, or cantools on a file that is no DBC
+        raise ConfigError(src, "dbc", f"cannot load {dbc}: {exc}") from exc
+
+
+def make_codec(protocol: str, dbc: str, ids: CanIds, src: str, dbc_map: DbcMap | None = None) -> FrameCodec:
+    """The codec of a process config: ``protocol`` (``native`` or ``dbc-map`` with ``dbc_map``),
+    the native DBC ``dbc`` (empty: the shipped one) and the ID layout ``ids``. A bad DBC, map or
+    ID layout is a :class:`ConfigError` naming its key (exit 2)."""
+    native = _native(dbc, ids, src)
+    if protocol == "native":
+        return native
+    if protocol != "dbc-map" or dbc_map is None:
+        raise ConfigError(src, "protocol", f"expected one of {', '.join(PROTOCOLS)} (dbc-map with dbc_map)")
+    from .dbcmap import MappedCodec
+    from .mapcheck import check_id_clash, resolve_map
+
+    vdb, frames = resolve_map(dbc_map, src)
+    codec = MappedCodec(
+        frames,
+        dbc or None,
+        id_base=ids.id_base,
+        node_ids={"HEARTBEAT_CTRL": ids.controller_node, "HEARTBEAT_EMU": ids.emulator_node},
+        max_delta_counter=ids.max_delta_counter,
+    )
+    check_id_clash(vdb, codec.native_ids(), ids.id_base, src)
+    return codec
