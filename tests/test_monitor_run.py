@@ -73,7 +73,10 @@ def test_run_with_monitor(tmp_path: Path) -> None:
     assert "--netns" in cmd and "--allow-inject" in cmd
     assert seen["frames"] > 1000, seen
     assert seen.get("sent") == {"sent": "FAULT_INJECT k_loe = 0.6"}, seen
-    # the emulator applied it: its true k_LOE, as logged on the run's bus, went to 0.6
+    # the emulator applied it: its true k_LOE, as logged on the run's bus, went to 0.6 (the
+    # scenario has no LOE event, so 0.6 can only come from the page; which rows before the
+    # injection carry truth depends on when a loaded host let the loop reach ACTIVE)
     k = load_log_run(out / "bus.log").result.true_k_loe
     k = k[np.isfinite(k)]
-    assert k[0] == 1.0 and k[-1] == pytest.approx(0.6, abs=1e-4)
+    assert k[-1] == pytest.approx(0.6, abs=1e-4)
+    assert set(np.round(k, 4)) <= {1.0, 0.6}
