@@ -18,7 +18,8 @@ class PlantStepper:
     """Plant state ``[ẍ, ẋ, x, ẋ_v, x_v]`` advanced by one sample per :meth:`step`.
 
     The input current is held constant over the sample (ZOH). The ZOH map is cached by
-    ``(k_loe, k_q)``, so a fault change costs one ``expm`` and steady running costs a 5×5 matvec.
+    ``(k_loe, k_q)``, so a fault change costs one ``expm``; steady running is the 5×5 map written
+    out on Python floats (about half the cost of a numpy matvec of this size).
     """
 
     def __init__(self, params: Params, ts_s: float) -> None:
@@ -27,13 +28,19 @@ class PlantStepper:
         self._zoh = ZohCache(self._continuous, ts_s)
         #: the piston [ẍ, ẋ, x] driven by a held spool x_v, for samples the spool spends on its stop
         self._zoh_stop = ZohCache(self._continuous_piston, ts_s)
-        self.state = np.zeros(5)
-        self._ad: Matrix
-        self._bd: Matrix
+        self._s: list[float] = [0.0] * 5
+        self._rows: tuple[tuple[float, ...], ...] = ()
+        self._rows_stop: tuple[tuple[float, ...], ...] = ()
         self._key: Hashable = None
         self.faults = FaultState()
         self._stroke_m = params.plant.spool_stroke_m
+        self._p_per_acc = load_pressure_pa(params.plant, 1.0)
         self._select(self.faults)
+
+    @property
+    def state(self) -> Matrix:
+        """The state ``[ẍ, ẋ, x, ẋ_v, x_v]`` (a copy)."""
+        return np.array(self._s)
 
     def _continuous(self, key: Hashable) -> tuple[Matrix, Matrix]:
         k_loe, k_q = typing.cast(tuple[float, float], key)
@@ -46,15 +53,16 @@ class PlantStepper:
     def _select(self, faults: FaultState) -> None:
         key = faults.dynamics_key
         if key != self._key:
-            self._ad, bd = self._zoh.get(key)
-            self._bd = bd[:, 0].copy()
-            self._ad_stop, bd = self._zoh_stop.get(key)
-            self._bd_stop = bd[:, 0].copy()
+            ad, bd = self._zoh.get(key)
+            # each row: the state coefficients, then the input's
+            self._rows = tuple((*map(float, ad[i]), float(bd[i, 0])) for i in range(5))
+            ad, bd = self._zoh_stop.get(key)
+            self._rows_stop = tuple((*map(float, ad[i]), float(bd[i, 0])) for i in range(3))
             self._key = key
 
     def reset(self) -> None:
         """Back to rest at the origin, fault-free."""
-        self.state[:] = 0.0
+        self._s = [0.0] * 5
         self.set_faults(FaultState())
 
     def set_faults(self, faults: FaultState) -> None:
@@ -70,34 +78,47 @@ class PlantStepper:
         stop at rest and the piston is stepped with the spool held there over the whole sample
         (the valve is fast against Ts: it reaches the stop early in the sample)."""
         lim = self.faults.current_limit_a
-        applied = min(max(current_a, -lim), lim)
-        st = self._ad @ self.state + self._bd * applied
+        u = min(max(current_a, -lim), lim)
+        s0, s1, s2, s3, s4 = self._s
+        r0, r1, r2, r3, r4 = self._rows
+        xv = r4[0] * s0 + r4[1] * s1 + r4[2] * s2 + r4[3] * s3 + r4[4] * s4 + r4[5] * u
         stop = self._stroke_m / self.faults.k_loe
-        xv = st[SPOOL]
-        if xv > stop or xv < -stop:
+        if -stop <= xv <= stop:
+            self._s = [
+                r0[0] * s0 + r0[1] * s1 + r0[2] * s2 + r0[3] * s3 + r0[4] * s4 + r0[5] * u,
+                r1[0] * s0 + r1[1] * s1 + r1[2] * s2 + r1[3] * s3 + r1[4] * s4 + r1[5] * u,
+                r2[0] * s0 + r2[1] * s1 + r2[2] * s2 + r2[3] * s3 + r2[4] * s4 + r2[5] * u,
+                r3[0] * s0 + r3[1] * s1 + r3[2] * s2 + r3[3] * s3 + r3[4] * s4 + r3[5] * u,
+                xv,
+            ]
+        else:
             held = stop if xv > 0.0 else -stop
-            st[:SPOOL_VEL] = self._ad_stop @ self.state[:SPOOL_VEL] + self._bd_stop * held
-            st[SPOOL_VEL] = 0.0
-            st[SPOOL] = held
-        self.state = st
-        return applied
+            q0, q1, q2 = self._rows_stop
+            self._s = [
+                q0[0] * s0 + q0[1] * s1 + q0[2] * s2 + q0[3] * held,
+                q1[0] * s0 + q1[1] * s1 + q1[2] * s2 + q1[3] * held,
+                q2[0] * s0 + q2[1] * s1 + q2[2] * s2 + q2[3] * held,
+                0.0,
+                held,
+            ]
+        return u
 
     @property
     def position_m(self) -> float:
         """True piston position x (m)."""
-        return float(self.state[POS])
+        return self._s[POS]
 
     @property
     def spool_actual_m(self) -> float:
         """Actual spool displacement k_loe·x_v (m): what the spool LVDT measures (eq 8)."""
-        return float(self.faults.k_loe * self.state[SPOOL])
+        return self.faults.k_loe * self._s[SPOOL]
 
     @property
     def spool_commanded_m(self) -> float:
         """Spool displacement the valve dynamics produce from the current, x_v (m)."""
-        return float(self.state[SPOOL])
+        return self._s[SPOOL]
 
     @property
     def load_pressure_pa(self) -> float:
         """Load pressure P_L = m·ẍ/A_h (Pa)."""
-        return load_pressure_pa(self.params.plant, float(self.state[ACC]))
+        return self._p_per_acc * self._s[ACC]
