@@ -42,6 +42,7 @@ def _run(name: str, mode: str) -> tuple[SimResult, RunMetrics]:
         "hold-drift",
         "climit-loe",
         "poweron-loe-drift",
+        "poweron-kq",
         "kq-loss",
     ],
 )
@@ -61,7 +62,9 @@ def test_fault_free_motion_with_the_spool_on_its_stop_is_not_a_fault(name: str) 
     assert abs(mm.rms_error_m - nrc.rms_error_m) <= 1 * UM
 
 
-@pytest.mark.parametrize("name", ["poweron-loe", "poweron-drift", "poweron-loe-drift", "warmup-sensor-fail"])
+@pytest.mark.parametrize(
+    "name", ["poweron-loe", "poweron-drift", "poweron-loe-drift", "poweron-kq", "warmup-sensor-fail"]
+)
 def test_faults_present_at_power_on_are_identified(name: str) -> None:
     mm, orc = _run(name, "mmac")[1], _run(name, "oracle")[1]
     assert mm.rms_error_m <= orc.rms_error_m + 5 * UM

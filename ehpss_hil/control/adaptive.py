@@ -71,6 +71,7 @@ class MmacController(LoopBase):
         self._in_flow = False
         self._flow_on = t.flow_gain_test
         self._flow_hold = max(1, round(FLOW_HOLD_S / ts))
+        self._switch_ramp = max(1, round(t.unattributed_switch_ramp_s / ts))
         self._stop_hold = max(1, round(SPOOL_STOP_HOLD_S / ts))
         self._inv_s_spool = 1.0 / self.scale_spool_m
         self._inv_s_pos = 1.0 / self.scale_pos_m
@@ -88,6 +89,7 @@ class MmacController(LoopBase):
         self.monitor.reset()
         self._in_flow = False
         self._flow_spool_model = self.spool_sup.active
+        self._pos_model = self.pos_sup.active
         self.clock.reset()
         self._spool_hold = 0  # samples left without spool evidence (the spool was at its stop)
         #: the seed point: the sensor (m) and x̂ (m) at the first sample after the reset; the
@@ -139,6 +141,13 @@ class MmacController(LoopBase):
                 pb.update(meas.position_m - self._y0, xh - self._x0)
                 ps.update(abs(xh - self._x0) * self._inv_s_pos)
             tl = 1.0 if ss.guarded else sb.theta[ss.active]
+            if ps.active != self._pos_model:
+                self._pos_model = ps.active
+                if self._flow_on and not self.flow.attributed:
+                    # whose the deviation is (sensor or flow gain) is not known yet: move the
+                    # compensation over a few samples, so that the pressure test can overturn a
+                    # drift model before it has moved the piston far
+                    self.start_ramp(self._switch_ramp)
             self.k_loe_hat = tl
             self.k_dft_hat = pb.theta[ps.active]
             self.k_q_hat = 1.0

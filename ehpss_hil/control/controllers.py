@@ -113,7 +113,7 @@ class LoopBase:
         self.k_q_hat = 1.0
         self.sensor_trusted = True
         self.nominal = False
-        self._ramp_left = 0
+        self._ramp_left = self._ramp_len = 0
         self._ramp_from = (1.0, 1.0)
         self._applied_loe = self._applied_dft = 1.0
         self._blend = 1.0
@@ -135,16 +135,20 @@ class LoopBase:
         """Compensate nominally (k̂ = 1: the plain PI loop on the raw sensor) or with the
         estimates; the divisors in use move between the two over ``FALLBACK_RAMP_S``."""
         if nominal != self.nominal:
-            self._ramp_from = (self._applied_loe, self._applied_dft)
-            self._ramp_left = self._ramp_n
+            self.start_ramp(self._ramp_n)
             self.nominal = nominal
+
+    def start_ramp(self, samples: int) -> None:
+        """Move the divisors in use from where they are to the targets over ``samples``."""
+        self._ramp_from = (self._applied_loe, self._applied_dft)
+        self._ramp_left = self._ramp_len = samples
 
     def _apply(self) -> None:
         """The current divisor and the feedback divisor in use this cycle."""
         tl, td = (1.0, 1.0) if self.nominal else (self.k_loe_hat, self.k_dft_hat)
         if self._ramp_left > 0:
             self._ramp_left -= 1
-            f = self._ramp_left / self._ramp_n
+            f = self._ramp_left / self._ramp_len
             tl += f * (self._ramp_from[0] - tl)
             td += f * (self._ramp_from[1] - td)
         self._applied_loe, self._applied_dft = tl, td

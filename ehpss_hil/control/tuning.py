@@ -65,6 +65,10 @@ class ControlTuning:
     flow_gain_min_deviation: float = field(default=0.05, metadata=rng(0.0, 1.0, lo_open=True))
     flow_gain_min_evidence_s: float = field(default=0.03, metadata=rng(0.0, 10.0))
     flow_gain_excitation: float = field(default=0.1, metadata=rng(0.0, 1.0))
+    #: … a position-model switch made before the test attributed the deviation moves the
+    #: compensation in over this long (s) instead of at once (a flow-gain loss taken for a drift
+    #: for the few samples until the test decides does not jolt the piston)
+    unattributed_switch_ramp_s: float = field(default=0.005, metadata=rng(0.0, 1.0))
     #: mmac do-no-harm monitor (control/monitor.py): a rule must fire this long in a row to fall
     #: back to nominal compensation; the fallback ends after this long without any rule firing (s)
     monitor_confirm_s: float = field(default=0.003, metadata=rng(0.0, 1.0))
