@@ -15,7 +15,7 @@ from _virtual import VirtualPair
 from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.codec.e2e import protect
 from ehpss_hil.config import Watchdog
-from ehpss_hil.control.base import ControllerStatus, Measurement, ValveCommand
+from ehpss_hil.control.base import Controller, ControllerStatus, Measurement, ValveCommand
 from ehpss_hil.physics.params import Params, load_params
 from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
@@ -24,7 +24,7 @@ from ehpss_hil.runtime.signals import StopFlag
 from ehpss_hil.scenario import Reference, Scenario
 
 
-class MiniPI:
+class MiniPI(Controller):
     """A tiny PI on the position error (A per m), enough to exercise the loop."""
 
     mode = "nrc"
