@@ -22,8 +22,8 @@ import numpy as np
 
 from ..codec import FrameCodec, Verdict
 from ..errors import EhpssError
+from .lineformat import CAN_ERR_BUSERROR, CAN_ERR_FLAG
 from .sidecar import sidecar_path
-from .writer import CAN_ERR_BUSERROR, CAN_ERR_FLAG
 
 #: ``(sec.usec) iface ID#DATA`` | ``ID#R[dlc]`` | ``ID##<flags>DATA`` (candump -L), optional R/T
 _LINE = re.compile(
