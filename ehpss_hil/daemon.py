@@ -155,26 +155,35 @@ def run_daemon(a: DaemonArgs) -> int:
             f"returned a {type(controller).__name__}, not a Controller",
         )
     bus = open_bus(cfg.bus)
-    logger = open_process_logger(
-        a.log,
-        cfg.log,
-        cfg.bus,
-        bus,
-        str(a.config),
-        sidecar={
-            "tool": "ehpss-hil controller",
-            "config": asdict(cfg),
-            "config_path": str(a.config),
-            "dbc": cfg.dbc or None,
-            "mode": cfg.mode,
-            "rate_hz": cfg.rate_hz,
-            "clock": CLOCK_NOTE,
-            "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
-            "lockstep": a.lockstep,
-        },
-    )
+    try:  # until the loop's own shutdown takes over: the bus (and the log) closed on any error
+        logger = open_process_logger(
+            a.log,
+            cfg.log,
+            cfg.bus,
+            bus,
+            str(a.config),
+            sidecar={
+                "tool": "ehpss-hil controller",
+                "config": asdict(cfg),
+                "config_path": str(a.config),
+                "dbc": cfg.dbc or None,
+                "mode": cfg.mode,
+                "rate_hz": cfg.rate_hz,
+                "clock": CLOCK_NOTE,
+                "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
+                "lockstep": a.lockstep,
+            },
+        )
+    except BaseException:
+        bus.shutdown()
+        raise
     io = FrameIO(bus, codec, OWN_FRAMES, logger)
-    loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us))
+    try:
+        loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us))
+    except BaseException:
+        io.close()
+        bus.shutdown()
+        raise
     stop, previous = install_stop_handlers()
     n = None if a.duration_s is None else round(a.duration_s * cfg.rate_hz)
     try:

@@ -2,13 +2,13 @@
 
 A log's timestamps are the host's wall clock (CLOCK_REALTIME at send or receive): an NTP step or
 a ``date -s`` in the middle of a run moves every later timestamp by the step, and a report that
-pairs frames by timestamp then pairs the wrong ones (an hour's step turned a 0.72 µm RMS into
-517 µm). The controller's VALVE_CMD ``CycleCount`` counts its periods whatever the wall clock
-does (an overrun's skipped periods are counted too), so ``t − CycleCount·Ts`` stays within a few
-periods for a whole run: where it changes by more than :data:`CLOCK_STEP_S` between two
-consecutive commands the clock stepped. :func:`undo_clock_steps` finds each step, where in the
-file it happened (the largest timestamp jump between those two commands, in file order) and
-moves every frame logged after it back by the step, so that frames of all names line up again.
+pairs frames by timestamp then pairs the wrong ones. The controller's VALVE_CMD ``CycleCount``
+counts its periods whatever the wall clock does (an overrun's skipped periods are counted too),
+so ``t − CycleCount·Ts`` stays within a few periods for a whole run: where it changes by more
+than :data:`CLOCK_STEP_S` between two consecutive commands the clock stepped.
+:func:`undo_clock_steps` finds each step, where in the file it happened (the largest timestamp
+jump between those two commands, in file order) and moves every frame logged after it back by
+the step, so that frames of all names line up again.
 
 A log without VALVE_CMD has no counter that spans the whole run: a backward jump of more than
 :data:`CLOCK_STEP_S` (time never runs backwards) is undone there, a forward one only reported
