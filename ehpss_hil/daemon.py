@@ -12,7 +12,6 @@ import logging
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import cast
 
 from .blas import limit_blas_threads
 from .bus import open_bus
@@ -88,8 +87,7 @@ def default_factory(mode: str, params: Params, ts_s: float, cfg: ControllerConfi
     """The project's control laws (``ehpss_hil.control.controllers.make_controller``)."""
     from .control.registry import make_controller
 
-    ctrl = make_controller(mode, params, ts_s, cfg.tuning, reference=cfg.reference)
-    return cast(Controller, ctrl)  # every concrete mode implements step()
+    return make_controller(mode, params, ts_s, cfg.tuning, reference=cfg.reference)
 
 
 def load_factory(spec: str | None) -> ControllerFactory:
@@ -150,27 +148,42 @@ def run_daemon(a: DaemonArgs) -> int:
     codec = process_codec(cfg.dbc, cfg.ids, str(a.config), cfg.protocol, cfg.dbc_map)
     limit_sensor_rate(codec, params.plant.piston_speed_max_m_s, 1.0 / cfg.rate_hz)
     controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
+    if not isinstance(controller, Controller):
+        raise ConfigError(
+            "",
+            "--controller-factory",
+            f"returned a {type(controller).__name__}, not a Controller",
+        )
     bus = open_bus(cfg.bus)
-    logger = open_process_logger(
-        a.log,
-        cfg.log,
-        cfg.bus,
-        bus,
-        str(a.config),
-        sidecar={
-            "tool": "ehpss-hil controller",
-            "config": asdict(cfg),
-            "config_path": str(a.config),
-            "dbc": cfg.dbc or None,
-            "mode": cfg.mode,
-            "rate_hz": cfg.rate_hz,
-            "clock": CLOCK_NOTE,
-            "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
-            "lockstep": a.lockstep,
-        },
-    )
+    try:  # until the loop's own shutdown takes over: the bus (and the log) closed on any error
+        logger = open_process_logger(
+            a.log,
+            cfg.log,
+            cfg.bus,
+            bus,
+            str(a.config),
+            sidecar={
+                "tool": "ehpss-hil controller",
+                "config": asdict(cfg),
+                "config_path": str(a.config),
+                "dbc": cfg.dbc or None,
+                "mode": cfg.mode,
+                "rate_hz": cfg.rate_hz,
+                "clock": CLOCK_NOTE,
+                "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
+                "lockstep": a.lockstep,
+            },
+        )
+    except BaseException:
+        bus.shutdown()
+        raise
     io = FrameIO(bus, codec, OWN_FRAMES, logger)
-    loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us))
+    try:
+        loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us))
+    except BaseException:
+        io.close()
+        bus.shutdown()
+        raise
     stop, previous = install_stop_handlers()
     n = None if a.duration_s is None else round(a.duration_s * cfg.rate_hz)
     try:

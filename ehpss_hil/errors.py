@@ -114,9 +114,14 @@ class ControlTimeoutError(EhpssError, TimeoutError):
     """Sensor or command data went stale for longer than the configured watchdog allows."""
 
 
+#: exit code of a program that ran out of memory (the environment's limit, not bad input)
+EXIT_OUT_OF_MEMORY = 1
+
+
 def run_console(prog: str, fn: Callable[[], int]) -> int:
     """Run a console command's body: an :class:`EhpssError` becomes one line on stderr
-    (``<prog>: error: …``) and its class's exit code; Ctrl-C exits 130."""
+    (``<prog>: error: …``) and its class's exit code; Ctrl-C exits 130; running out of memory
+    (a small ``ulimit -v``) is one line naming the limit, exit :data:`EXIT_OUT_OF_MEMORY`."""
     try:
         return fn()
     except EhpssError as exc:
@@ -124,3 +129,22 @@ def run_console(prog: str, fn: Callable[[], int]) -> int:
         return exc.exit_code
     except KeyboardInterrupt:
         return 130
+    except MemoryError as exc:
+        print(f"{prog}: error: out of memory ({one_line(str(exc))}){_memory_limits()}", file=sys.stderr)
+        return EXIT_OUT_OF_MEMORY
+
+
+def _memory_limits() -> str:
+    """``; address-space limit 195 MiB (ulimit -v), OPENBLAS_NUM_THREADS=8`` — what bounds the
+    memory here, or empty."""
+    import os
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    parts = (
+        [] if soft == resource.RLIM_INFINITY else [f"address-space limit {soft / 2**20:.0f} MiB (ulimit -v)"]
+    )
+    threads = os.environ.get("OPENBLAS_NUM_THREADS")
+    if threads and threads != "1":
+        parts.append(f"OPENBLAS_NUM_THREADS={threads} (each BLAS thread reserves its own buffers)")
+    return "; " + ", ".join(parts) if parts else ""

@@ -127,37 +127,46 @@ def run(args: argparse.Namespace) -> int:
     codec = process_codec(cfg.dbc, cfg.ids, str(args.config), cfg.protocol, cfg.dbc_map)
     emu = PlantEmulation(params, scenario)
     bus = open_bus(cfg.bus)
-    logger = open_process_logger(
-        args.log,
-        cfg.log,
-        cfg.bus,
-        bus,
-        str(args.config),
-        sidecar={
-            "tool": "firmware-sim",
-            "config": asdict(cfg),
-            "config_path": str(args.config),
-            "dbc": cfg.dbc or None,
-            "scenario": asdict(scenario),
-            "scenario_name": scenario.name,
-            "rate_hz": cfg.rate_hz,
-            "clock": CLOCK_NOTE,
-            "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
-            "mode": cfg.mode,
-        },
-    )
+    try:  # until the run's own shutdown takes over: the bus (and the log) closed on any error
+        logger = open_process_logger(
+            args.log,
+            cfg.log,
+            cfg.bus,
+            bus,
+            str(args.config),
+            sidecar={
+                "tool": "firmware-sim",
+                "config": asdict(cfg),
+                "config_path": str(args.config),
+                "dbc": cfg.dbc or None,
+                "scenario": asdict(scenario),
+                "scenario_name": scenario.name,
+                "rate_hz": cfg.rate_hz,
+                "clock": CLOCK_NOTE,
+                "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
+                "mode": cfg.mode,
+            },
+        )
+    except BaseException:
+        bus.shutdown()
+        raise
     io = FrameIO(bus, codec, OWN_FRAMES, logger)
-    proc = EmulatorProcess(
-        emu,
-        io,
-        EmulatorOptions(
-            command_timeout_s=cfg.command_timeout_s,
-            truth=cfg.truth,
-            fault_inject=cfg.fault_inject,
-            heartbeat_rate_hz=cfg.heartbeat_rate_hz,
-            lockstep_timeout_s=args.lockstep_timeout,
-        ),
-    )
+    try:
+        proc = EmulatorProcess(
+            emu,
+            io,
+            EmulatorOptions(
+                command_timeout_s=cfg.command_timeout_s,
+                truth=cfg.truth,
+                fault_inject=cfg.fault_inject,
+                heartbeat_rate_hz=cfg.heartbeat_rate_hz,
+                lockstep_timeout_s=args.lockstep_timeout,
+            ),
+        )
+    except BaseException:
+        io.close()
+        bus.shutdown()
+        raise
     stop, previous = install_stop_handlers()
     ok = True
     try:

@@ -19,7 +19,8 @@ from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
 from ehpss_hil.bus import frame_reader
 from ehpss_hil.bus.netns import netns_prefix, netns_unavailable_reason
-from ehpss_hil.bus.udp import DatagramParser, own_source_program, template
+from ehpss_hil.bus.udp import own_source_program
+from ehpss_hil.bus.udpwire import DatagramParser, template
 
 NETNS_SKIP = netns_unavailable_reason()
 netns = pytest.mark.skipif(NETNS_SKIP is not None, reason=f"needs a namespace: {NETNS_SKIP}")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -123,3 +124,46 @@ def test_package_import_graph_has_no_cycles_and_no_library_imports_a_command() -
             visit(u, [])
     users = sorted(u for u, vs in edges.items() if "commands" in vs)
     assert users == ["cli"], users
+
+
+def test_the_daemon_builds_and_steps_every_mode_without_scipy() -> None:
+    """The daemon's imports, and every daemon mode built through the registry as the daemon
+    does (its config, ZOH discretisations, gains) and stepped, load no scipy, simulator,
+    emulator, report or udp module."""
+    code = (
+        "from ehpss_hil.daemon import default_factory\n"
+        "from ehpss_hil.config import load_controller_config\n"
+        "from ehpss_hil.control.base import Measurement\n"
+        "from ehpss_hil.control.registry import DAEMON_MODES\n"
+        "from ehpss_hil.physics.params import load_params\n"
+        "cfg = load_controller_config('configs/controller.yaml')\n"
+        "params = load_params(cfg.params)\n"
+        "for mode in DAEMON_MODES:\n"
+        "    ctrl = default_factory(mode, params, 1.0 / cfg.rate_hz, cfg)\n"
+        "    m = Measurement(position_m=1e-4, spool_m=2e-5, reference_m=1e-4, samples=1)\n"
+        "    for _ in range(3):\n"
+        "        getattr(ctrl, 'observe', lambda m: None)(m)\n"
+        "        cmd = ctrl.step(m)\n"
+        "    assert abs(cmd.current_a) < 10.0, (mode, cmd)\n"
+        "    print('MODE', mode)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code + "\nimport sys\nprint(' '.join(sys.modules))"],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+        cwd=Path(__file__).resolve().parent.parent,
+    )
+    lines = out.stdout.splitlines()
+    from ehpss_hil.control.registry import DAEMON_MODES
+
+    assert [ln.split()[1] for ln in lines if ln.startswith("MODE ")] == list(DAEMON_MODES)
+    mods = set(lines[-1].split())
+    leaked = sorted(
+        m
+        for m in mods
+        if m.split(".")[0] == "scipy"
+        or m.startswith(("ehpss_hil.sim", "ehpss_hil.report", "ehpss_hil.bus.udp", "firmware_sim"))
+    )
+    assert not leaked, leaked

@@ -140,3 +140,22 @@ def test_flow_gain_monitor_takes_its_constants_from_the_tuning() -> None:
         x += 3.0 * TS * PARAMS.plant.velocity_gain_1_s * spool
         mon.product(x, spool)
     assert mon.theta_prod == 1.3
+
+
+def test_a_product_that_falls_below_the_failed_sensor_bound_ends_h_q_even_when_held() -> None:
+    """H_Q decided, then the product falls to 0 (the sensor failed) while evidence is held off:
+    H_Q ends at once and k̂_Q is 1, not 0 (mmac divided the position by k̂_Q = 0: a scenario
+    at 10.5 Hz, found by the config property test)."""
+    plant = PlantStepper(PARAMS, TS)
+    plant.set_faults(FaultState(k_loe=0.8, k_q=0.7, k_dft=1.0))
+    mon = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3)
+    rng = np.random.default_rng(7)
+    current = 0.0
+    for _ in range(400):
+        mon.update(current, plant.load_pressure_pa + 1e4 * rng.standard_normal(), 0.8, 0.7)
+        current = 1e-4 * rng.standard_normal()
+        plant.step(current)
+    assert mon.flow_fault and mon.k_q == 0.7
+    mon.hold_off(10)
+    assert mon.update(current, plant.load_pressure_pa, 0.8, 0.0) == 1.0
+    assert not mon.flow_fault and mon.k_q == 1.0

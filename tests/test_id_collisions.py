@@ -14,7 +14,7 @@ from _virtual import VirtualPair
 
 from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.config import SetpointPolicy, Watchdog
-from ehpss_hil.control.base import ControllerStatus, Measurement, ValveCommand
+from ehpss_hil.control.base import Controller, ControllerStatus, Measurement, ValveCommand
 from ehpss_hil.physics.params import Params, load_params
 from ehpss_hil.runtime.collisions import SentFrames
 from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
@@ -91,7 +91,7 @@ def test_sent_frames_ring() -> None:
 # ---- the controller's reaction ---------------------------------------------------------------
 
 
-class HoldLaw:
+class HoldLaw(Controller):
     """A law that commands 1 mA whatever it measures (the loop's reaction is under test)."""
 
     mode = "nrc"

@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 
 import pytest
-from test_daemon_loop import MiniPI, Rig, _activate
+from _daemon_rig import MiniPI, Rig, activate
 
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import Watchdog
@@ -78,7 +78,7 @@ def test_starvation_is_a_loop_overrun_and_blocks_recovery() -> None:
 def test_more_skipped_periods_than_bridged_is_loop_overrun(skipped: int) -> None:
     r = Rig(f"overrun{skipped}", LONG)
     try:
-        _activate(r, 20)
+        activate(r, 20)
         seen = _count_steps(r)
         r.sensors(5e-4)
         r.loop.poll_cycle(skipped=skipped)
@@ -95,7 +95,7 @@ def test_more_skipped_periods_than_bridged_is_loop_overrun(skipped: int) -> None
 def test_skipped_periods_within_the_bridge_are_stepped() -> None:
     r = Rig("bridge", LONG)
     try:
-        _activate(r, 20)
+        activate(r, 20)
         seen = _count_steps(r)
         r.sensors(5e-4)
         r.loop.poll_cycle(skipped=RESYNC_SAMPLES)
@@ -109,7 +109,7 @@ def test_skipped_periods_reach_the_timeout() -> None:
     """The shipped 3-cycle watchdog: an overrun of 3 periods is a LOOP_OVERRUN."""
     r = Rig("timeout3", Watchdog(timeout_cycles=3))
     try:
-        _activate(r, 20)
+        activate(r, 20)
         seen = _count_steps(r)
         r.sensors(5e-4)
         r.loop.poll_cycle(skipped=3)
@@ -127,7 +127,7 @@ def test_stale_frames_are_counted_not_used() -> None:
     # window, not by how long a loaded host takes between send and drain: no window while the
     # loop starts, a zero window for the stale frames, a huge one for the fresh frame after them
     try:
-        _activate(r, 20)
+        activate(r, 20)
         r.sensors(1e-4)
         r.cycle()
         r.loop.check_age, r.loop.stale_after_s = True, 0.0
@@ -149,7 +149,7 @@ def test_stale_frames_are_counted_not_used() -> None:
 def test_stale_frames_lead_to_sensor_timeout() -> None:
     r = Rig("stale-timeout", Watchdog(timeout_cycles=3))
     try:
-        _activate(r, 20)
+        activate(r, 20)
         r.loop.check_age, r.loop.stale_after_s = True, 0.0  # every frame from now on is stale
         for _ in range(3):
             r.sensors(9e-3)
@@ -166,7 +166,7 @@ def test_leaving_fault_restarts_the_law_from_the_present_measurement() -> None:
     on the present measurement and reference: no wound-up integrator, no stale state."""
     r = Rig("bumpless", LONG)
     try:
-        _activate(r, 200)  # integrator wound up on a 1 mm error
+        activate(r, 200)  # integrator wound up on a 1 mm error
         r.sensors(0.0)
         r.loop.poll_cycle(skipped=100)
         assert r.loop.life.reason is FailsafeReason.LOOP_OVERRUN

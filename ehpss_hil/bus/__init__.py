@@ -29,28 +29,56 @@ For loops that drain the bus every cycle: :func:`frame_reader` (one non-blocking
 ``udp_multicast`` without a dict and ``msgpack.packb`` per frame) and :func:`suppress_own_echoes`
 (on ``udp_multicast`` a kernel filter for the process's own datagrams), all in
 :mod:`ehpss_hil.bus.udp`.
+
+:mod:`ehpss_hil.bus.udp` reads private attributes of python-can's ``udp_multicast`` (pinned
+below python-can 5; ``tests/test_bus_udp.py`` pins the wire format), so it is imported only when a
+``udp_multicast`` bus is opened or handed in: a process on socketcan or virtual never loads it.
 """
 
 from __future__ import annotations
 
 import logging
 import socket
+import sys
 from collections.abc import Callable, Iterable
 from functools import partial
+from types import ModuleType
 from typing import Any
 
 import can
-from can.interfaces.udp_multicast import UdpMulticastBus
 
 from ..config import BusConfig
 from ..errors import BusUnavailableError
 from .rejects import DatagramRejects
-from .udp import GuardedUdpMulticastBus, UdpReader, UdpWriter, attach_own_source_filter
 
 log = logging.getLogger(__name__)
 
+_UDP_MODULE = f"{__name__}.udp"
+
 #: Linux SO_RCVBUFFORCE (root may exceed net.core.rmem_max)
 _SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
+
+
+def _udp() -> ModuleType:
+    """:mod:`ehpss_hil.bus.udp`, imported now (the first udp_multicast bus)."""
+    from . import udp
+
+    return udp
+
+
+def _is_udp_multicast(bus: can.BusABC) -> bool:
+    """True for python-can's ``UdpMulticastBus`` or a subclass, told without importing it."""
+    return any(
+        c.__name__ == "UdpMulticastBus" and c.__module__.startswith("can.interfaces.udp_multicast")
+        for c in type(bus).__mro__
+    )
+
+
+def _is_guarded(bus: can.BusABC) -> bool:
+    """True for a :class:`~ehpss_hil.bus.udp.GuardedUdpMulticastBus` (only :func:`open_bus`
+    makes one, after importing :mod:`ehpss_hil.bus.udp`)."""
+    udp = sys.modules.get(_UDP_MODULE)
+    return udp is not None and isinstance(bus, udp.GuardedUdpMulticastBus)
 
 
 def af_can_available() -> bool:
@@ -125,7 +153,7 @@ def _open_udp_multicast(cfg: BusConfig) -> can.BusABC:
     if cfg.hop_limit != 0:  # BusConfig validates this too; never send beyond this host
         raise BusUnavailableError("udp_multicast requires hop_limit 0 (frames stay on this host)")
     try:
-        bus = GuardedUdpMulticastBus(channel=cfg.channel, port=cfg.port, hop_limit=0, fd=False)
+        bus = _udp().GuardedUdpMulticastBus(channel=cfg.channel, port=cfg.port, hop_limit=0, fd=False)
     except (OSError, can.CanError) as exc:
         raise BusUnavailableError(
             f"udp_multicast:{cfg.channel}:{cfg.port}: cannot open ({exc}); a multicast route is "
@@ -139,7 +167,7 @@ def _open_udp_multicast(cfg: BusConfig) -> can.BusABC:
 def datagram_rejects(bus: can.BusABC) -> DatagramRejects | None:
     """The counter of datagrams skipped as no frame (udp_multicast from :func:`open_bus`), or
     None on a bus that cannot receive such datagrams."""
-    return bus.rejects if isinstance(bus, GuardedUdpMulticastBus) else None
+    return bus.rejects if _is_guarded(bus) else None  # type: ignore[attr-defined, no-any-return]
 
 
 def set_receive_buffer(bus: can.BusABC, size_bytes: int) -> int:
@@ -183,8 +211,8 @@ def frame_reader(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callabl
     """One pending frame or None, never waiting: ``bus.recv(0.0)``, or on ``udp_multicast`` the
     same read without its ``select()`` system call (:class:`~ehpss_hil.bus.udp.UdpReader`),
     with the templates of ``shapes`` (frames like those to come) built now, not on arrival."""
-    if UdpReader.supports(bus):
-        reader = UdpReader(bus)
+    if _is_udp_multicast(bus) and _udp().UdpReader.supports(bus):
+        reader = _udp().UdpReader(bus)
         reader.prepare(shapes)
         return reader.read
     return partial(bus.recv, 0.0)
@@ -194,8 +222,8 @@ def frame_writer(bus: can.BusABC, shapes: Iterable[can.Message] = ()) -> Callabl
     """Send one frame: ``bus.send``, or on ``udp_multicast`` the same datagram built from a
     per-frame-shape template (:class:`~ehpss_hil.bus.udp.UdpWriter`; the templates of
     ``shapes`` built now, not on the first send)."""
-    if isinstance(bus, GuardedUdpMulticastBus):
-        writer = UdpWriter(bus)
+    if _is_guarded(bus):
+        writer = _udp().UdpWriter(bus)
         writer.prepare(shapes)
         return writer.write
     return bus.send
@@ -207,8 +235,8 @@ def suppress_own_echoes(bus: can.BusABC) -> bool:
     back, so that a frame received on one of the process's own TX IDs is another node's. False:
     own frames may come back (python-can's plain ``UdpMulticastBus``, a bus opened with
     ``receive_own_messages``, an unknown interface) and the caller must tell them apart."""
-    if isinstance(bus, UdpMulticastBus):
-        ok = attach_own_source_filter(bus)
+    if _is_udp_multicast(bus):
+        ok: bool = _udp().attach_own_source_filter(bus)
         if not ok:
             log.warning("udp_multicast: own frames are told apart in user space (kernel filter not attached)")
         return ok

@@ -2,7 +2,7 @@
 
 Anyone on the host (in the namespace) can send a datagram to the bus's group and port: an empty
 one, text, any msgpack value, one larger than the receive buffer. :class:`DatagramRejects` counts
-them by reason for :mod:`ehpss_hil.bus_udp`'s readers and warns without flooding the log.
+them by reason for :mod:`ehpss_hil.bus.udp`'s readers and warns without flooding the log.
 """
 
 from __future__ import annotations

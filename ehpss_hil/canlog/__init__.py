@@ -5,7 +5,8 @@ Log lines are exactly what ``candump -L`` writes (``(sec.usec) iface ID#DATA``),
 (versions, DBC hash, config/scenario, counts, rotation files) lives in ``<log>.json`` beside it.
 """
 
+from .lineformat import format_line
 from .reader import BadLines, decode_log, log_files, read_log, read_sidecar
-from .writer import CandumpLogger, format_line
+from .writer import CandumpLogger
 
 __all__ = ["BadLines", "CandumpLogger", "decode_log", "format_line", "log_files", "read_log", "read_sidecar"]

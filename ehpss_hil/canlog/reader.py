@@ -22,8 +22,8 @@ import numpy as np
 
 from ..codec import FrameCodec, Verdict
 from ..errors import EhpssError
+from .lineformat import CAN_ERR_BUSERROR, CAN_ERR_FLAG
 from .sidecar import sidecar_path
-from .writer import CAN_ERR_BUSERROR, CAN_ERR_FLAG
 
 #: ``(sec.usec) iface ID#DATA`` | ``ID#R[dlc]`` | ``ID##<flags>DATA`` (candump -L), optional R/T
 _LINE = re.compile(
@@ -85,6 +85,10 @@ def parse_line(line: str) -> can.Message | None:
         )
     except ValueError:
         return None
+
+
+#: the key :func:`decode_log` adds with ``order``: a frame's position in the log (file order)
+FRAME_INDEX = "frame_index"
 
 
 class LogError(EhpssError, OSError):
@@ -187,6 +191,7 @@ def decode_log(
     codec: FrameCodec | None = None,
     rotated: bool = True,
     bad: BadLines | None = None,
+    order: bool = False,
 ) -> dict[str, dict[str, np.ndarray]]:
     """Decode a log with the DBC into per-frame-name arrays, in file order.
 
@@ -196,10 +201,13 @@ def decode_log(
     bad CRC/DLC/range are left out. ``codec.counts_by_name`` holds every verdict, so rejected
     frames are counted, not hidden. A multiplexed frame (CTRL_INDEX) has one array per signal
     with NaN where a row did not carry it. Lines that are no frame are counted in ``bad``.
+    With ``order`` each name also has :data:`FRAME_INDEX`: the frame's position among all the
+    frames of the log (0, 1, … in file order), which tells in what order frames of different
+    names were logged whatever their timestamps say.
     """
     codec = codec if codec is not None else FrameCodec()
     rows: dict[str, list[tuple[float, dict[str, Any]]]] = {}
-    for msg in read_log(path, rotated, bad):
+    for i, msg in enumerate(read_log(path, rotated, bad)):
         d = codec.classify(msg)
         if d.name is None:
             continue
@@ -209,6 +217,8 @@ def decode_log(
         elif not d.verdict.usable:
             continue
         if values is not None:
+            if order:
+                values = {**values, FRAME_INDEX: i}
             rows.setdefault(d.name, []).append((msg.timestamp, values))
     return {name: _to_arrays(r) for name, r in rows.items()}
 

@@ -11,10 +11,9 @@ that; a write that fails anyway (ENOSPC, EIO) is cut back to the last complete l
 never sees half a line. Both are counted by reason, warned about once and then every 10 s with
 the running count, and the logger closes cleanly (the sidecar keeps room for its own updates).
 
-Line format (can-utils ``lib.c``, ``candump -L``): ``(%010u.%06u) IFACE ID#DATA`` with a 3-digit
-(standard) or 8-digit (extended) upper-case hex ID, upper-case hex data, ``ID#R[dlc]`` for remote
-frames and ``ID##<flags>DATA`` for CAN FD. No comments and no header: every file of a rotation set
-is a standalone log that ``canplayer``, ``cantools decode`` and python-can's reader accept.
+Line format: :mod:`~ehpss_hil.canlog.lineformat` (exactly ``candump -L``'s). No comments and no
+header: every file of a rotation set is a standalone log that ``canplayer``, ``cantools decode``
+and python-can's reader accept.
 
 Real-time note: the writer thread holds the GIL while it formats a batch (at most
 ``_BATCH_LINES`` lines, ≈ 50–100 µs) and yields it after each batch. Woken by its 20 ms poll it
@@ -32,13 +31,13 @@ import os
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import can
 
 from .diskspace import DISK_RESERVE_BYTES, DiskRoom, LineDrops
+from .lineformat import MAX_LINE_BYTES, FrameItem, format_line
 from .sidecar import (
     SIDECAR_RESERVE_BYTES,
     FileRecord,
@@ -46,64 +45,13 @@ from .sidecar import (
     sidecar_path,
     write_json_atomic,
 )
+from .summary import LogSummary
 
 _log = logging.getLogger(__name__)
 
-CAN_ERR_FLAG = 0x20000000
-CAN_ERR_BUSERROR = 0x00000080
 _BATCH_LINES = 32  # ≈ 50 µs of formatting per GIL hold
 _KICK_LINES = 32  # kick() wakes the writer once this many lines are queued
 _POLL_S = 0.02
-#: the longest line a frame can make (CAN FD, 64 bytes, 8-digit ID, 16-character interface name)
-MAX_LINE_BYTES = 20 + 16 + 1 + 8 + 3 + 128 + 1
-
-_Item = tuple[float, int, bool, bool, bool, bool, bool, bool, int, bytes]
-
-
-def format_line(item: _Item, iface: str) -> str:
-    """One ``candump -L`` line (with ``\\n``) for a queued frame tuple (see :meth:`_item`)."""
-    ts, can_id, ext, rtr, err, fd, brs, esi, dlc, data = item
-    usec = max(0, round(ts * 1e6))
-    sec, usec = divmod(usec, 1_000_000)
-    if err:
-        ident = f"{CAN_ERR_FLAG | CAN_ERR_BUSERROR | (can_id & 0x1FFFFFFF):08X}"
-    elif ext:
-        ident = f"{can_id:08X}"
-    else:
-        ident = f"{can_id:03X}"
-    if rtr:
-        body = "R" + (f"{dlc:X}" if 0 < dlc <= 8 else "")
-    elif fd:
-        body = f"#{(1 if brs else 0) | (2 if esi else 0):X}{data.hex().upper()}"
-    else:
-        body = data.hex().upper()
-    return f"({sec:010d}.{usec:06d}) {iface} {ident}#{body}\n"
-
-
-@dataclass
-class LogSummary:
-    """What a closed logger did. ``dropped`` counts queue overflows, lines logged after close and
-    lines not written for lack of disk space or a write error, ``dropped_by_reason`` each of them;
-    ``discarded`` counts lines in rotated files deleted beyond ``backups``. ``files``: oldest
-    first. ``error``: the last write error, if any."""
-
-    path: str
-    written: int
-    dropped: int
-    discarded: int
-    files: list[str] = field(default_factory=list)
-    error: str | None = None
-    dropped_by_reason: dict[str, int] = field(default_factory=dict)
-
-    def __str__(self) -> str:
-        s = f"{self.path}: {self.written} frames written, {self.dropped} dropped"
-        if self.dropped_by_reason:
-            s += " (" + ", ".join(f"{k} {n}" for k, n in self.dropped_by_reason.items()) + ")"
-        if self.discarded:
-            s += f", {self.discarded} discarded by rotation"
-        if self.error:
-            s += f" (write error: {self.error})"
-        return s
 
 
 class CandumpLogger:
@@ -145,7 +93,7 @@ class CandumpLogger:
         self.max_bytes = int(max_bytes)
         self.backups = int(backups)
         self.queue_lines = int(queue_lines)
-        self._queue: deque[_Item] = deque()
+        self._queue: deque[FrameItem] = deque()
         self._written = 0
         self._overflow = 0  # queue full
         self._late = 0  # logged after close
@@ -258,7 +206,7 @@ class CandumpLogger:
             self._write_batch(batch)
             time.sleep(0)  # hand the GIL to a waiting real-time thread
 
-    def _write_batch(self, batch: list[_Item]) -> None:
+    def _write_batch(self, batch: list[FrameItem]) -> None:
         """Write whole lines; rotate first whenever the next line would overflow the file."""
         rec = self._records[0]
         chunk: list[bytes] = []
@@ -274,7 +222,7 @@ class CandumpLogger:
             size += len(line)
         self._flush_chunk(chunk, batch[start:])
 
-    def _flush_chunk(self, chunk: list[bytes], items: list[_Item]) -> None:
+    def _flush_chunk(self, chunk: list[bytes], items: list[FrameItem]) -> None:
         """Write whole lines: beyond the disk reserve none, after a failed write those that
         were written completely (the file is cut back to its last newline)."""
         if not chunk:

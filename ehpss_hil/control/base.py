@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -121,23 +122,87 @@ class ControllerStatus:
     fallbacks: int = 0
 
 
-class Controller(Protocol):
-    """A discrete-time position controller running at a fixed sample time."""
+class Controller(ABC):
+    """A discrete-time position controller running at a fixed sample time: the one contract the
+    daemon, replay, the lockstep simulator and sample logs drive (through
+    :class:`~ehpss_hil.driver.ControllerDriver`). Every mode of
+    :mod:`~ehpss_hil.control.registry` and every custom law (``--controller-factory``) is one.
 
-    mode: str
+    A law implements :meth:`configure`, :meth:`reset` and :meth:`step`; the rest has defaults
+    for a law without model banks: :meth:`observe` ignores a superseded sample, :meth:`probe`
+    reports no active model and nominal estimates, :meth:`status` is built from the probes.
+    """
 
+    #: the mode name (a key of the registry; CTRL_STATUS ``Mode``)
+    mode: str = "custom"
+    #: the model slots (DBC CTRL_INDEX ``ModelSlot``) :meth:`index_values` and
+    #: :meth:`theta_values` report, in their order
+    index_slots: tuple[int, ...] = ()
+    #: the do-no-harm fallback holds the loop on nominal compensation now
+    nominal: bool = False
+
+    @abstractmethod
     def configure(self, params: Params, ts_s: float) -> None:
-        """Build every matrix, gain and buffer; nothing is allocated in :meth:`step` afterwards."""
+        """Build every matrix, gain and buffer for sample time ``ts_s`` (s); nothing is
+        allocated in :meth:`step` afterwards."""
 
+    @abstractmethod
     def reset(self) -> None:
         """Back to the initial state (integrators, estimates, indices, active models)."""
 
+    @abstractmethod
     def step(self, meas: Measurement) -> ValveCommand:
         """One cycle: measurement in, valve command out."""
 
-    # optional: ``observe(meas) -> None``, a sensor sample that a newer one superseded within
-    # the same cycle (a burst of late frames): the predictors step on it, nothing else does (no
-    # regression, no output). The daemon and replay call it when the controller has it.
+    def observe(self, meas: Measurement) -> None:
+        """A sensor sample that a newer one superseded within the same cycle (a burst of late
+        frames), handed over before the cycle's :meth:`step`: a law that keeps predictors on the
+        sample clock steps them on it (no regression, no output). Default: ignored."""
+        return None
+
+    def probe(self) -> tuple[int, int, float, float]:
+        """(active spool slot, active position slot, k̂_LOE, k̂_DFT): cheap, every sample.
+        Default: no bank (-1, -1) and the nominal estimates 1, 1."""
+        return (-1, -1, 1.0, 1.0)
+
+    def index_values(self) -> list[float]:
+        """J of every model in :attr:`index_slots` order (dimensionless). Default: none."""
+        return []
+
+    def theta_values(self) -> list[float]:
+        """θ of every model in :attr:`index_slots` order. Default: none."""
+        return []
+
+    def switch_count(self) -> int:
+        """Total model switches since reset. Default: 0."""
+        return 0
+
+    def fallback_reason(self) -> int:
+        """Why the loop compensates nominally now (FallbackReason; 0: it does not)."""
+        return 0
+
+    def fallback_count(self) -> int:
+        """Entries into the nominal fallback since start-up."""
+        return 0
 
     def status(self) -> ControllerStatus:
-        """The current status (may allocate; call at status-frame rate, not every cycle)."""
+        """The current status from the probes (allocates: call at status-frame rate, not every
+        cycle)."""
+        sp, ps, kl, kd = self.probe()
+        active = {}
+        if sp >= 0:
+            active["spool"] = sp
+        if ps >= 0:
+            active["position"] = ps
+        return ControllerStatus(
+            mode=self.mode,
+            active_model=active,
+            k_loe_hat=kl,
+            k_dft_hat=kd,
+            index=dict(zip(self.index_slots, self.index_values(), strict=True)),
+            theta=dict(zip(self.index_slots, self.theta_values(), strict=True)),
+            switches=self.switch_count(),
+            fallback=self.nominal,
+            fallback_reason=self.fallback_reason(),
+            fallbacks=self.fallback_count(),
+        )

@@ -30,7 +30,7 @@ import math
 from ..errors import ModelError
 from ..physics.faults import FaultState
 from ..physics.params import Params
-from .base import ControllerStatus, Measurement, NominalMotion, PaperMotion, ValveCommand
+from .base import Controller, Measurement, NominalMotion, PaperMotion, ValveCommand
 from .compensation import compensated_current, sensor_trusted
 from .pi import PiLaw
 from .predictors import ModelPosition, ValvePredictor
@@ -51,8 +51,10 @@ JOINT_SLOT0 = 9
 SMAC_SLOT = 14
 
 
-class LoopBase:
-    """Shared parts: PI, valve predictor, model position, command object, probes."""
+class LoopBase(Controller):
+    """Shared parts of the project's modes: PI, valve predictor, model position, command
+    object, probes. A mode implements :meth:`step` (and may extend :meth:`_build`,
+    :meth:`_reset_mode` and the probes)."""
 
     mode = "base"
     #: during the warm-up x̂ is set to the sensor every sample (modes without a position model);
@@ -208,61 +210,10 @@ class LoopBase:
     def _position_guarded(self) -> bool:
         return False
 
-    def step(self, meas: Measurement) -> ValveCommand:
-        """One cycle (each mode overrides this)."""
-        raise NotImplementedError
-
-    def observe(self, meas: Measurement) -> None:
-        """A superseded sample (see ``Controller.observe``): only ``mmac`` keeps its predictors on
-        the sample clock; the other modes take the newest sample only."""
-
     # ---- probes ----------------------------------------------------------------------------
-    index_slots: tuple[int, ...] = ()
-
-    def index_values(self) -> list[float]:
-        """J of every model in :attr:`index_slots` order (dimensionless)."""
-        return []
-
     def probe(self) -> tuple[int, int, float, float]:
         """(active spool slot, active position slot, k̂_LOE, k̂_DFT) — cheap, every sample."""
         return (-1, -1, self.k_loe_hat, self.k_dft_hat)
-
-    def status(self) -> ControllerStatus:
-        """Current status (allocates; call at status rate)."""
-        sp, ps, kl, kd = self.probe()
-        active = {}
-        if sp >= 0:
-            active["spool"] = sp
-        if ps >= 0:
-            active["position"] = ps
-        return ControllerStatus(
-            mode=self.mode,
-            active_model=active,
-            k_loe_hat=kl,
-            k_dft_hat=kd,
-            index=dict(zip(self.index_slots, self.index_values(), strict=True)),
-            theta=dict(zip(self.index_slots, self.theta_values(), strict=True)),
-            switches=self.switch_count(),
-            fallback=self.nominal,
-            fallback_reason=self.fallback_reason(),
-            fallbacks=self.fallback_count(),
-        )
-
-    def fallback_reason(self) -> int:
-        """Why the loop compensates nominally now (:class:`FallbackReason`; 0: it does not)."""
-        return 0
-
-    def fallback_count(self) -> int:
-        """Entries into the nominal fallback since start-up."""
-        return 0
-
-    def theta_values(self) -> list[float]:
-        """θ of every model in :attr:`index_slots` order."""
-        return []
-
-    def switch_count(self) -> int:
-        """Total model switches since reset."""
-        return 0
 
 
 class NrcController(LoopBase):

@@ -197,6 +197,11 @@ class FlowGainMonitor:
         """One sample: current echo (A), measured P_L (Pa), k̂_LOE and the product estimate
         θ_pos = k_DFT·k_Q; returns k̂_Q (1.0 under H_D)."""
         self.propagate(current_a)
+        if self.flow_fault and theta_pos < self._failed_below:
+            # a failed sensor is never a flow-gain loss, also while evidence is held off or
+            # stale (k̂_Q = θ_pos ≈ 0 would divide the position by nothing)
+            self.flow_fault = False
+            self.k_q = 1.0
         if self._hold > 0:  # no evidence now (hold_off): the decision stands
             self._hold -= 1
             return self.k_q

@@ -1,4 +1,4 @@
-"""EHPSS physics: parameters, continuous models, exact ZOH, reference model. Pure numpy/scipy."""
+"""EHPSS physics: parameters, continuous models, exact ZOH, reference model. Pure numpy."""
 
 from .faults import FaultState
 from .params import ControllerGains, Params, PlantParams, load_params

@@ -9,7 +9,8 @@ from collections.abc import Callable, Hashable
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg import expm
+
+from .expm import expm
 
 Matrix = NDArray[np.float64]
 

@@ -10,7 +10,7 @@ number i as the position ``i × POSITION_STEP_M`` reads i back from each VALVE_C
 from __future__ import annotations
 
 from ..config import ControllerConfig
-from ..control.base import ControllerStatus, Measurement, ValveCommand
+from ..control.base import Controller, Measurement, ValveCommand
 from ..physics.params import Params
 
 #: sample i is sent as position i × this (m): 10 LSB of SENSOR_POS Position
@@ -24,7 +24,7 @@ def sample_of(current_a: float) -> int:
     return round(current_a / (CURRENT_PER_M * POSITION_STEP_M))
 
 
-class ProbeController:
+class ProbeController(Controller):
     """Echoes the fresh position as a current; 0 A without fresh data."""
 
     mode = "nrc"
@@ -38,10 +38,6 @@ class ProbeController:
     def step(self, meas: Measurement) -> ValveCommand:
         """``CURRENT_PER_M × position`` when ``meas.fresh``, else 0 A (A)."""
         return ValveCommand(CURRENT_PER_M * meas.position_m if meas.fresh else 0.0, True)
-
-    def status(self) -> ControllerStatus:
-        """Mode only."""
-        return ControllerStatus(mode=self.mode)
 
 
 def probe_factory(mode: str, params: Params, ts_s: float, cfg: ControllerConfig) -> ProbeController:

@@ -10,6 +10,8 @@ Alignment (the controller's view, one row per logged VALVE_CMD):
   arrived since the previous command), applied current over [k, k+1) from the SENSOR_AUX echo
   of sample k+1 (the commanded one is :attr:`LogRun.commanded_current_a`), active models and k̂
   from CTRL_STATUS, J per slot from CTRL_INDEX, true gains from PLANT_FAULTS;
+- the timestamps are the host's wall clock: a clock step in the middle of a run (NTP, ``date``)
+  is found on the CycleCount and undone before frames are paired (:mod:`.logclock`), and noted;
 - x_d and y_m (ReferenceModel, exact ZOH, from rest at k = 0) come from the run's reference: the
   sidecar's ``scenario`` (a mapping, a YAML path, or a scenario name found in ``scenarios/``),
   or ``config.reference``/``reference`` with ``config.rate_hz``/``rate_hz``, or the caller's.
@@ -28,12 +30,13 @@ from typing import Any
 import numpy as np
 
 from ..canlog import BadLines, decode_log, read_sidecar
-from ..canlog.reader import resolve_log
+from ..canlog.reader import FRAME_INDEX, resolve_log
 from ..codec import FrameCodec, Verdict
 from ..physics.params import Params, load_params
 from ..physics.reference import ReferenceModel
 from ..runtime.status_frames import MODE_CODE
 from ..scenario import Scenario
+from .logclock import undo_clock_steps, unwrap_counter
 from .logmeta import RunInfo, reference_of, run_info
 from .metrics import RunMetrics, compute_metrics
 from .result import N_SLOTS, SimResult
@@ -72,14 +75,6 @@ def hold(
     fill = v_src[0] if default is None else default
     out = np.where(i >= 0, v_src[np.clip(i, 0, None)], fill)
     return out.astype(float)
-
-
-def unwrap_counter(c: np.ndarray, modulo: int = 65536) -> np.ndarray:
-    """A wrapping counter made monotonic (assumes < ``modulo`` steps between two rows)."""
-    if len(c) == 0:
-        return c.astype(np.int64)
-    d = np.mod(np.diff(c.astype(np.int64)), modulo)
-    return np.concatenate(([int(c[0])], int(c[0]) + np.cumsum(d)))
 
 
 def _sorted(frames: dict[str, dict[str, np.ndarray]], name: str) -> dict[str, np.ndarray]:
@@ -200,10 +195,13 @@ def load_log_run(
     side = read_sidecar(log)
     codec = codec if codec is not None else FrameCodec(_dbc_of(side))
     bad = BadLines()
-    frames = decode_log(log, codec, bad=bad)
+    frames = decode_log(log, codec, bad=bad, order=True)
     verdicts = {n: {v.name: c for v, c in per.items() if c} for n, per in codec.counts_by_name.items()}
     notes: list[str] = [bad.text()] if bad.count else []
     info = run_info(side, log.parent, scenario, log)
+    notes += undo_clock_steps(frames, info.ts_s)[1]
+    for f in frames.values():
+        f.pop(FRAME_INDEX, None)
     sc, ref, ts = info.scenario, info.reference, info.ts_s
     if ref is not None and info.sources and info.sources[0] not in ("--scenario", "sidecar"):
         notes.append(f"reference taken from {', '.join(info.sources)} beside the log")

@@ -1,0 +1,166 @@
+"""A log's wall clock checked against the controller's cycle counter, and clock steps undone.
+
+A log's timestamps are the host's wall clock (CLOCK_REALTIME at send or receive): an NTP step or
+a ``date -s`` in the middle of a run moves every later timestamp by the step, and a report that
+pairs frames by timestamp then pairs the wrong ones. The controller's VALVE_CMD ``CycleCount``
+counts its periods whatever the wall clock does (an overrun's skipped periods are counted too),
+so ``t − CycleCount·Ts`` stays within a few periods for a whole run: where it changes by more
+than :data:`CLOCK_STEP_S` between two consecutive commands the clock stepped.
+:func:`undo_clock_steps` finds each step, where in the file it happened (the largest timestamp
+jump between those two commands, in file order) and moves every frame logged after it back by
+the step, so that frames of all names line up again.
+
+A log without VALVE_CMD has no counter that spans the whole run: a backward jump of more than
+:data:`CLOCK_STEP_S` (time never runs backwards) is undone there, a forward one only reported
+(it cannot be told from a pause of every sender).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..canlog.reader import FRAME_INDEX
+
+#: a change of ``t − CycleCount·Ts`` between two consecutive VALVE_CMDs, or a backward jump in
+#: file order, larger than this (s) is a clock step; a controller's jitter and its counted
+#: overruns stay far below, the log's own reordering (receive vs send stamps) is milliseconds
+CLOCK_STEP_S = 0.5
+#: commands on each side of a step whose offsets (median) give its size: jitter averages out
+STEP_WINDOW = 16
+#: a step's size is rounded to the log's resolution (candump -L: 1 µs)
+STEP_RESOLUTION_S = 1e-6
+
+Frames = dict[str, dict[str, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class ClockStep:
+    """One step of the log's clock: the first frame after it (file order), the wall-clock time
+    before it (s) and its size (s; negative: the clock went back)."""
+
+    frame_index: int
+    before_s: float
+    step_s: float
+
+    def text(self) -> str:
+        """``+3600.000 s after 1767225600.600`` (the uncorrected time before the step)."""
+        return f"{self.step_s:+.3f} s after t={self.before_s:.6f} (frame {self.frame_index})"
+
+
+def unwrap_counter(c: np.ndarray, modulo: int = 65536) -> np.ndarray:
+    """A wrapping counter made monotonic (assumes < ``modulo`` steps between two rows)."""
+    if len(c) == 0:
+        return c.astype(np.int64)
+    d = np.mod(np.diff(c.astype(np.int64)), modulo)
+    return np.concatenate(([int(c[0])], int(c[0]) + np.cumsum(d)))
+
+
+def undo_clock_steps(frames: Frames, ts_s: float | None) -> tuple[list[ClockStep], list[str]]:
+    """Find the clock steps of ``frames`` (decoded with ``order``: each name has
+    :data:`FRAME_INDEX`) and move the timestamps after each back by it, in place; returns the
+    steps undone and one-line notes (a step undone, or a forward jump left as it was)."""
+    t_all = _file_order_times(frames)
+    if len(t_all) == 0:
+        return [], []
+    cmd = frames.get("VALVE_CMD")
+    notes: list[str] = []
+    if cmd is not None and len(cmd["t_s"]) > 1 and "CycleCount" in cmd:
+        steps = _steps_from_cycle_count(cmd, t_all, ts_s)
+    else:
+        steps, jumps = _steps_from_file_order(t_all)
+        if jumps:
+            notes.append(
+                "log timestamps jump forward by "
+                + ", ".join(j.text() for j in jumps)
+                + ": no VALVE_CMD CycleCount to tell a clock step from a pause, kept as logged"
+            )
+    if steps:
+        _shift(frames, steps)
+        notes.insert(
+            0,
+            "the log's clock stepped "
+            + ", ".join(s.text() for s in steps)
+            + ": timestamps after each step corrected on the VALVE_CMD CycleCount"
+            + ("" if cmd is not None else " (file order: no VALVE_CMD)"),
+        )
+    return steps, notes
+
+
+def _file_order_times(frames: Frames) -> np.ndarray:
+    """Every decoded frame's timestamp at its position in the log (NaN: a frame not decoded)."""
+    n = 1 + max((int(f[FRAME_INDEX][-1]) for f in frames.values() if len(f["t_s"])), default=-1)
+    t_all = np.full(n, np.nan)
+    for f in frames.values():
+        if len(f["t_s"]):
+            t_all[f[FRAME_INDEX].astype(np.int64)] = f["t_s"]
+    return t_all
+
+
+def _steps_from_cycle_count(
+    cmd: dict[str, np.ndarray], t_all: np.ndarray, ts_s: float | None
+) -> list[ClockStep]:
+    t, at = cmd["t_s"], cmd[FRAME_INDEX].astype(np.int64)
+    k = unwrap_counter(cmd["CycleCount"])
+    ts = ts_s if ts_s else _period(t, k)
+    if ts is None:
+        return []
+    off = t - k * ts
+    cuts = np.flatnonzero(np.abs(np.diff(off)) > CLOCK_STEP_S)
+    bounds = np.concatenate(([0], cuts + 1, [len(off)]))
+    steps = []
+    for n, j in enumerate(cuts):
+        before = off[max(bounds[n], j + 1 - STEP_WINDOW) : j + 1]
+        after = off[j + 1 : min(bounds[n + 2], j + 1 + STEP_WINDOW)]
+        size = round(float(np.median(after) - np.median(before)) / STEP_RESOLUTION_S) * STEP_RESOLUTION_S
+        where = _largest_jump(t_all, int(at[j]), int(at[j + 1]), size)
+        steps.append(ClockStep(where, float(t_all[_known_before(t_all, where)]), size))
+    return steps
+
+
+def _steps_from_file_order(t_all: np.ndarray) -> tuple[list[ClockStep], list[ClockStep]]:
+    """(backward steps to undo, forward jumps to report) from the timestamps in file order."""
+    known = np.flatnonzero(np.isfinite(t_all))
+    d = np.diff(t_all[known])
+    usual = float(np.median(d[d >= 0])) if np.any(d >= 0) else 0.0
+    back, fwd = [], []
+    for j in np.flatnonzero(np.abs(d) > CLOCK_STEP_S):
+        step = ClockStep(int(known[j + 1]), float(t_all[known[j]]), float(d[j]))
+        if d[j] < 0:
+            size = round((float(d[j]) - usual) / STEP_RESOLUTION_S) * STEP_RESOLUTION_S
+            back.append(ClockStep(step.frame_index, step.before_s, size))
+        else:
+            fwd.append(step)
+    return back, fwd
+
+
+def _largest_jump(t_all: np.ndarray, lo: int, hi: int, size: float) -> int:
+    """The first frame after the largest timestamp jump in the direction of ``size`` among the
+    frames ``lo``…``hi`` (file order; the two commands around the step)."""
+    idx = lo + np.flatnonzero(np.isfinite(t_all[lo : hi + 1]))
+    d = np.diff(t_all[idx]) * (1.0 if size > 0 else -1.0)
+    return int(idx[int(np.argmax(d)) + 1]) if len(d) else hi
+
+
+def _known_before(t_all: np.ndarray, i: int) -> int:
+    known = np.flatnonzero(np.isfinite(t_all[:i]))
+    return int(known[-1]) if len(known) else i
+
+
+def _period(t: np.ndarray, k: np.ndarray) -> float | None:
+    """Ts (s) from consecutive commands: the median time per counted period."""
+    dk, dt = np.diff(k), np.diff(t)
+    ok = dk > 0
+    return float(np.median(dt[ok] / dk[ok])) if np.any(ok) else None
+
+
+def _shift(frames: Frames, steps: list[ClockStep]) -> None:
+    """Move every frame logged after a step back by it (the steps in file order)."""
+    order = sorted(steps, key=lambda s: s.frame_index)
+    starts = np.array([s.frame_index for s in order])
+    total = np.concatenate(([0.0], np.cumsum([s.step_s for s in order])))
+    for f in frames.values():
+        if len(f["t_s"]):
+            n = np.searchsorted(starts, f[FRAME_INDEX], side="right")
+            f["t_s"] = f["t_s"] - total[n]
