@@ -6,7 +6,9 @@ matching builtin so callers may catch either (the pattern of python-can's ``CanE
 
 from __future__ import annotations
 
+import os
 import reprlib
+import resource  # loaded now: under a small ``ulimit -v`` it may not load when memory runs out
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -132,14 +134,16 @@ def run_console(prog: str, fn: Callable[[], int]) -> int:
     except MemoryError as exc:
         print(f"{prog}: error: out of memory ({one_line(str(exc))}){_memory_limits()}", file=sys.stderr)
         return EXIT_OUT_OF_MEMORY
+    except ImportError as exc:  # a shared library that no longer fits the address space
+        if "failed to map segment" not in str(exc):
+            raise
+        print(f"{prog}: error: out of memory ({one_line(str(exc))}){_memory_limits()}", file=sys.stderr)
+        return EXIT_OUT_OF_MEMORY
 
 
 def _memory_limits() -> str:
     """``; address-space limit 195 MiB (ulimit -v), OPENBLAS_NUM_THREADS=8`` — what bounds the
     memory here, or empty."""
-    import os
-    import resource
-
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)
     parts = (
         [] if soft == resource.RLIM_INFINITY else [f"address-space limit {soft / 2**20:.0f} MiB (ulimit -v)"]
