@@ -94,6 +94,16 @@ class Cia408Rig:
         self.close()
 
 
+def heartbeat_state(node: Any, state: str, limit_s: float = LIMIT_S) -> str:
+    """The NMT state of ``node``'s heartbeats until one shows ``state`` (a heartbeat sent before
+    the node handled an NMT command may still arrive after it); the last one seen at the limit."""
+    end = time.monotonic() + limit_s
+    seen = node.nmt.wait_for_heartbeat(limit_s)
+    while seen != state and time.monotonic() < end:
+        seen = node.nmt.wait_for_heartbeat(limit_s)
+    return str(seen)
+
+
 def emcy_codes(node: Any) -> list[int]:
     """EMCY codes the master has logged for ``node``."""
     return [e.code for e in node.emcy.log]

@@ -10,8 +10,9 @@ from pathlib import Path
 
 import canopen
 import pytest
-from _cia408 import Cia408Rig, emcy_codes, wait_until
+from _cia408 import Cia408Rig, emcy_codes, heartbeat_state, wait_until
 
+from ehpss_hil.bus import af_can_available
 from ehpss_hil.canlog import read_log
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.protocol.cia408 import cobid
@@ -49,7 +50,7 @@ def _abort(fn: object, *args: object) -> int:
 def _operational(r: Cia408Rig) -> None:
     for n in (r.valve, r.encoder):
         n.nmt.state = "OPERATIONAL"
-        assert n.nmt.wait_for_heartbeat(30) == "OPERATIONAL"
+        assert heartbeat_state(n, "OPERATIONAL") == "OPERATIONAL"
         n.tpdo.read(from_od=True)
     r.valve.rpdo.read(from_od=True)
 
@@ -93,7 +94,7 @@ def test_identity_by_sdo_and_aborts_for_bad_accesses() -> None:
 def test_nmt_states_in_the_heartbeat_and_pdos_only_when_operational() -> None:
     with _rig("nmt") as r:
         v = r.valve
-        assert v.nmt.wait_for_heartbeat(30) == "PRE-OPERATIONAL"
+        assert heartbeat_state(v, "PRE-OPERATIONAL") == "PRE-OPERATIONAL"
         r.net.sync.transmit()
         _operational(r)
         status, actual, position = _sync(r)
@@ -102,15 +103,17 @@ def test_nmt_states_in_the_heartbeat_and_pdos_only_when_operational() -> None:
         # a PDO mapping is not changed while OPERATIONAL
         assert _abort(v.sdo.download, 0x1A00, 1, struct.pack("<I", 0x60410010)) == ABORT_STATE
         v.nmt.state = "STOPPED"
-        assert v.nmt.wait_for_heartbeat(30) == "STOPPED"
+        assert heartbeat_state(v, "STOPPED") == "STOPPED"
         before = r.proc.valve.tpdos
         r.net.sync.transmit()
         r.encoder.tpdo[1].is_received = False
         r.net.sync.transmit()
         assert r.encoder.tpdo[1].wait_for_reception(30) is not None  # the encoder still answers
         assert r.proc.valve.tpdos == before
+        states: list[int] = []
+        v.nmt.add_heartbeat_callback(states.append)
         v.nmt.send_command(0x81)  # reset node: boot-up, PRE-OPERATIONAL, power-on values
-        v.nmt.wait_for_bootup(30)
+        assert wait_until(lambda: NmtState.BOOT_UP in states)
         assert v.sdo[0x1017].raw == r.cfg.heartbeat_time_ms
         assert r.proc.valve.nmt == NmtState.PRE_OPERATIONAL
 
@@ -199,7 +202,7 @@ def test_candump_log_of_a_session_decodes_as_standard_canopen_traffic(tmp_path: 
             _sync(r)
         assert wait_until(lambda: 0x2310 in emcy_codes(r.valve), 60.0)
         r.valve.nmt.state = "PRE-OPERATIONAL"
-        assert r.valve.nmt.wait_for_heartbeat(30) == "PRE-OPERATIONAL"
+        assert heartbeat_state(r.valve, "PRE-OPERATIONAL") == "PRE-OPERATIONAL"
     frames = list(read_log(log_path))
     seen: dict[str, int] = {}
     valve, encoder = r.cfg.valve_node, r.cfg.encoder_node
@@ -231,3 +234,24 @@ def test_candump_log_of_a_session_decodes_as_standard_canopen_traffic(tmp_path: 
     assert seen["TPDO1"] == 2 * 5  # one per node per SYNC while OPERATIONAL
     boot = [m for m in frames if m.arbitration_id == cobid.HEARTBEAT + valve and m.data[0] == 0]
     assert len(boot) == 1  # the boot-up message
+
+
+def _vcan0_reason() -> str | None:
+    if not af_can_available():
+        return "this kernel has no SocketCAN (socket(AF_CAN) fails): run via ../shared/tools/vcan-vm/run"
+    if not Path("/sys/class/net/vcan0").exists():
+        return "vcan0 does not exist (modprobe vcan; ip link add dev vcan0 type vcan; up)"
+    return None
+
+
+@pytest.mark.socketcan
+def test_on_socketcan_the_master_reads_identity_and_pdos() -> None:
+    reason = _vcan0_reason()
+    if reason is not None:
+        pytest.skip(reason)
+    with Cia408Rig({"interface": "socketcan", "channel": "vcan0"}) as r:
+        assert r.valve.sdo[0x1000].raw == 0x198 and r.encoder.sdo[0x1000].raw == 0x80196
+        assert r.valve.sdo[0x1018][2].raw == 0x408
+        _operational(r)
+        status, actual, position = _sync(r)
+        assert (state_of_status(status), actual, position) == (DeviceState.DISABLED, 0, 0)
