@@ -131,8 +131,8 @@ class SetpointPolicy:
 
 
 #: the protocol profiles a process may speak to the valve electronics (docs/hardware.md)
-PROTOCOLS = ("native", "dbc-map")
-Protocol = Literal["native", "dbc-map"]
+PROTOCOLS = ("native", "dbc-map", "cia408")
+Protocol = Literal["native", "dbc-map", "cia408"]
 
 
 @dataclass(frozen=True)
@@ -179,6 +179,34 @@ class DbcMap:
     e2e: E2EMap = field(default_factory=E2EMap)
 
 
+@dataclass(frozen=True)
+class Cia408Config:
+    """``protocol: cia408`` (emulator): the CANopen nodes firmware-sim impersonates — a CiA 408
+    valve and a CiA 406 linear encoder (docs/hardware.md). Node ids 1…127; times in ms (0 = off);
+    ``full_scale_current_a``: the coil current of a +100 % set-point (16384), so its LSB is
+    full_scale/16384 and must meet the controller's current resolution (the default 1 mA: the
+    plant's spool reaches its ±10 mm stroke at ≈ 0.61 mA). The timeouts are the
+    power-on values of 0x1016.1 (the master's heartbeat) and 0x1400.5 (the set-point RPDO);
+    a master may change them by SDO. EDS paths: empty = the shipped files (``eds/``). The
+    resolution and the EDS files are checked by ``ehpss_hil.protocol.cia408.check``."""
+
+    valve_node: int = field(default=32, metadata=rng(1, 127))
+    encoder_node: int = field(default=33, metadata=rng(1, 127))
+    master_node: int = field(default=1, metadata=rng(1, 127))
+    full_scale_current_a: float = field(default=0.001, metadata=rng(0.0, 10.0, lo_open=True))
+    heartbeat_time_ms: int = field(default=100, metadata=rng(0, 65535))
+    master_heartbeat_timeout_ms: int = field(default=0, metadata=rng(0, 65535))
+    setpoint_timeout_ms: int = field(default=0, metadata=rng(0, 65535))
+    valve_eds: str = ""
+    encoder_eds: str = ""
+
+    def __post_init__(self) -> None:
+        if self.encoder_node == self.valve_node:
+            raise ConfigError("", "encoder_node", f"must differ from valve_node ({self.valve_node})")
+        if self.master_node in (self.valve_node, self.encoder_node):
+            raise ConfigError("", "master_node", "must differ from valve_node and encoder_node")
+
+
 def _check_protocol(protocol: str, dbc_map: DbcMap | None) -> None:
     """``dbc_map`` is given exactly when ``protocol`` is ``dbc-map``."""
     if protocol == "dbc-map" and dbc_map is None:
@@ -213,6 +241,13 @@ class ControllerConfig:
 
     def __post_init__(self) -> None:
         _check_protocol(self.protocol, self.dbc_map)
+        if self.protocol == "cia408":
+            raise ConfigError(
+                "",
+                "protocol",
+                "cia408 is emulator-only so far: the controller as a CANopen master is not built yet "
+                "(expected native or dbc-map)",
+            )
         if self.mode not in DAEMON_MODES:
             raise ConfigError(
                 "",
@@ -253,9 +288,31 @@ class EmulatorConfig:
     dbc: str = ""
     protocol: Protocol = "native"
     dbc_map: DbcMap | None = None
+    cia408: Cia408Config | None = None
 
     def __post_init__(self) -> None:
         _check_protocol(self.protocol, self.dbc_map)
+        if self.protocol != "cia408":
+            if self.cia408 is not None:
+                raise ConfigError(
+                    "", "cia408", f"only read with protocol: cia408 (protocol is {self.protocol})"
+                )
+            return
+        if self.mode == "lockstep":
+            raise ConfigError(
+                "", "mode", "lockstep is not available with protocol cia408 (the nodes run in realtime)"
+            )
+        if self.truth:
+            raise ConfigError("", "truth", "PLANT_TRUTH/PLANT_FAULTS are not sent with protocol cia408 yet")
+        if self.fault_inject:
+            raise ConfigError(
+                "", "fault_inject", "FAULT_INJECT is not read with protocol cia408 (use a device_fault event)"
+            )
+
+    @property
+    def nodes(self) -> Cia408Config:
+        """The CANopen node settings (``cia408:``, or their defaults)."""
+        return self.cia408 if self.cia408 is not None else Cia408Config()
 
 
 def apply_overrides(
@@ -355,4 +412,18 @@ def load_emulator_config(path: str | Path, data: object = None) -> EmulatorConfi
         dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)),
         dbc_map=_resolve_map(p, base, cfg.dbc_map),
         scenario=_existing(p, "scenario", _resolve(base, cfg.scenario)),
+        cia408=_resolve_eds(p, base, cfg.cia408),
+    )
+
+
+def _resolve_eds(src: Path, base: Path, c: Cia408Config | None) -> Cia408Config | None:
+    """``cia408`` with its EDS paths resolved against the config's directory and checked."""
+    if c is None:
+        return None
+    from dataclasses import replace
+
+    return replace(
+        c,
+        valve_eds=_existing(src, "cia408.valve_eds", _resolve(base, c.valve_eds)),
+        encoder_eds=_existing(src, "cia408.encoder_eds", _resolve(base, c.encoder_eds)),
     )

@@ -87,6 +87,13 @@ class OutputError(EhpssError, OSError):
     exit_code = 2
 
 
+class NodeError(EhpssError, OSError):
+    """A CANopen node at start-up is missing (no SDO answer, no heartbeat) or is not the device
+    the config names (device type, state): the controller cannot drive it."""
+
+    exit_code = 3
+
+
 class InjectError(EhpssError, ValueError):
     """The monitor refuses a fault injection request (off, unknown kind, bad value, not sent)."""
 

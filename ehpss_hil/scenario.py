@@ -209,6 +209,9 @@ class Event:
     frame_loss: float | None = field(default=None, metadata=rng(0.0, 1.0))
     sensor_frame_loss: float | None = field(default=None, metadata=rng(0.0, 1.0))
     command_frame_loss: float | None = field(default=None, metadata=rng(0.0, 1.0))
+    #: a fault of the valve electronics with this EMCY error code (protocol cia408: the valve
+    #: goes to FAULT and sends EMCY; other protocols ignore it)
+    device_fault: int | None = field(default=None, metadata=rng(0x1000, 0xFFFF))
 
     def __post_init__(self) -> None:
         if all(getattr(self, k) is None for k in _EVENT_KEYS):
@@ -226,7 +229,7 @@ class Event:
 
 _FAULT_KEYS = ("k_loe", "k_q", "k_dft", "position_bias_m", "stuck", "current_limit_a")
 _LOSS_KEYS = ("frame_loss", "sensor_frame_loss", "command_frame_loss")
-_EVENT_KEYS = (*_FAULT_KEYS, *_LOSS_KEYS)
+_EVENT_KEYS = (*_FAULT_KEYS, *_LOSS_KEYS, "device_fault")
 
 
 @dataclass(frozen=True)
@@ -288,6 +291,14 @@ class Scenario:
             loss = ev.apply_loss(loss)
             out.append((round(ev.t_s / self.sample_time_s), faults, loss))
         return out
+
+    def device_faults(self) -> list[tuple[int, int]]:
+        """``(sample index, EMCY error code)`` of each ``device_fault`` event, in time order."""
+        return [
+            (round(ev.t_s / self.sample_time_s), ev.device_fault)
+            for ev in self.events
+            if ev.device_fault is not None
+        ]
 
     def reference_samples(self) -> np.ndarray:
         """x_d at every sample (m)."""

@@ -120,9 +120,90 @@ def format_summary(s: dict[str, object]) -> str:
     return "\n".join(lines)
 
 
+def format_canopen_summary(s: dict[str, object]) -> str:
+    """The counters printed at exit with ``protocol: cia408``."""
+    st = s["stats"]
+    assert isinstance(st, dict)
+    lat = st["lateness_s"]
+    nodes = s["nodes"]
+    assert isinstance(nodes, dict)
+    return "\n".join(
+        [
+            f"firmware-sim (cia408): periods {s['periods']}, SYNCs {s['syncs']}, valve {s['valve_state']}",
+            f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
+            f"  frames received: {s['frames_received']} (for no node: {s['unused_frames']})",
+            *(f"  {name}: {', '.join(f'{k} {v}' for k, v in n.items())}" for name, n in nodes.items()),
+            f"  overruns {st['overruns']} (skipped periods {st['skipped']}), wake-up lateness "
+            f"p50 {lat['p50'] * 1e6:.1f} µs p99 {lat['p99'] * 1e6:.1f} µs, compute p99 "
+            f"{st['compute_s']['p99'] * 1e6:.1f} µs",
+        ]
+    )
+
+
+def _sidecar(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenario) -> dict[str, object]:
+    return {
+        "tool": "firmware-sim",
+        "config": asdict(cfg),
+        "config_path": str(args.config),
+        "dbc": cfg.dbc or None,
+        "scenario": asdict(scenario),
+        "scenario_name": scenario.name,
+        "rate_hz": cfg.rate_hz,
+        "clock": CLOCK_NOTE,
+        "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
+        "mode": cfg.mode,
+        "protocol": cfg.protocol,
+    }
+
+
+def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenario) -> int:
+    """``protocol: cia408``: the plant behind an emulated CiA 408 valve and CiA 406 encoder."""
+    from ehpss_hil.protocol.cia408.check import check_nodes
+    from ehpss_hil.runtime.rawio import RawFrameIO
+
+    from .canopen_process import CanopenEmulatorProcess, CanopenOptions, build_nodes
+
+    params = load_params(cfg.params or None)
+    valve_od, encoder_od = check_nodes(cfg.nodes, str(args.config))
+    emu = PlantEmulation(params, scenario)
+    logging.getLogger("canopen").setLevel(logging.WARNING)  # its SDO server logs every transfer
+    bus = open_bus(cfg.bus)
+    logger = open_process_logger(
+        args.log, cfg.log, cfg.bus, bus, str(args.config), _sidecar(args, cfg, scenario)
+    )
+    io = RawFrameIO(bus, logger)
+    valve, encoder = build_nodes(cfg.nodes, valve_od, encoder_od, io, params.plant.spool_stroke_m)
+    proc = CanopenEmulatorProcess(emu, io, valve, encoder, CanopenOptions())
+    stop, previous = install_stop_handlers()
+    try:
+        limit_blas_threads(1)
+        apply_rt_options(cfg.rt)
+        freeze_gc(cfg.rt.gc_freeze)
+        log.info(
+            "cia408: valve node %d, encoder node %d on %s:%s at %g Hz, scenario %s",
+            cfg.nodes.valve_node,
+            cfg.nodes.encoder_node,
+            cfg.bus.interface,
+            cfg.bus.channel,
+            cfg.rate_hz,
+            scenario.name,
+        )
+        proc.run_realtime(stop, None if args.duration is None else round(args.duration * cfg.rate_hz))
+    finally:
+        restore_handlers(previous)
+        io.close()
+        bus.shutdown()
+    publish_summary(format_canopen_summary, proc.summary(), args.summary_json)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Configure, run until the end/stop signal, print the counters; returns the exit code."""
     cfg, scenario = _resolve(args)
+    if cfg.protocol == "cia408":
+        return run_canopen(args, cfg, scenario)
+    if scenario.device_faults():
+        log.warning("device_fault events are read with protocol cia408 only; ignored (%s)", cfg.protocol)
     params = load_params(cfg.params or None)
     codec = process_codec(cfg.dbc, cfg.ids, str(args.config), cfg.protocol, cfg.dbc_map)
     emu = PlantEmulation(params, scenario)

@@ -75,7 +75,12 @@ def _prepare_emulator(path: Path, e: EmulatorConfig) -> None:
     from ..runtime.frameio import process_codec
 
     params = load_params(e.params or None)
-    process_codec(e.dbc, e.ids, str(path), e.protocol, e.dbc_map)
+    if e.protocol == "cia408":
+        from ..protocol.cia408.check import check_nodes
+
+        check_nodes(e.nodes, str(path))
+    else:
+        process_codec(e.dbc, e.ids, str(path), e.protocol, e.dbc_map)
     if e.scenario:
         _prepare_scenario(load_scenario(e.scenario), params)
 
@@ -123,6 +128,11 @@ def _summarize(path: Path) -> str:
             f"emulator: {e.bus.interface}:{e.bus.channel} at {e.rate_hz:g} Hz, {e.mode}, "
             f"command timeout {e.command_timeout_s * 1e3:g} ms, truth {e.truth}"
             + _protocol_text(e.protocol, e.dbc_map)
+            + (
+                f", protocol cia408 (valve node {e.nodes.valve_node}, encoder node {e.nodes.encoder_node})"
+                if e.protocol == "cia408"
+                else ""
+            )
         )
     c = load_controller_config(path, data)
     _prepare_controller(path, c)

@@ -5,9 +5,10 @@ process and the lockstep transport encode and classify the logical frames SENSOR
 and VALVE_CMD by their native names and SI signals (:mod:`.logical`), and the profile decides
 which bytes carry them. ``native``: our own DBC (``dbc/ehpss.dbc``). ``dbc-map``: a vendor DBC
 and a map of the logical signals onto its messages (:mod:`.dbcmap`, checked by :mod:`.mapcheck`).
-A further profile (CANopen CiA 408) is one more entry here: its codec maps the same logical
-frames onto PDOs, and whatever it must do before the first cycle (NMT, SDO configuration) goes
-into its own start-up step.
+``cia408``: CANopen with the valve profile CiA 408 and a CiA 406 encoder (:mod:`.cia408`); the
+emulator impersonates those nodes (``firmware_sim/canopen_node/``); the controller's side, a
+codec mapping the logical frames onto PDOs plus a start-up step (NMT, SDO configuration), is
+still to come.
 """
 
 from __future__ import annotations
@@ -40,6 +41,10 @@ def make_codec(protocol: str, dbc: str, ids: CanIds, src: str, dbc_map: DbcMap |
     native = _native(dbc, ids, src)
     if protocol == "native":
         return native
+    if protocol == "cia408":
+        raise ConfigError(
+            src, "protocol", "cia408 carries no DBC frames (its nodes: ehpss_hil.protocol.cia408)"
+        )
     if protocol != "dbc-map" or dbc_map is None:
         raise ConfigError(src, "protocol", f"expected one of {', '.join(PROTOCOLS)} (dbc-map with dbc_map)")
     from .dbcmap import MappedCodec

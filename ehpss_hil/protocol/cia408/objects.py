@@ -1,0 +1,124 @@
+"""Object indices, NMT codes, the CiA 408 device-control bits, EMCY and SDO abort codes.
+
+The CiA 408 device state machine as the emulated valve implements it (a real valve's manual is
+the authority for its own bits): the control word's bits 0…2 (D, H, M) request DISABLED (D),
+HOLD (D+H) or DEVICE_MODE_ACTIVE (D+H+M); bit 3 (R) resets a fault on its rising edge. The
+status word mirrors the state in the same bits 0…2 and sets bit 3 (ready) when no fault is
+latched: FAULT (FAULT_DISABLED) shows D with R clear, FAULT_HOLD shows D+H with R clear.
+"""
+
+from __future__ import annotations
+
+import enum
+
+# ---- communication objects (CiA 301) ------------------------------------------------------
+DEVICE_TYPE = 0x1000  #: UNSIGNED32: low word the profile number, high word profile-specific
+ERROR_REGISTER = 0x1001
+DEVICE_NAME = 0x1008
+COB_ID_EMCY = 0x1014
+CONSUMER_HEARTBEAT = 0x1016  #: sub n: UNSIGNED32 (producer node << 16) | time (ms)
+PRODUCER_HEARTBEAT = 0x1017  #: UNSIGNED16 period (ms), 0 = off
+IDENTITY = 0x1018  #: sub 1 vendor-ID, 2 product code, 3 revision, 4 serial number
+RPDO_COMM, RPDO_MAP = 0x1400, 0x1600
+TPDO_COMM, TPDO_MAP = 0x1800, 0x1A00
+#: PDO communication parameter sub-indices
+PDO_COB_ID, PDO_TRANSMISSION, PDO_INHIBIT, PDO_EVENT_TIMER = 1, 2, 3, 5
+#: bit 31 of a PDO COB-ID: the PDO is not valid (off)
+PDO_INVALID = 0x8000_0000
+#: transmission types: 1…240 synchronous (every n-th SYNC), 254/255 event-driven
+PDO_SYNC_MAX = 240
+
+# ---- device profiles -------------------------------------------------------------------------
+PROFILE_VALVE = 408  #: CiA 408 fluid power (proportional valves)
+PROFILE_ENCODER = 406  #: CiA 406 encoders
+ENCODER_ABSOLUTE_LINEAR = 0x0008  #: CiA 406 device type's high word: an absolute linear encoder
+
+# ---- CiA 408 valve objects ----------------------------------------------------------------
+CONTROL_WORD = 0x6040  #: UNSIGNED16
+STATUS_WORD = 0x6041  #: UNSIGNED16
+DEVICE_MODE = 0x6042  #: INTEGER8, 1 = set-point input via the bus
+DEVICE_CONTROL_MODE = 0x6043  #: INTEGER8, 1 = spool position control, open loop
+VPOC_SETPOINT = 0x6300  #: sub 1: INTEGER16 spool set-point, ±SCALE_100_PERCENT = ±100 %
+VPOC_ACTUAL = 0x6301  #: sub 1: INTEGER16 spool actual value, same scaling
+VPOC_SUB = 1
+DEVICE_MODE_SETPOINT_VIA_BUS = 1
+CONTROL_MODE_SPOOL_OPEN_LOOP = 1
+#: the CiA 408 16-bit value of 100 % (set-point, actual value)
+SCALE_100_PERCENT = 16384
+
+# ---- CiA 406 encoder objects -----------------------------------------------------------
+POSITION_VALUE = 0x6004  #: INTEGER32 position in measuring steps
+MEASURING_STEP = 0x6005  #: sub 1: UNSIGNED32 measuring step (nm)
+
+# ---- control word / status word bits (CiA 408) -------------------------------------------
+BIT_D = 0x0001  #: disabled → enabled electronics (DISABLED)
+BIT_H = 0x0002  #: hold
+BIT_M = 0x0004  #: device mode active
+BIT_R = 0x0008  #: control word: fault reset (rising edge); status word: ready (no fault)
+STATE_BITS = BIT_D | BIT_H | BIT_M
+
+
+class DeviceState(enum.IntEnum):
+    """CiA 408 device states the emulated valve takes (the status word shows each)."""
+
+    NOT_READY = 0
+    DISABLED = 1
+    HOLD = 2
+    ACTIVE = 3  #: DEVICE_MODE_ACTIVE: the set-point drives the spool
+    FAULT = 4  #: FAULT_DISABLED
+    FAULT_HOLD = 5
+
+
+#: status word of each state (bits 0…3)
+STATUS_OF = {
+    DeviceState.NOT_READY: 0,
+    DeviceState.DISABLED: BIT_D | BIT_R,
+    DeviceState.HOLD: BIT_D | BIT_H | BIT_R,
+    DeviceState.ACTIVE: BIT_D | BIT_H | BIT_M | BIT_R,
+    DeviceState.FAULT: BIT_D,
+    DeviceState.FAULT_HOLD: BIT_D | BIT_H,
+}
+
+
+def state_of_status(word: int) -> DeviceState:
+    """The device state a status word shows (its bits 0…3); NOT_READY for any other pattern."""
+    low = word & (STATE_BITS | BIT_R)
+    for state, bits in STATUS_OF.items():
+        if bits == low:
+            return state
+    return DeviceState.NOT_READY
+
+
+# ---- NMT (CiA 301) ----------------------------------------------------------------------------
+class NmtCommand(enum.IntEnum):
+    """Command specifiers of the NMT frame (COB-ID 0x000: [command, node id or 0 = all])."""
+
+    START = 0x01
+    STOP = 0x02
+    ENTER_PRE_OPERATIONAL = 0x80
+    RESET_NODE = 0x81
+    RESET_COMMUNICATION = 0x82
+
+
+class NmtState(enum.IntEnum):
+    """NMT states as the heartbeat's byte carries them."""
+
+    BOOT_UP = 0x00
+    STOPPED = 0x04
+    OPERATIONAL = 0x05
+    PRE_OPERATIONAL = 0x7F
+
+
+# ---- EMCY (CiA 301) -----------------------------------------------------------------------
+EMCY_NO_ERROR = 0x0000  #: error reset / no error
+EMCY_HEARTBEAT = 0x8130  #: life guard or heartbeat error (the master's heartbeat was lost)
+EMCY_RPDO_TIMEOUT = 0x8250  #: an RPDO (the set-point) did not arrive within its event timer
+ERR_REG_GENERIC = 0x01
+ERR_REG_COMMUNICATION = 0x10
+
+# ---- SDO abort codes (CiA 301) -------------------------------------------------------------
+ABORT_NOT_IN_OD = 0x0602_0000  #: object does not exist in the object dictionary
+ABORT_READ_ONLY = 0x0601_0002  #: attempt to write a read-only object
+ABORT_LENGTH = 0x0607_0010  #: data type does not match, length of service parameter does not match
+ABORT_RANGE = 0x0609_0030  #: value range of parameter exceeded
+ABORT_STATE = 0x0800_0022  #: data cannot be transferred because of the present device state

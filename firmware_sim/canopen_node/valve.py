@@ -1,0 +1,121 @@
+"""The emulated CiA 408 servo valve node: set-point in, spool actual and status word out.
+
+RPDO 1 carries the control word (0x6040) and the spool set-point (0x6300.1), TPDO 1 the status
+word (0x6041) and the spool actual value (0x6301.1), both ±16384 = ±100 % (the set-point of the
+full-scale current, the actual value of the spool stroke). The plant gets
+``set-point / 16384 × full_scale_current_a`` in ACTIVE and 0 A in every other state. Faults:
+the master's heartbeat lost (0x1016) or the set-point RPDO late (0x1400.5 event timer) while
+ACTIVE → FAULT_HOLD with EMCY 0x8130 / 0x8250; an injected device fault → FAULT with its code.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from canopen.sdo import SdoAbortedError
+
+from ehpss_hil.protocol.cia408.objects import (
+    ABORT_RANGE,
+    CONTROL_WORD,
+    DEVICE_CONTROL_MODE,
+    DEVICE_MODE,
+    EMCY_HEARTBEAT,
+    EMCY_NO_ERROR,
+    EMCY_RPDO_TIMEOUT,
+    ERR_REG_COMMUNICATION,
+    ERR_REG_GENERIC,
+    SCALE_100_PERCENT,
+    STATUS_WORD,
+    VPOC_ACTUAL,
+    VPOC_SETPOINT,
+    VPOC_SUB,
+    DeviceState,
+)
+
+from .device import ValveStateMachine
+from .node import CanopenSlave, Send
+from .store import Key
+
+log = logging.getLogger("firmware_sim")
+_INT16_MAX = 32767
+
+
+class ValveNode(CanopenSlave):
+    """A CiA 408 valve; ``full_scale_current_a`` (A) is the current of a +100 % set-point and
+    ``stroke_m`` (m) the spool travel of a +100 % actual value."""
+
+    def __init__(
+        self,
+        node_id: int,
+        od: Any,
+        send: Send,
+        full_scale_current_a: float,
+        stroke_m: float,
+        overrides: dict[Key, int] | None = None,
+    ) -> None:
+        self.device = ValveStateMachine()
+        self.full_scale_current_a = full_scale_current_a
+        self._actual_per_m = SCALE_100_PERCENT / stroke_m
+        self.spool_actual = 0
+        super().__init__(node_id, od, send, overrides)
+        self.store.live[(STATUS_WORD, 0)] = lambda: self.device.status_word
+        self.store.live[(VPOC_ACTUAL, VPOC_SUB)] = lambda: self.spool_actual
+
+    # ---- process values ---------------------------------------------------------------------
+    def current_a(self) -> float:
+        """The coil current the amplifier applies (A): the set-point's share of full scale in
+        ACTIVE, else 0."""
+        if self.device.state != DeviceState.ACTIVE:
+            return 0.0
+        return int(self.store.get(VPOC_SETPOINT, VPOC_SUB)) / SCALE_100_PERCENT * self.full_scale_current_a
+
+    def measure(self, spool_m: float) -> None:
+        """The spool position measured this period (m) → the actual value (0x6301.1)."""
+        v = round(spool_m * self._actual_per_m)
+        self.spool_actual = max(-_INT16_MAX, min(_INT16_MAX, v))
+
+    # ---- hooks ------------------------------------------------------------------------------
+    def reset_application(self) -> None:
+        self.device = ValveStateMachine()
+        self.device.power_on()
+
+    def _control_word(self, word: int) -> None:
+        was = self.device.state
+        if self.device.command(word):
+            self.send_emcy(EMCY_NO_ERROR, 0)
+        if self.device.state != was:
+            log.info("valve %d: %s -> %s", self.node_id, was.name, self.device.state.name)
+
+    def on_rpdo(self, values: list[tuple[Any, Any]]) -> None:
+        for var, value in values:
+            if (var.index, var.subindex) == (VPOC_SETPOINT, VPOC_SUB):
+                value = max(-SCALE_100_PERCENT, min(SCALE_100_PERCENT, int(value)))
+            self.store.set(var.index, var.subindex, value)
+            if var.index == CONTROL_WORD:
+                self._control_word(int(value))
+
+    def on_object_write(self, index: int, sub: int, value: Any) -> None:
+        if index == CONTROL_WORD:
+            self._control_word(int(value))
+        elif index in (DEVICE_MODE, DEVICE_CONTROL_MODE) and self.device.state == DeviceState.ACTIVE:
+            raise SdoAbortedError(ABORT_RANGE)
+
+    def on_heartbeat_lost(self, producer: int) -> None:
+        self._fault(EMCY_HEARTBEAT, ERR_REG_GENERIC | ERR_REG_COMMUNICATION, hold=True)
+
+    def on_rpdo_timeout(self, comm_index: int) -> None:
+        if self.device.state == DeviceState.ACTIVE:
+            self._fault(EMCY_RPDO_TIMEOUT, ERR_REG_GENERIC | ERR_REG_COMMUNICATION, hold=True)
+
+    def inject_fault(self, code: int) -> None:
+        """A device fault with EMCY ``code`` (a scenario's ``device_fault`` event) → FAULT."""
+        self._fault(code, ERR_REG_GENERIC, hold=False)
+
+    def _fault(self, code: int, register: int, hold: bool) -> None:
+        was = self.device.state
+        if self.device.fault(code, hold):
+            log.warning(
+                "valve %d: %s -> %s (EMCY 0x%04X)", self.node_id, was.name, self.device.state.name, code
+            )
+            self.send_emcy(code, register)

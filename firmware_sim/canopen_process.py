@@ -1,0 +1,189 @@
+"""The emulator's loop for ``protocol: cia408``: the plant behind a CiA 408 valve node and a
+CiA 406 encoder node (:mod:`.canopen_node`).
+
+Realtime, each period k (fixed deadline grid, plant time t = k·Ts): drain RX without blocking →
+each frame to both nodes (NMT, SDO, RPDO, the master's heartbeat), SYNCs counted → the
+scenario's ``device_fault`` events due → the nodes' clocks (heartbeats, timeouts) → the valve's
+current (ACTIVE: set-point × full scale, else 0 A) → measure y[k]: spool actual and position
+value → one round of synchronous TPDOs per SYNC received → advance the plant over [k, k+1).
+The TPDOs answering a SYNC thus carry the sample of the period in which it arrived.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from ehpss_hil.config import Cia408Config
+from ehpss_hil.emulation import PlantEmulation
+from ehpss_hil.protocol.cia408 import cobid
+from ehpss_hil.protocol.cia408.objects import CONSUMER_HEARTBEAT, PRODUCER_HEARTBEAT, RPDO_COMM
+from ehpss_hil.runtime.deadline import DeadlineTimer
+from ehpss_hil.runtime.rawio import RawFrameIO
+from ehpss_hil.runtime.signals import StopFlag
+from ehpss_hil.runtime.stats import LoopStats
+
+from .canopen_node.encoder import EncoderNode
+from .canopen_node.node import CanopenSlave
+from .canopen_node.valve import ValveNode
+
+log = logging.getLogger("firmware_sim")
+
+
+@dataclass(frozen=True)
+class CanopenOptions:
+    """Run options: ``stats_capacity`` samples of the loop statistics."""
+
+    stats_capacity: int = 600_000
+
+
+def build_nodes(
+    c: Cia408Config, valve_od: Any, encoder_od: Any, io: RawFrameIO, stroke_m: float
+) -> tuple[ValveNode, EncoderNode]:
+    """The two nodes from the config and their object dictionaries; the config's times are the
+    power-on values of 0x1017, 0x1016.1 and 0x1400.5."""
+    hb = {(PRODUCER_HEARTBEAT, 0): c.heartbeat_time_ms}
+    valve = ValveNode(
+        c.valve_node,
+        valve_od,
+        io.send,
+        c.full_scale_current_a,
+        stroke_m,
+        {
+            **hb,
+            (CONSUMER_HEARTBEAT, 1): (c.master_node << 16) | c.master_heartbeat_timeout_ms
+            if c.master_heartbeat_timeout_ms
+            else 0,
+            (RPDO_COMM, 5): c.setpoint_timeout_ms,
+        },
+    )
+    encoder = EncoderNode(c.encoder_node, encoder_od, io.send, hb)
+    return valve, encoder
+
+
+class CanopenEmulatorProcess:
+    """The emulated plant with its valve and encoder nodes on one bus (periods of ``emu.ts_s``)."""
+
+    def __init__(
+        self,
+        emu: PlantEmulation,
+        io: RawFrameIO,
+        valve: ValveNode,
+        encoder: EncoderNode,
+        opts: CanopenOptions,
+    ) -> None:
+        self.emu = emu
+        self.io = io
+        self.valve = valve
+        self.encoder = encoder
+        self.nodes: tuple[CanopenSlave, ...] = (valve, encoder)
+        self.stats = LoopStats(opts.stats_capacity)
+        self._device_faults = emu.scenario.device_faults()
+        self.periods = 0
+        self.skipped_periods = 0
+        self.syncs = 0
+        self.unused_frames = 0
+        self.applied_a = 0.0
+
+    @property
+    def t_s(self) -> float:
+        """Plant time of the current sample (s)."""
+        return self.emu.k * self.emu.ts_s
+
+    def boot(self) -> None:
+        """Power-on of both nodes: boot-up messages, PRE-OPERATIONAL."""
+        for node in self.nodes:
+            node.boot(self.t_s)
+
+    def _receive(self) -> int:
+        """Hand every pending frame to the nodes; returns the SYNCs among them."""
+        syncs, t = 0, self.t_s
+        for msg in self.io.drain():
+            if msg.arbitration_id == cobid.SYNC:
+                syncs += 1
+                continue
+            if msg.is_extended_id or msg.is_remote_frame:
+                self.unused_frames += 1
+                continue
+            data = bytes(msg.data)
+            used = [node.on_frame(msg.arbitration_id, data, t) for node in self.nodes]
+            if not any(used):
+                self.unused_frames += 1
+        return syncs
+
+    def _due_faults(self) -> None:
+        while self._device_faults and self._device_faults[0][0] <= self.emu.k:
+            _, code = self._device_faults.pop(0)
+            log.info("t=%.4f s: device fault 0x%04X", self.t_s, code)
+            self.valve.inject_fault(code)
+
+    def step_period(self, skipped: int = 0) -> float:
+        """One realtime period (no waiting); returns the current applied over it (A). Periods
+        the loop slept through (``skipped``) advance the plant with the same current."""
+        syncs = self._receive()
+        self._due_faults()
+        for node in self.nodes:
+            node.tick(self.t_s)
+        current = self.valve.current_a()
+        for _ in range(skipped):
+            self.emu.measure()  # the noise streams stay on the sample grid
+            self.emu.advance(current)
+            self.skipped_periods += 1
+            self.periods += 1
+        y = self.emu.measure()
+        self.valve.measure(y.spool_m)
+        self.encoder.measure(y.position_m)
+        for _ in range(syncs):
+            for node in self.nodes:
+                node.on_sync()
+        self.syncs += syncs
+        self.applied_a = self.emu.advance(current)
+        self.periods += 1
+        self.io.idle()
+        return self.applied_a
+
+    def run_realtime(self, stop: StopFlag, n_periods: int | None = None) -> None:
+        """Boot the nodes, then run on the deadline grid until ``stop`` or ``n_periods``."""
+        timer = DeadlineTimer(self.emu.ts_s, name="firmware-sim")
+        self.boot()
+        timer.start()
+        perf = time.perf_counter
+        while not stop and (n_periods is None or self.periods < n_periods):
+            lateness = timer.wait()
+            t0 = perf()
+            skipped = timer.last_skipped
+            if n_periods is not None:
+                skipped = min(skipped, max(0, n_periods - self.periods - 1))
+            self.step_period(skipped)
+            self.stats.compute.add(perf() - t0)
+            self.stats.lateness.add(lateness)
+        self.stats.overruns = timer.overruns
+        self.stats.skipped = timer.skipped
+
+    def summary(self) -> dict[str, Any]:
+        """Counters and period statistics (JSON-able)."""
+        v = self.valve
+        return {
+            "periods": self.periods,
+            "skipped_periods": self.skipped_periods,
+            "frames_sent": {f"0x{k:03X}": n for k, n in sorted(self.io.sent.items())},
+            "tx_errors": self.io.tx_errors,
+            "frames_received": self.io.received,
+            "unused_frames": self.unused_frames,
+            "syncs": self.syncs,
+            "nodes": {
+                f"{type(n).__name__}:{n.node_id}": {
+                    "nmt": n.nmt.name,
+                    "sdo_requests": n.sdo_requests,
+                    "rpdos": n.rpdos,
+                    "tpdos": n.tpdos,
+                    "emcy": n.emcy_sent,
+                }
+                for n in self.nodes
+            },
+            "valve_state": v.device.state.name,
+            "valve_transitions": v.device.transitions,
+            "stats": self.stats.summary(),
+        }

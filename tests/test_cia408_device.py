@@ -1,0 +1,150 @@
+"""The emulated nodes stepped period by period (no thread, no clock): the CiA 408 device state
+machine, heartbeat and timeouts counted in plant time, PDOs on SYNC, NMT."""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterator
+
+import can
+import pytest
+
+from ehpss_hil.config import Cia408Config
+from ehpss_hil.emulation import PlantEmulation
+from ehpss_hil.physics.params import load_params
+from ehpss_hil.protocol.cia408 import cobid
+from ehpss_hil.protocol.cia408.check import check_nodes
+from ehpss_hil.protocol.cia408.objects import DeviceState, NmtCommand, NmtState
+from ehpss_hil.runtime.rawio import RawFrameIO
+from ehpss_hil.scenario import Scenario
+from firmware_sim.canopen_node.device import ValveStateMachine
+from firmware_sim.canopen_process import CanopenEmulatorProcess, CanopenOptions, build_nodes
+
+
+def test_state_machine_follows_the_control_word_and_latches_faults() -> None:
+    sm = ValveStateMachine()
+    assert sm.command(0x0007) is False and sm.state == DeviceState.NOT_READY  # not initialised
+    sm.power_on()
+    steps = [
+        (0x0001, DeviceState.DISABLED, 0x0009),
+        (0x0003, DeviceState.HOLD, 0x000B),
+        (0x0007, DeviceState.ACTIVE, 0x000F),
+        (0x0005, DeviceState.DISABLED, 0x0009),  # M without H: not a HOLD/ACTIVE request
+        (0x0007, DeviceState.ACTIVE, 0x000F),
+    ]
+    for word, state, status in steps:
+        sm.command(word)
+        assert (sm.state, sm.status_word) == (state, status)
+    assert sm.fault(0x8130, hold=True) and sm.status_word == 0x0003
+    assert not sm.fault(0x5000, hold=False) and sm.fault_code == 0x8130  # the first fault stays
+    sm.command(0x000F)  # R rises: reset → DISABLED
+    assert (sm.state, sm.fault_code) == (DeviceState.DISABLED, 0)
+    sm.fault(0x5000, hold=False)
+    assert sm.status_word == 0x0001
+    assert sm.command(0x000F) is False  # R held high: no rising edge
+    assert sm.command(0x0000) is False and sm.command(0x0008) is True
+    assert sm.state == DeviceState.DISABLED
+
+
+class Stepper:
+    """The emulator process and a peer on one virtual bus; the test steps the periods."""
+
+    def __init__(self, channel: str, cfg: Cia408Config) -> None:
+        self.cfg = cfg
+        params = load_params()
+        self.bus = can.Bus(interface="virtual", channel=channel)
+        self.peer = can.Bus(interface="virtual", channel=channel)
+        io = RawFrameIO(self.bus)
+        v_od, e_od = check_nodes(cfg, "test")
+        valve, enc = build_nodes(cfg, v_od, e_od, io, params.plant.spool_stroke_m)
+        self.proc = CanopenEmulatorProcess(
+            PlantEmulation(params, Scenario(name="s", duration_s=100.0)), io, valve, enc, CanopenOptions(1000)
+        )
+        self.proc.boot()
+
+    def send(self, can_id: int, data: bytes) -> None:
+        self.peer.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
+
+    def step(self, n: int = 1) -> None:
+        for _ in range(n):
+            self.proc.step_period()
+
+    def frames(self) -> Iterator[can.Message]:
+        while (m := self.peer.recv(0.0)) is not None:
+            yield m
+
+    def close(self) -> None:
+        self.bus.shutdown()
+        self.peer.shutdown()
+
+
+@pytest.fixture
+def stepper(request: pytest.FixtureRequest) -> Iterator[Stepper]:
+    s = Stepper(f"step-{request.node.name}", Cia408Config(setpoint_timeout_ms=20))
+    yield s
+    s.close()
+
+
+def test_heartbeats_every_100_periods_and_tpdos_per_sync_only_when_operational(stepper: Stepper) -> None:
+    v, e = stepper.cfg.valve_node, stepper.cfg.encoder_node
+    boot = [(m.arbitration_id, bytes(m.data)) for m in stepper.frames()]
+    assert boot == [(cobid.HEARTBEAT + v, b"\x00"), (cobid.HEARTBEAT + e, b"\x00")]
+    stepper.send(cobid.SYNC, b"")
+    stepper.step(1001)  # t = 0 … 1 s at 1 kHz: heartbeats at 0.1 … 1.0 s
+    got = [m.arbitration_id for m in stepper.frames()]
+    assert got.count(cobid.HEARTBEAT + v) == 10 and got.count(cobid.HEARTBEAT + e) == 10
+    assert cobid.TPDO1 + v not in got  # PRE-OPERATIONAL: no PDO
+    stepper.send(cobid.NMT, bytes([NmtCommand.START, 0]))  # all nodes
+    stepper.send(cobid.SYNC, b"")
+    stepper.send(cobid.SYNC, b"")
+    stepper.step()
+    tpdo = [(m.arbitration_id, bytes(m.data)) for m in stepper.frames() if m.arbitration_id & 0x780 == 0x180]
+    assert tpdo == [(0x180 + v, b"\x09\x00\x00\x00"), (0x180 + e, b"\x00" * 4)] * 2  # DISABLED, at rest
+    stepper.send(cobid.NMT, bytes([NmtCommand.STOP, v]))
+    stepper.send(cobid.SYNC, b"")
+    stepper.step(100)
+    got2 = [(m.arbitration_id, bytes(m.data)) for m in stepper.frames()]
+    assert (cobid.HEARTBEAT + v, bytes([NmtState.STOPPED])) in got2
+    assert [i for i, _ in got2 if i & 0x780 == 0x180] == [0x180 + e]
+
+
+def test_setpoint_timeout_is_counted_in_plant_periods(stepper: Stepper) -> None:
+    v = stepper.cfg.valve_node
+    stepper.send(cobid.NMT, bytes([NmtCommand.START, v]))
+    stepper.step()
+    stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, 1638))  # ACTIVE, +10 %
+    stepper.step()
+    valve = stepper.proc.valve
+    assert valve.device.state == DeviceState.ACTIVE
+    assert valve.current_a() == pytest.approx(1638 / 16384 * stepper.cfg.full_scale_current_a)
+    k_seen = stepper.proc.emu.k - 1  # the RPDO was handled in the period just stepped
+    stepper.step(19)
+    assert valve.device.state == DeviceState.ACTIVE  # 20 ms event timer not exceeded yet
+    while valve.device.state == DeviceState.ACTIVE:
+        stepper.step()
+    assert stepper.proc.emu.k - 1 - k_seen == 21  # > 20 ms after the last RPDO
+    assert valve.device.state == DeviceState.FAULT_HOLD and valve.current_a() == 0.0
+    emcy = [bytes(m.data) for m in stepper.frames() if m.arbitration_id == cobid.EMCY + v]
+    assert emcy == [struct.pack("<HB5x", 0x8250, 0x11)]
+
+
+def test_reset_communication_keeps_the_device_state_and_restores_comm_objects(stepper: Stepper) -> None:
+    v = stepper.cfg.valve_node
+    valve = stepper.proc.valve
+    valve.store.set(0x1017, 0, 7)
+    stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0003, 0))  # PRE-OPERATIONAL: RPDO ignored
+    stepper.step()
+    assert valve.device.state == DeviceState.DISABLED and valve.rpdos == 0
+    stepper.send(cobid.SDO_RX + v, bytes([0x2B, 0x40, 0x60, 0x00, 0x03, 0x00, 0, 0]))  # 0x6040 := 3
+    stepper.step()
+    assert valve.device.state == DeviceState.HOLD
+    stepper.send(cobid.NMT, bytes([NmtCommand.RESET_COMMUNICATION, v]))
+    stepper.step()
+    assert valve.store.get(0x1017) == stepper.cfg.heartbeat_time_ms and valve.device.state == DeviceState.HOLD
+    stepper.send(cobid.NMT, bytes([NmtCommand.RESET_NODE, v]))
+    stepper.step()
+    assert valve.device.state == DeviceState.DISABLED and valve.nmt == NmtState.PRE_OPERATIONAL
+    boots = [
+        m for m in stepper.frames() if m.arbitration_id == cobid.HEARTBEAT + v and bytes(m.data) == b"\x00"
+    ]
+    assert len(boots) == 3  # power-on, reset communication, reset node
