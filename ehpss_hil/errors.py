@@ -112,3 +112,10 @@ def run_console(prog: str, fn: Callable[[], int]) -> int:
         return exc.exit_code
     except KeyboardInterrupt:
         return 130
+
+
+class ClusterError(EhpssError, ConnectionError):
+    """A compute cluster (the Dask scheduler of ``ehpss-hil campaign --scheduler``) cannot be
+    reached or used."""
+
+    exit_code = 3

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ..control.registry import MODES
 from ..report.metrics import RunMetrics
-from ..sim.campaign import Job, default_jobs, run_campaign, scenario_paths
+from ..sim.jobs import Job, default_jobs, run_jobs, scenario_paths
 from ..sim.lockstep import TRANSPORTS
 
 NAME = "sim"
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     paths = scenario_paths(args.scenarios)
     jobs = [Job(p, m, args.transport, keep_result=bool(args.plot)) for p in paths for m in modes]
     t0 = time.perf_counter()
-    outcomes = run_campaign(jobs, args.jobs)
+    outcomes = run_jobs(jobs, args.jobs)
     wall = time.perf_counter() - t0
     rows = [o.metrics for o in outcomes]
     print(format_table(rows))
