@@ -245,3 +245,13 @@ def test_the_shipped_campaigns_load() -> None:
     quick = load_campaign(ROOT / "campaigns" / "quick.yaml")
     qual = load_campaign(ROOT / "campaigns" / "qualification.yaml")
     assert 40 <= quick.spec.samples <= 64 and qual.spec.samples >= 2000
+
+
+def test_bench_campaign_prints_every_row_and_writes_its_figures(tmp_path: Path) -> None:
+    js = tmp_path / "bench.json"
+    out = _cli("bench", "campaign", "--runs", "2", "--no-dask", "--json", str(js))
+    assert out.returncode == 0, out.stderr
+    assert "speed-up local ×2 / ×1" in out.stdout and "mmac offline speed" in out.stdout
+    data = json.loads(js.read_text())
+    assert [e["runs"] for e in data["executors"]] == [2, 2]
+    assert all(e["run_s"] > 0.0 for e in data["executors"]) and data["mmac_speed"]["median"] > 0.0
