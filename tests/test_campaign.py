@@ -245,6 +245,12 @@ def test_the_shipped_campaigns_load() -> None:
     quick = load_campaign(ROOT / "campaigns" / "quick.yaml")
     qual = load_campaign(ROOT / "campaigns" / "qualification.yaml")
     assert 40 <= quick.spec.samples <= 64 and qual.spec.samples >= 2000
+    out = _cli(
+        "check-config", str(ROOT / "campaigns" / "quick.yaml"), str(ROOT / "campaigns" / "qualification.yaml")
+    )
+    assert out.returncode == 0, out.stderr
+    assert "campaign quick: 48 runs of 3 s (sobol)" in out.stdout
+    assert "campaign qualification: 2048 runs" in out.stdout
 
 
 def test_bench_campaign_prints_every_row_and_writes_its_figures(tmp_path: Path) -> None:

@@ -21,8 +21,19 @@ from .spec import FAULT_KINDS
 
 #: bins per axis of a coverage map
 MAP_BINS = 8
-#: colour range of the mmac/oracle RMS ratio (log scale)
-RATIO_RANGE = (1.0, 100.0)
+#: colour range of the mmac/oracle RMS ratio (log scale, 1 in the middle: blue = mmac better
+#: than the oracle, red = worse)
+RATIO_RANGE = (0.01, 100.0)
+#: y-axis label per fault kind (what its magnitude is)
+MAGNITUDE_LABEL = {
+    "loe": "k_LOE",
+    "kq": "k_Q",
+    "drift": "k_DFT",
+    "sensor_failure": "k_DFT (fixed 0)",
+    "bias": "bias (m)",
+    "stuck": "(no magnitude)",
+    "frame_loss": "loss probability",
+}
 
 
 def _binned_median(x: np.ndarray, y: np.ndarray, v: np.ndarray, bins: int) -> tuple[Any, Any, Any]:
@@ -52,7 +63,7 @@ def _map(ax: Any, x: np.ndarray, y: np.ndarray, v: np.ndarray) -> Any:
     from matplotlib.colors import LogNorm
 
     xe, ye, grid = _binned_median(x, y, np.clip(v, *RATIO_RANGE), MAP_BINS)
-    return ax.pcolormesh(xe, ye, grid, norm=LogNorm(*RATIO_RANGE), cmap="viridis", shading="flat")
+    return ax.pcolormesh(xe, ye, grid, norm=LogNorm(*RATIO_RANGE), cmap="RdBu_r", shading="flat")
 
 
 def coverage_loe_drift(rows: Sequence[dict[str, Any]], path: Path) -> Path | None:
@@ -64,14 +75,13 @@ def coverage_loe_drift(rows: Sequence[dict[str, Any]], path: Path) -> Path | Non
         return None
     loe = 1.0 - np.nan_to_num(_col(sel, "loe.magnitude"), nan=1.0)
     drift = np.abs(1.0 - np.nan_to_num(_col(sel, "drift.magnitude"), nan=1.0))
-    fig, ax = plt.subplots(figsize=(6.4, 5.0))
+    fig, ax = plt.subplots(figsize=(6.4, 5.0), layout="constrained")
     mesh = _map(ax, loe, drift, _ratio(sel))
     ax.scatter(loe, drift, s=6, c="white", edgecolors="black", linewidths=0.3)
     ax.set_xlabel("LOE 1 − k_LOE")
     ax.set_ylabel("drift |1 − k_DFT|")
     ax.set_title(f"mmac / oracle RMS (median per cell), {len(sel)} runs")
     fig.colorbar(mesh, ax=ax, label="mmac / oracle RMS")
-    fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -86,7 +96,9 @@ def coverage_onset(rows: Sequence[dict[str, Any]], path: Path) -> Path | None:
         return None
     ncol = min(4, len(kinds))
     nrow = -(-len(kinds) // ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.6 * ncol, 3.0 * nrow), squeeze=False)
+    fig, axes = plt.subplots(
+        nrow, ncol, figsize=(3.6 * ncol, 3.0 * nrow), squeeze=False, layout="constrained"
+    )
     mesh: Any = None
     for ax, kind in zip(axes.flat, kinds, strict=False):
         sel = [r for r in rows if not np.isnan(r[f"{kind}.onset_s"])]
@@ -95,11 +107,11 @@ def coverage_onset(rows: Sequence[dict[str, Any]], path: Path) -> Path | None:
         ax.scatter(x, y, s=4, c="white", edgecolors="black", linewidths=0.2)
         ax.set_title(f"{kind} ({len(sel)} runs)", fontsize=9)
         ax.set_xlabel("onset (s)", fontsize=8)
-        ax.set_ylabel("magnitude", fontsize=8)
+        ax.set_ylabel(MAGNITUDE_LABEL[kind], fontsize=8)
     for ax in list(axes.flat)[len(kinds) :]:
         ax.set_visible(False)
     fig.suptitle("mmac / oracle RMS over fault onset × magnitude (median per cell)")
-    fig.colorbar(mesh, ax=axes.ravel().tolist(), label="mmac / oracle RMS")
+    fig.colorbar(mesh, ax=axes, label="mmac / oracle RMS")
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
@@ -109,19 +121,20 @@ def distributions(rows: Sequence[dict[str, Any]], modes: Sequence[str], path: Pa
     """Histograms of recovery time (finite) and switches per run, per mode."""
     import matplotlib.pyplot as plt
 
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8), layout="constrained")
+    top = max(int(_col(rows, f"{m}.switches").max()) for m in modes)
+    edges = np.arange(top + 2) - 0.5  # one bin per whole number of switches
     for m in modes:
         rec = _col(rows, f"{m}.recovery_s")
         never = int(np.count_nonzero(np.isinf(rec)))
         a1.hist(rec[np.isfinite(rec)], bins=30, histtype="step", label=f"{m} ({never} never)")
-        a2.hist(_col(rows, f"{m}.switches"), bins=30, histtype="step", label=m)
+        a2.hist(_col(rows, f"{m}.switches"), bins=edges, histtype="step", label=m)
     a1.set_xlabel("longest recovery per run (s)")
     a1.set_ylabel("runs")
     a1.legend(fontsize=8)
     a2.set_xlabel("model switches per run")
-    a2.set_yscale("log")
+    a2.set_ylabel("runs")
     a2.legend(fontsize=8)
-    fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path

@@ -197,11 +197,13 @@ def canonical_json(data: Any) -> str:
     return json.dumps(data, sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
-def load_campaign(path: str | Path) -> Campaign:
-    """Load and validate a campaign file and its base scenario. The content hash covers the
-    parsed campaign (not its comments or layout) and the parsed base scenario."""
+def load_campaign(path: str | Path, data: object = None) -> Campaign:
+    """Load and validate a campaign file (``data``: its parsed content, when the caller read it
+    already) and its base scenario. The content hash covers the parsed campaign (not its comments
+    or layout) and the parsed base scenario."""
     p = Path(path)
-    data = load_yaml(p)
+    if data is None:
+        data = load_yaml(p)
     spec = build(CampaignSpec, data, str(p))
     base_path = p.parent / spec.base
     base_data = load_yaml(base_path)
