@@ -261,3 +261,12 @@ def test_bench_campaign_prints_every_row_and_writes_its_figures(tmp_path: Path) 
     data = json.loads(js.read_text())
     assert [e["runs"] for e in data["executors"]] == [2, 2]
     assert all(e["run_s"] > 0.0 for e in data["executors"]) and data["mmac_speed"]["median"] > 0.0
+
+
+def test_a_bad_scheduler_address_is_one_line_exit_3(reference: tuple[Path, Path], tmp_path: Path) -> None:
+    f, _one = reference
+    out = _cli("campaign", str(f), "--scheduler", "bogus://x", "--out", str(tmp_path / "o"))
+    assert out.returncode == 3
+    errors = [line for line in out.stderr.splitlines() if "error" in line.lower()]
+    assert len(errors) == 1 and "bad Dask scheduler address 'bogus://x'" in errors[0]
+    assert "Traceback" not in out.stderr

@@ -56,7 +56,13 @@ def run_dask(tasks: Sequence[RunTask], address: str, on_result: OnResult) -> Non
     """Run ``tasks`` on the Dask cluster whose scheduler listens at ``address``
     (``tcp://host:8786``); ClusterError when it cannot be reached."""
     from distributed import Client, as_completed
+    from distributed.comm import parse_address
+    from distributed.comm.registry import get_backend
 
+    try:  # a bad address before a Client exists (a half-built one hangs in its finalizer)
+        get_backend(parse_address(address)[0])
+    except (ValueError, TypeError) as exc:
+        raise ClusterError(f"bad Dask scheduler address {address!r}: {exc}") from exc
     try:
         client = Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as exc:
