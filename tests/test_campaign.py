@@ -113,6 +113,7 @@ def test_a_real_dask_cluster_gives_the_bit_identical_table(
     print(out.stdout, out.stderr)
     assert out.returncode == 0, out.stderr
     assert "8 run(s) done" in out.stdout
+    assert "campaign: 8/8 runs (100.0 %)" in out.stderr and "runs/s, ETA" in out.stderr  # progress
     assert _digest(tmp_path / "dask") == _digest(one)
 
 
@@ -208,6 +209,7 @@ def test_an_existing_campaign_directory_needs_resume(reference: tuple[Path, Path
         ("count: [1, 2]", "faults.count"),
         ("duration_s: 0.5", "faults.onset_s"),
         ("seed: 3", "colour"),
+        ("stuck: {}", "faults.kinds.stuck.magnitude"),
     ],
 )
 def test_bad_campaign_files_are_one_line_errors_naming_file_and_key(
@@ -221,6 +223,7 @@ def test_bad_campaign_files_are_one_line_errors_naming_file_and_key(
         "count: [1, 2]": "count: [1, 6]",
         "duration_s: 0.5": "duration_s: 0.2",
         "seed: 3": "seed: 3\ncolour: red",
+        "stuck: {}": "stuck: {magnitude: [1, 1]}",
     }[change]
     f = _tiny(tmp_path / "bad.yaml")
     f.write_text(

@@ -50,7 +50,8 @@ class KindDist:
     and stuck have none)."""
 
     weight: float = field(default=1.0, metadata=rng(0.0, 1e6))
-    magnitude: tuple[float, ...] = field(default=(0.0, 0.0), metadata=_pair(-0.1, 2.5, "kind's unit"))
+    #: None: the kind's :data:`DEFAULT_MAGNITUDE`
+    magnitude: tuple[float, ...] | None = field(default=None, metadata=_pair(-0.1, 2.5, "kind's unit"))
 
 
 #: allowed magnitude per kind (inclusive bounds; the scenario schema's own ranges)
@@ -86,11 +87,13 @@ class FaultKinds:
     def __post_init__(self) -> None:
         for kind in FAULT_KINDS:
             dist = getattr(self, kind)
-            if dist is None or kind not in MAGNITUDE_BOUNDS:
+            if dist is None or dist.magnitude is None:
                 continue
+            if kind not in MAGNITUDE_BOUNDS:
+                raise ConfigError("", f"{kind}.magnitude", "this fault kind has no magnitude")
             lo, hi = dist.magnitude
             blo, bhi = MAGNITUDE_BOUNDS[kind]
-            if (lo, hi) != (0.0, 0.0) and not (blo <= lo <= hi <= bhi):
+            if not (blo <= lo <= hi <= bhi):
                 raise ConfigError(
                     "", f"{kind}.magnitude", f"expected low <= high within [{blo}, {bhi}], got [{lo}, {hi}]"
                 )
@@ -102,10 +105,9 @@ class FaultKinds:
     def magnitude(self, kind: str) -> tuple[float, float]:
         """The magnitude range of ``kind`` (its default when the file gives none)."""
         dist = getattr(self, kind)
-        given = tuple(dist.magnitude) if dist is not None else (0.0, 0.0)
-        if given == (0.0, 0.0):
+        if dist is None or dist.magnitude is None:
             return DEFAULT_MAGNITUDE.get(kind, (0.0, 0.0))
-        return (given[0], given[1])
+        return (dist.magnitude[0], dist.magnitude[1])
 
 
 @dataclass(frozen=True)
