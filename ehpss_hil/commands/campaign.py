@@ -25,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "-j",
         type=int,
         default=default_workers(),
-        help="local worker processes (default: all cores)",
+        help="local worker processes (default: all cores; ignored with --scheduler)",
     )
     p.add_argument(
         "--scheduler", metavar="ADDRESS", help="run on the Dask cluster of this scheduler (tcp://host:8786)"
