@@ -182,6 +182,12 @@ def test_worst_case_scenarios_rerun_exactly_with_sim(reference: tuple[Path, Path
     rows = {r["index"]: r for r in pq.read_table(out / PARQUET_NAME).to_pylist()}
     worst = sorted((out / "worst" / "all").glob("*.yaml"))
     assert len(worst) == 5
+    summary = json.loads((out / "summary.json").read_text())["classes"]
+    assert summary[-1]["fault_class"] == "all" and summary[-1]["runs"] == 8
+    assert sum(c["runs"] for c in summary[:-1]) == 8
+    top = summary[-1]["worst"][0]
+    assert top["rms_m"]["mmac"] == rows[top["index"]]["mmac.rms_error_m"]
+    assert worst[0].name == f"1-run{top['index']:05d}.yaml"
     for path in worst[:2]:
         index = int(path.stem.split("run")[1])
         js = tmp_path / f"{path.stem}.json"

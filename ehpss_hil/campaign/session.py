@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..canlog.sidecar import write_json_atomic
 from ..errors import OutputError
 from .executors import run_dask, run_local
 from .figures import write_figures
@@ -22,10 +23,11 @@ from .progress import Progress
 from .runs import RunTask
 from .sampling import RunPlan, plan_runs
 from .spec import Campaign
-from .summary import ClassSummary, summarize, summary_markdown, write_worst
+from .summary import ClassSummary, summarize, summary_json, summary_markdown, write_worst
 from .table import build_rows, to_table, write_table
 
 SUMMARY_NAME = "summary.md"
+SUMMARY_JSON_NAME = "summary.json"
 
 
 @dataclass
@@ -134,6 +136,7 @@ def finish(
     path = out / SUMMARY_NAME
     try:
         path.write_text(summary_markdown(spec.name, header, outcome.summaries, figs, out))
+        write_json_atomic(out / SUMMARY_JSON_NAME, summary_json(outcome.summaries))
     except OSError as exc:
         raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
-    outcome.files.append(path)
+    outcome.files += [path, out / SUMMARY_JSON_NAME]

@@ -97,6 +97,22 @@ def write_worst(summaries: Sequence[ClassSummary], plans: Sequence[RunPlan], out
             w.path = write_scenario(by_index[w.index].scenario, out / WORST_DIR / cs.fault_class / name)
 
 
+def summary_json(summaries: Sequence[ClassSummary]) -> dict[str, Any]:
+    """The per-class figures as JSON (``summary.json``; RMS in m, worst runs by index)."""
+    return {
+        "classes": [
+            {
+                "fault_class": cs.fault_class,
+                "runs": cs.runs,
+                "compensated_pct": cs.compensated_pct,
+                "harm_pct": cs.harm_pct,
+                "worst": [{"index": w.index, "rms_m": w.rms_m} for w in cs.worst],
+            }
+            for cs in summaries
+        ]
+    }
+
+
 def _um(x: float) -> str:
     return f"{x * 1e6:.1f}"
 
