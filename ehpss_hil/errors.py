@@ -159,3 +159,10 @@ def _memory_limits() -> str:
     if threads and threads != "1":
         parts.append(f"OPENBLAS_NUM_THREADS={threads} (each BLAS thread reserves its own buffers)")
     return "; " + ", ".join(parts) if parts else ""
+
+
+class ClusterError(EhpssError, ConnectionError):
+    """A compute cluster (the Dask scheduler of ``ehpss-hil campaign --scheduler``) cannot be
+    reached or used."""
+
+    exit_code = 3

@@ -41,3 +41,8 @@ MAX_REFERENCE_M = 0.5
 #: their inverses, so every scenario the simulator runs also runs on the bench
 MIN_RATE_HZ = 10.0
 MAX_RATE_HZ = 10000.0
+
+#: most runs in one campaign file (``samples``); each run simulates every mode of the campaign
+MAX_CAMPAIGN_RUNS = 1_000_000
+#: most faults injected at once in one campaign run (one per fault kind at most)
+MAX_FAULTS_PER_RUN = 7

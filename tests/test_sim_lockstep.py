@@ -12,7 +12,7 @@ from ehpss_hil.errors import ConfigError
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.scenario import Event, load_scenario
 from ehpss_hil.sim import run_scenario
-from ehpss_hil.sim.campaign import Job, run_campaign
+from ehpss_hil.sim.jobs import Job, run_jobs
 
 PARAMS = load_params()
 LOSSY = load_scenario(PROJECT_ROOT / "scenarios" / "extra" / "unseen-frameloss2pct.yaml")
@@ -72,7 +72,7 @@ def test_lost_sensor_frames_mark_stale_samples() -> None:
 def test_campaign_keeps_order_and_matches_single_runs() -> None:
     sc = replace(LOSSY, duration_s=0.3, events=(Event(t_s=0.2, k_loe=0.5),))
     jobs = [Job(sc, "nrc"), Job(sc, "mmac", keep_result=True), Job(sc, "oracle")]
-    out = run_campaign(jobs, n_jobs=2, params=PARAMS)
+    out = run_jobs(jobs, n_jobs=2, params=PARAMS)
     assert [o.metrics.controller for o in out] == ["nrc", "mmac", "oracle"]
     assert out[0].result is None and out[1].result is not None
     single = run_scenario(sc, "mmac", PARAMS)

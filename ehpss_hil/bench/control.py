@@ -13,9 +13,9 @@ from pathlib import Path
 
 from .. import PROJECT_ROOT
 from ..control.registry import MODES
-from ..report.metrics import RunMetrics
+from ..report.metrics import COMPENSATED_RMS_M, NO_HARM_RATIO, NO_HARM_RMS_M, RunMetrics
 from ..scenario import _FAULT_KEYS, load_scenario
-from ..sim.campaign import Job, default_jobs, run_campaign, scenario_paths
+from ..sim.jobs import Job, default_jobs, run_jobs, scenario_paths
 from .common import write_json
 
 NAME = "control"
@@ -36,12 +36,10 @@ KQ = "kq-loss"
 ENVELOPE_DIR = "envelope"
 QUIET = "quiet-20s"
 #: no harm: mmac RMS ≤ NO_HARM_RATIO·nrc + NO_HARM_RMS_M, worst |x − y_m| ≤ nrc's + NO_HARM_PEAK_M
-NO_HARM_RATIO = 1.1
-NO_HARM_RMS_M = 1e-6
 NO_HARM_PEAK_M = 10e-6
 #: fault-free envelope runs: mmac RMS within this of nrc (m); power-on faults: ≤ oracle + this
 FAULT_FREE_RMS_M = 1e-6
-POWER_ON_RMS_M = 5e-6
+POWER_ON_RMS_M = COMPENSATED_RMS_M
 QUIET_SWITCHES = 2
 SPEED_TARGET = 50.0
 #: a fault at or before this time (s) counts as present at power-on
@@ -307,7 +305,7 @@ def run(args: argparse.Namespace) -> int:
     )
     jobs = [Job(p, m) for p in paths for m in MODES]
     t0 = time.perf_counter()
-    outcomes = run_campaign(jobs, args.jobs, progress=_progress())
+    outcomes = run_jobs(jobs, args.jobs, progress=_progress())
     wall = time.perf_counter() - t0
     table: Table = {(o.metrics.scenario, o.metrics.controller): o.metrics for o in outcomes}
     vs = verdicts(table, envelope_kinds(env_paths))

@@ -8,6 +8,10 @@ from __future__ import annotations
 #: subcommand → (module in this package, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("bench", "benchmarks: codec, control, loop, faults, soak (print figures beside their targets)"),
+    "campaign": (
+        "campaign",
+        "Monte-Carlo fault campaign (sampled faults × nrc/mmac/oracle) on local cores or a Dask cluster",
+    ),
     "check-config": ("check_config", "validate controller/emulator/params configs and scenario files"),
     "controller": (
         "controller",

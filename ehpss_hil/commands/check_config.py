@@ -1,4 +1,4 @@
-"""``ehpss-hil check-config FILE…``: validate configs and scenarios, one summary line each.
+"""``ehpss-hil check-config FILE…``: validate configs, scenarios and campaigns, one summary line each.
 
 A file is read once. Beyond the schema, each is prepared as far as its program goes before
 opening a bus (parameters, DBC with the ID layout, trajectory file, the control law or the plant
@@ -27,6 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _kind(data: Any, path: Path) -> str:
     if isinstance(data, dict):
+        if "samples" in data and "base" in data:
+            return "campaign"
         if "events" in data or "duration_s" in data:
             return "scenario"
         if "plant" in data or ("controller" in data and "bus" not in data):
@@ -114,6 +116,8 @@ def _summarize(path: Path) -> str:
             f"{s.reference.kind} {s.reference.amplitude_m * 1e3:g} mm, {len(s.events)} events, "
             f"loss {_loss_text(s)}, delay {s.transport_delay_samples}"
         )
+    if kind == "campaign":
+        return _summarize_campaign(path, data)
     if kind == "params":
         p = load_params(path)  # (few bytes: read again rather than a second entry point)
         _prepare_scenario(Scenario(name="check", duration_s=1.0), p)
@@ -140,6 +144,21 @@ def _summarize(path: Path) -> str:
         f"controller: {c.bus.interface}:{c.bus.channel} at {c.rate_hz:g} Hz, mode {c.mode}, "
         f"watchdog {c.watchdog.timeout_cycles} cycles -> {c.watchdog.failsafe}"
         + _protocol_text(c.protocol, c.dbc_map)
+    )
+
+
+def _summarize_campaign(path: Path, data: Any) -> str:
+    """A campaign file with its base scenario, every run's scenario built."""
+    from ..campaign.sampling import plan_runs
+    from ..campaign.spec import load_campaign
+
+    c = load_campaign(path, data)
+    plans = plan_runs(c)
+    kinds = [k for k, w in c.spec.faults.kinds.weights().items() if w > 0]
+    lo, hi = c.spec.faults.count
+    return (
+        f"campaign {c.spec.name}: {len(plans)} runs of {c.duration_s:g} s ({c.spec.sampler}), "
+        f"{lo}-{hi} of {', '.join(kinds)}, modes {', '.join(c.spec.modes)}"
     )
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from ..control.registry import MODES
 from ..report.metrics import RunMetrics
 from ..scenario import Scenario
-from ..sim.campaign import Job, JobOutcome, default_jobs, run_campaign, scenario_paths
+from ..sim.jobs import Job, JobOutcome, default_jobs, run_jobs, scenario_paths
 from ..sim.lockstep import TRANSPORTS
 
 NAME = "sim"
@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         for m in modes
     ]
     t0 = time.perf_counter()
-    outcomes = run_campaign(jobs, args.jobs)
+    outcomes = run_jobs(jobs, args.jobs)
     wall = time.perf_counter() - t0
     rows = [o.metrics for o in outcomes]
     print(format_table(rows))

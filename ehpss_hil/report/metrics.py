@@ -29,6 +29,12 @@ from .result import SimResult
 RECOVERY_BAND_M = 20e-6
 #: peak window after an event (s)
 PEAK_WINDOW_S = 0.3
+#: "do no harm" (docs/design.md §11): mmac RMS ≤ NO_HARM_RATIO·nrc RMS + NO_HARM_RMS_M (m);
+#: a campaign run beyond it counts as harm
+NO_HARM_RATIO = 1.1
+NO_HARM_RMS_M = 1e-6
+#: a fault counts as compensated when mmac RMS ≤ oracle RMS + COMPENSATED_RMS_M (m)
+COMPENSATED_RMS_M = 5e-6
 
 
 @dataclass

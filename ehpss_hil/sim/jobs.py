@@ -1,4 +1,4 @@
-"""Campaigns: many (scenario, controller) runs on all cores, results in submission order."""
+"""Jobs: many (scenario, controller) runs on all cores, results in submission order (`ehpss-hil sim`)."""
 
 from __future__ import annotations
 
@@ -59,7 +59,7 @@ def default_jobs() -> int:
     return os.cpu_count() or 1
 
 
-def run_campaign(
+def run_jobs(
     jobs: Sequence[Job],
     n_jobs: int | None = None,
     params: Params | None = None,

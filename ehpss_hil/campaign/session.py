@@ -1,0 +1,142 @@
+"""One campaign session: plan the runs, skip those the journal holds, run the rest (local or Dask),
+then write the table, the worst cases, the figures and summary.md.
+
+Output directory (``--out``): ``runs.jsonl`` (the journal), ``results.parquet`` (+ ``.csv``),
+``summary.md``, ``worst/<class>/*.yaml``, the figures. A directory that holds a journal is only
+continued with ``resume``; without it the campaign refuses to touch it (exit 2).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..canlog.sidecar import write_json_atomic
+from ..errors import OutputError
+from .executors import run_dask, run_local
+from .figures import write_figures
+from .journal import JOURNAL_NAME, Journal, read_journal
+from .progress import Progress
+from .runs import RunTask
+from .sampling import RunPlan, plan_runs
+from .spec import Campaign
+from .summary import ClassSummary, summarize, summary_json, summary_markdown, write_worst
+from .table import build_rows, to_table, write_table
+
+SUMMARY_NAME = "summary.md"
+SUMMARY_JSON_NAME = "summary.json"
+
+
+@dataclass
+class Outcome:
+    """What a session did: runs planned, skipped (found in the journal), run now; the rows and
+    summaries (empty when interrupted) and the files written."""
+
+    planned: int
+    skipped: int
+    ran: int = 0
+    #: wall time of executing the runs (s), without planning and writing
+    run_wall_s: float = 0.0
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    summaries: list[ClassSummary] = field(default_factory=list)
+    files: list[Path] = field(default_factory=list)
+    #: timing of the runs done now (from their records)
+    timings: list[dict[str, Any]] = field(default_factory=list)
+
+
+def prepare_out(out: Path, resume: bool) -> Path:
+    """Make ``out``; refuse one holding a journal unless ``resume``."""
+    journal = out / JOURNAL_NAME
+    if journal.exists() and not resume:
+        raise OutputError(
+            f"{out} holds a campaign's runs ({JOURNAL_NAME}); pass --resume or choose another --out"
+        )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create {out}: {exc.strerror or exc}") from exc
+    return journal
+
+
+def execute_runs(
+    tasks: list[RunTask], workers: int, scheduler: str | None, on_result: Callable[[dict[str, Any]], None]
+) -> None:
+    """Run ``tasks`` locally on ``workers`` processes, or on the Dask ``scheduler``."""
+    if scheduler:
+        run_dask(tasks, scheduler, on_result)
+    else:
+        run_local(tasks, workers, on_result)
+
+
+def run_campaign(
+    camp: Campaign,
+    out: Path,
+    workers: int = 1,
+    scheduler: str | None = None,
+    resume: bool = False,
+    csv: bool = False,
+    figures: bool = True,
+    progress: Progress | None = None,
+) -> Outcome:
+    """Run the campaign into ``out`` (see the module docstring). KeyboardInterrupt propagates
+    after the journal is closed: every run that finished is kept."""
+    journal_path = prepare_out(out, resume)
+    plans = plan_runs(camp)
+    with Journal(journal_path) as journal:
+        records = read_journal(journal_path)
+        todo = [p for p in plans if p.run_hash not in records]
+        outcome = Outcome(len(plans), len(plans) - len(todo))
+        prog = progress if progress is not None else Progress(len(plans), outcome.skipped)
+        tasks = [RunTask(p.index, p.run_hash, p.scenario, camp.spec.modes, camp.spec.transport) for p in todo]
+
+        def on_result(rec: dict[str, Any]) -> None:
+            journal.append(rec)
+            records[rec["run_hash"]] = rec
+            outcome.ran += 1
+            outcome.timings.append(rec["timing"])
+            prog.step()
+
+        t0 = time.perf_counter()
+        try:
+            execute_runs(tasks, workers, scheduler, on_result)
+        finally:
+            outcome.run_wall_s = time.perf_counter() - t0
+            prog.finish()
+    finish(camp, plans, records, out, outcome, csv, figures)
+    return outcome
+
+
+def finish(
+    camp: Campaign,
+    plans: list[RunPlan],
+    records: dict[str, dict[str, Any]],
+    out: Path,
+    outcome: Outcome,
+    csv: bool,
+    figures: bool,
+) -> None:
+    """Table, worst cases, figures and summary.md from the finished records."""
+    rows = build_rows(plans, records)
+    outcome.rows = rows
+    outcome.files += write_table(to_table(rows), out, csv)
+    outcome.summaries = summarize(rows, camp.spec.modes)
+    write_worst(outcome.summaries, plans, out)
+    figs = write_figures(rows, camp.spec.modes, out) if figures else []
+    outcome.files += figs
+    spec = camp.spec
+    header = [
+        f"{spec.description}" if spec.description else "",
+        f"- file: `{camp.source}`, content hash `{camp.content_hash[:16]}`",
+        f"- {len(rows)} runs of {camp.duration_s:g} s, sampler {spec.sampler}, modes {', '.join(spec.modes)}",
+        "- table: `results.parquet` (one row per run; columns `<mode>.<metric>`)",
+    ]
+    path = out / SUMMARY_NAME
+    try:
+        path.write_text(summary_markdown(spec.name, header, outcome.summaries, figs, out))
+        write_json_atomic(out / SUMMARY_JSON_NAME, summary_json(outcome.summaries))
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
+    outcome.files += [path, out / SUMMARY_JSON_NAME]
