@@ -12,7 +12,6 @@ The TPDOs answering a SYNC thus carry the sample of the period in which it arriv
 from __future__ import annotations
 
 import logging
-import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,7 +19,6 @@ from ehpss_hil.config import Cia408Config
 from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.objects import CONSUMER_HEARTBEAT, PRODUCER_HEARTBEAT, RPDO_COMM
-from ehpss_hil.runtime.deadline import DeadlineTimer
 from ehpss_hil.runtime.rawio import RawFrameIO
 from ehpss_hil.runtime.signals import StopFlag
 from ehpss_hil.runtime.stats import LoopStats
@@ -28,6 +26,7 @@ from ehpss_hil.runtime.stats import LoopStats
 from .canopen_node.encoder import EncoderNode
 from .canopen_node.node import CanopenSlave
 from .canopen_node.valve import ValveNode
+from .periods import run_periods
 
 log = logging.getLogger("firmware_sim")
 
@@ -146,21 +145,8 @@ class CanopenEmulatorProcess:
 
     def run_realtime(self, stop: StopFlag, n_periods: int | None = None) -> None:
         """Boot the nodes, then run on the deadline grid until ``stop`` or ``n_periods``."""
-        timer = DeadlineTimer(self.emu.ts_s, name="firmware-sim")
         self.boot()
-        timer.start()
-        perf = time.perf_counter
-        while not stop and (n_periods is None or self.periods < n_periods):
-            lateness = timer.wait()
-            t0 = perf()
-            skipped = timer.last_skipped
-            if n_periods is not None:
-                skipped = min(skipped, max(0, n_periods - self.periods - 1))
-            self.step_period(skipped)
-            self.stats.compute.add(perf() - t0)
-            self.stats.lateness.add(lateness)
-        self.stats.overruns = timer.overruns
-        self.stats.skipped = timer.skipped
+        run_periods(self.emu.ts_s, self.step_period, lambda: self.periods, self.stats, stop, n_periods)
 
     def summary(self) -> dict[str, Any]:
         """Counters and period statistics (JSON-able)."""

@@ -141,6 +141,7 @@ def format_canopen_summary(s: dict[str, object]) -> str:
 
 
 def _sidecar(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenario) -> dict[str, object]:
+    """The log sidecar's description of this emulator run (both protocols)."""
     return {
         "tool": "firmware-sim",
         "config": asdict(cfg),
@@ -215,18 +216,7 @@ def run(args: argparse.Namespace) -> int:
             cfg.bus,
             bus,
             str(args.config),
-            sidecar={
-                "tool": "firmware-sim",
-                "config": asdict(cfg),
-                "config_path": str(args.config),
-                "dbc": cfg.dbc or None,
-                "scenario": asdict(scenario),
-                "scenario_name": scenario.name,
-                "rate_hz": cfg.rate_hz,
-                "clock": CLOCK_NOTE,
-                "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
-                "mode": cfg.mode,
-            },
+            sidecar=_sidecar(args, cfg, scenario),
         )
     except BaseException:
         bus.shutdown()

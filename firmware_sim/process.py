@@ -27,7 +27,6 @@ import can
 from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.emulation import PlantEmulation, SensorSample
 from ehpss_hil.physics.faults import FaultState
-from ehpss_hil.runtime.deadline import DeadlineTimer
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.runtime.signals import StopFlag
 from ehpss_hil.runtime.stats import LoopStats
@@ -35,6 +34,7 @@ from ehpss_hil.runtime.stats import LoopStats
 from .command_hold import CommandHold
 from .commanders import CommanderCheck
 from .inject import parse_inject
+from .periods import run_periods
 
 log = logging.getLogger("firmware_sim")
 
@@ -280,25 +280,12 @@ class EmulatorProcess:
     # ---- loops ------------------------------------------------------------------------------
     def run_realtime(self, stop: StopFlag, n_periods: int | None = None) -> None:
         """Run on the deadline grid until ``stop`` or ``n_periods`` periods."""
-        timer = DeadlineTimer(self.emu.ts_s, name="firmware-sim")
         self.io.send("HEARTBEAT_EMU", {"NmtState": 0})  # CiA 301 boot-up
         # the frames queued since the bus opened (a running controller sends ~1000/s): handled
         # now, not in the first period, which they made several ms late — a stall right at the
         # controller's first samples, whose reference starts with them
         self._early = self._drain()
-        timer.start()
-        perf = time.perf_counter
-        while not stop and (n_periods is None or self.periods < n_periods):
-            lateness = timer.wait()
-            t0 = perf()
-            skipped = timer.last_skipped
-            if n_periods is not None:
-                skipped = min(skipped, max(0, n_periods - self.periods - 1))
-            self.step_period(skipped)
-            self.stats.compute.add(perf() - t0)
-            self.stats.lateness.add(lateness)
-        self.stats.overruns = timer.overruns
-        self.stats.skipped = timer.skipped
+        run_periods(self.emu.ts_s, self.step_period, lambda: self.periods, self.stats, stop, n_periods)
         self._drain()  # classify + log what arrived since the last period (e.g. a final command)
         self.io.send("HEARTBEAT_EMU", {"NmtState": NMT_STOPPED})
 
