@@ -48,6 +48,24 @@ def test_layout_and_comments_do_not_change_the_runs_but_the_seed_does(tmp_path: 
     assert plan_runs(c)[0].scenario.seed != plan_runs(a)[0].scenario.seed
 
 
+def test_where_the_base_scenario_lives_does_not_change_the_runs_but_its_content_does(
+    tmp_path: Path,
+) -> None:
+    """The same campaign and base scenario in another checkout (another absolute path, or the
+    base beside the file) draw the same runs; an edited base scenario draws others."""
+    a = load_campaign(_write(tmp_path))
+    other = tmp_path / "elsewhere"
+    other.mkdir()
+    base = (ROOT / "scenarios" / "case1-loe.yaml").read_text()
+    (other / "case1-loe.yaml").write_text(base)
+    b = load_campaign(_write(other, text=FILE.format(base="case1-loe.yaml", sampler="sobol")))
+    assert a.content_hash == b.content_hash
+    assert [p.run_hash for p in plan_runs(a)] == [p.run_hash for p in plan_runs(b)]
+    (other / "case1-loe.yaml").write_text(base.replace("seed: ", "seed: 1", 1))
+    c = load_campaign(_write(other, text=FILE.format(base="case1-loe.yaml", sampler="sobol"), name="c"))
+    assert c.content_hash != a.content_hash
+
+
 @pytest.mark.parametrize("sampler", ["random", "lhs", "sobol"])
 def test_samplers_fill_the_unit_cube(sampler: str) -> None:
     pts = unit_points(sampler, 256, 5, seed=7)

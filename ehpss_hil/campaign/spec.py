@@ -202,7 +202,8 @@ def canonical_json(data: Any) -> str:
 def load_campaign(path: str | Path, data: object = None) -> Campaign:
     """Load and validate a campaign file (``data``: its parsed content, when the caller read it
     already) and its base scenario. The content hash covers the parsed campaign (not its comments
-    or layout) and the parsed base scenario."""
+    or layout, and not where its base scenario lives: ``base`` is left out) and the parsed base
+    scenario, so a campaign draws the same runs in any checkout."""
     p = Path(path)
     if data is None:
         data = load_yaml(p)
@@ -212,5 +213,6 @@ def load_campaign(path: str | Path, data: object = None) -> Campaign:
     base = load_scenario(base_path, base_data)
     if spec.faults.onset_s[1] > (spec.duration_s or base.duration_s):
         raise ConfigError(str(p), "faults.onset_s", "onsets must lie within the run's duration_s")
-    digest = hashlib.sha256(canonical_json({"campaign": data, "base": base_data}).encode()).hexdigest()
+    own = {k: v for k, v in data.items() if k != "base"} if isinstance(data, dict) else data
+    digest = hashlib.sha256(canonical_json({"campaign": own, "base": base_data}).encode()).hexdigest()
     return Campaign(spec, base, str(p), digest)
