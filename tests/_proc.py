@@ -17,6 +17,9 @@ EHPSS_HIL = [PY, "-m", "ehpss_hil.cli"]
 EMU_CFG_PATH = str(ROOT / "configs" / "emulator.yaml")
 CLIENT = [PY, str(ROOT / "tests" / "udp_client.py")]
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
+#: how long ``ehpss-hil run`` may wait for each process to come up in a test (s): a hang guard
+#: only — in the vcan VM (Python ~10x slower) on a loaded host the controller took over 60 s
+STARTUP_LIMIT_S = 600.0
 
 
 class Proc:

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from _proc import STARTUP_LIMIT_S
 from _scenarios import short_scenario_yaml
 
 from ehpss_hil.bus.netns import netns_unavailable_reason
@@ -64,7 +65,16 @@ def test_run_with_monitor(tmp_path: Path) -> None:
     watcher = threading.Thread(target=watch, daemon=True)
     watcher.start()
     out = tmp_path / "run"
-    res = execute(RunPlan(scenario_path=sc, out_dir=out, monitor_port=port, monitor_inject=True, quiet=True))
+    res = execute(
+        RunPlan(
+            scenario_path=sc,
+            out_dir=out,
+            monitor_port=port,
+            monitor_inject=True,
+            quiet=True,
+            startup_timeout_s=STARTUP_LIMIT_S,
+        )
+    )
     watcher.join(timeout=10.0)
     check_exit_codes(res)
     assert res.exit_codes["monitor"] == 0

@@ -11,6 +11,7 @@ import warnings
 from pathlib import Path
 
 import pytest
+from _proc import STARTUP_LIMIT_S
 from _scenarios import short_scenario_yaml
 
 from ehpss_hil.bus.netns import netns_unavailable_reason
@@ -40,6 +41,7 @@ def test_realtime_vendor_profile_reaches_active_and_tracks(tmp_path: Path) -> No
         out_dir=out,
         controller_yaml=ROOT / "configs" / "controller-vendor.yaml",
         emulator_yaml=ROOT / "configs" / "emulator-vendor.yaml",
+        startup_timeout_s=STARTUP_LIMIT_S,
     )
     check_exit_codes(execute(plan))
     assert "first sensor data: ACTIVE" in (out / "controller.out").read_text()

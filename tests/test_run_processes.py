@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _proc import STARTUP_LIMIT_S
 from _scenarios import short_scenario_yaml
 
 from ehpss_hil.bus.netns import netns_unavailable_reason
@@ -35,7 +36,17 @@ def scenario(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_lockstep_run_gives_the_simulation_commands_and_metrics(scenario: Path, tmp_path: Path) -> None:
     out = tmp_path / "lockstep"
-    check_exit_codes(execute(RunPlan(scenario_path=scenario, mode="mmac", out_dir=out, lockstep=True)))
+    check_exit_codes(
+        execute(
+            RunPlan(
+                scenario_path=scenario,
+                mode="mmac",
+                out_dir=out,
+                lockstep=True,
+                startup_timeout_s=STARTUP_LIMIT_S,
+            )
+        )
+    )
     row = metrics_from_run(out)
     sim = run_scenario(load_scenario(scenario), "mmac")
     logged = load_log_run(out / "bus.log")
@@ -70,7 +81,9 @@ def test_realtime_drift_run(scenario: Path, tmp_path: Path, mode: str, bound_m: 
     to ~3 µm; the failures this guards against gave 28–263 µm: x̂ off the sensor's sample clock,
     a false flow-gain decision after a stall), ``nrc`` tracks x_d/0.5 (510 µm measured)."""
     out = tmp_path / mode
-    check_exit_codes(execute(RunPlan(scenario_path=scenario, mode=mode, out_dir=out)))
+    check_exit_codes(
+        execute(RunPlan(scenario_path=scenario, mode=mode, out_dir=out, startup_timeout_s=STARTUP_LIMIT_S))
+    )
     row = metrics_from_run(out)
     assert row["unavailable"] == [] and len(row["events"]) == 1
     kept = _kept_time(out)

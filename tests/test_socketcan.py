@@ -12,6 +12,7 @@ from pathlib import Path
 
 import can
 import pytest
+from _proc import STARTUP_LIMIT_S
 from _scenarios import short_scenario_yaml
 
 from ehpss_hil.bus import af_can_available, open_bus
@@ -78,7 +79,13 @@ def test_controller_and_emulator_processes_on_vcan0(vcan0: str, tmp_path: Path) 
     out = tmp_path / "run"
     res = execute(
         RunPlan(
-            scenario_path=sc, mode="mmac", out_dir=out, interface="socketcan", channel=vcan0, lockstep=True
+            scenario_path=sc,
+            mode="mmac",
+            out_dir=out,
+            interface="socketcan",
+            channel=vcan0,
+            lockstep=True,
+            startup_timeout_s=STARTUP_LIMIT_S,
         )
     )
     check_exit_codes(res)
