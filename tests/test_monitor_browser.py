@@ -166,9 +166,10 @@ def test_fault_injected_from_the_page_reconfigures_the_controller(bench: str) ->
 
         _until("mode mmac", lambda: text("mode") == "mmac")
         assert text("ref-note") == ""  # x_d and y_m aligned with the controller's reference
-        _until(
+        _until_controlling(
             "k̂_LOE 1 and k̂_DFT 1",
             lambda: _number(text("k-loe-hat")) == 1.0 and _number(text("k-dft-hat")) == 1.0,
+            text,
         )
         spool_before, pos_before = text("active-spool"), text("active-position")
         assert _theta(spool_before) == pytest.approx(1.0, abs=0.01), spool_before
