@@ -4,6 +4,7 @@ is timed). A minimal PI keeps the loop tests independent of the control law."""
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import can
@@ -58,6 +59,20 @@ class Rig(VirtualPair):
             Reference(kind="step", amplitude_m=1e-3),
             LoopOptions(watchdog=wd or Watchdog()),
         )
+        #: a second peer that keeps the timestamps it is given: frames received "long ago"
+        self.old_peer = can.Bus(interface="virtual", channel=name, preserve_timestamps=True)
+
+    def old_sensors(self, position_m: float, age_s: float) -> None:
+        """A sensor pair whose receive timestamps lie ``age_s`` (s) in the past."""
+        t = time.time() - age_s
+        self.old_peer.send(
+            self.tx.encode("SENSOR_POS", {"Position": position_m, "Spool": 0.0}, timestamp_s=t)
+        )
+        self.old_peer.send(self.tx.encode("SENSOR_AUX", {"CoilCurrent": 1e-5}, timestamp_s=t))
+
+    def close(self) -> None:
+        self.old_peer.shutdown()
+        super().close()
 
     def sensors(self, position_m: float = 0.0) -> can.Message:
         pos = self.tx.encode("SENSOR_POS", {"Position": position_m, "Spool": 0.0})

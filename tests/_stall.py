@@ -42,6 +42,7 @@ dbc: {root}/dbc/ehpss.dbc
 """
 REF_AMPLITUDE_M = 2e-4
 REF_OMEGA_RAD_S = 5.0
+TS_S = 1e-3  # the loop period of both configs (rate_hz 1000)
 
 
 @dataclass
@@ -207,18 +208,22 @@ def truth(path: Path) -> list[tuple[float, float]]:
     ]
 
 
-def resumed_at(cmds: list[Command], s: Stop) -> int:
+def resumed_at(cmds: list[Command], s: Stop, ts_s: float = TS_S) -> int:
     """Log frame number from which on the controller's frames come from cycles that started
     after ``s`` ended: for a controller stop, the first VALVE_CMD after it whose CycleCount
-    jumped (the cycle in flight when it stopped sends its command afterwards, unchanged); for an
-    emulator stop, the first VALVE_CMD sent after SIGCONT."""
+    jumped over the stop (by at least half its length in periods of ``ts_s`` s: the loop's grid
+    skips the periods it slept through); the cycle in flight when it stopped sends its command
+    afterwards (the loop turns it into the fail-safe command when it sees the stall, but a
+    process frozen inside its send sends it unchanged), and its own CycleCount may have jumped
+    by an overrun before the stop. For an emulator stop, the first VALVE_CMD sent after SIGCONT."""
     after = [i for i, c in enumerate(cmds) if c.t > s.t_cont]
     if not after:
         return 1 << 62
     if s.who == "emulator":
         return cmds[after[0]].n
+    over = max(1, round(0.5 * (s.t_cont - s.t_stop) / ts_s))
     for i in after:
-        if i > 0 and (cmds[i].cycle - cmds[i - 1].cycle) % 65536 != 1:
+        if i > 0 and (cmds[i].cycle - cmds[i - 1].cycle) % 65536 >= over:
             return cmds[i].n
     return cmds[after[0]].n
 

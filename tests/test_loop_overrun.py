@@ -19,6 +19,9 @@ from ehpss_hil.runtime.lifecycle import FailsafeReason, State
 from ehpss_hil.runtime.watchdog import SensorWatchdog
 
 LONG = Watchdog(timeout_cycles=100, recovery_cycles=5, auto_recover=True)
+#: the age window of the stale-frame tests (s): frames a minute old are stale, a cycle is never
+#: stalled this long between its drain and its command
+STALE_WINDOW_S = 5.0
 
 
 def _count_steps(rig: Rig) -> list[bool]:
@@ -119,25 +122,22 @@ def test_skipped_periods_reach_the_timeout() -> None:
 
 
 def test_stale_frames_are_counted_not_used() -> None:
-    """Frames received longer ago than the window (3 cycles of 1 ms) are classified and counted,
-    never used: the position is not taken, the cycle is one without data (echo 0); a fresh frame
-    after them is used."""
+    """Frames received longer ago than the window are classified and counted, never used: the
+    position is not taken, the cycle is one without data (echo 0); a fresh frame after them is
+    used. (virtual: a frame's timestamp is what its sender set; the stale ones are a minute
+    old against a 5-s window, so no host load changes which frames are stale.)"""
     r = Rig("stale", Watchdog(timeout_cycles=3))
-    # virtual: the timestamp is the (in-process) send time. Which frames are stale is set by the
-    # window, not by how long a loaded host takes between send and drain: no window while the
-    # loop starts, a zero window for the stale frames, a huge one for the fresh frame after them
     try:
         activate(r, 20)
         r.sensors(1e-4)
         r.cycle()
-        r.loop.check_age, r.loop.stale_after_s = True, 0.0
+        r.loop.check_age, r.loop.stale_after_s = True, STALE_WINDOW_S
         for _ in range(3):
-            r.sensors(9e-3)
-        time.sleep(0.001)  # the receive time is strictly past the send time
+            r.old_sensors(9e-3, age_s=60.0)
         cmd = r.cycle()["VALVE_CMD"]
         assert r.loop.stale_frames == 6 and r.loop.meas.position_m == pytest.approx(1e-4)
         assert cmd["SensorCounterEcho"] == 0 and r.loop.wd.stale_cycles == 1
-        r.loop.stale_after_s = 1e9
+        assert cmd["Enable"] == 1
         fresh = r.sensors(2e-4)
         cmd = r.cycle()["VALVE_CMD"]
         assert cmd["SensorCounterEcho"] == fresh.data[1] & 0x0F
@@ -150,10 +150,9 @@ def test_stale_frames_lead_to_sensor_timeout() -> None:
     r = Rig("stale-timeout", Watchdog(timeout_cycles=3))
     try:
         activate(r, 20)
-        r.loop.check_age, r.loop.stale_after_s = True, 0.0  # every frame from now on is stale
+        r.loop.check_age, r.loop.stale_after_s = True, STALE_WINDOW_S
         for _ in range(3):
-            r.sensors(9e-3)
-            time.sleep(0.001)
+            r.old_sensors(9e-3, age_s=60.0)
             r.cycle()
         assert r.loop.life.state is State.FAULT
         assert r.loop.life.reason is FailsafeReason.SENSOR_TIMEOUT
@@ -179,5 +178,32 @@ def test_leaving_fault_restarts_the_law_from_the_present_measurement() -> None:
         expect = fresh.step(Measurement(position_m=3e-4, reference_m=1e-3)).current_a
         q = FrameCodec().quantize("VALVE_CMD", {"CurrentSetpoint": expect})["CurrentSetpoint"]
         assert cmd["CurrentSetpoint"] == pytest.approx(q, abs=1e-6)
+    finally:
+        r.close()
+
+
+def test_a_cycle_stalled_after_its_drain_sends_the_failsafe_command() -> None:
+    """The process stopped between reading its frames and sending its command (a SIGSTOP or a
+    starved host mid-cycle) for longer than the window: the command computed on those frames is
+    not sent; the watchdog trips LOOP_OVERRUN, 0 A with Enable 0 goes out, and recovery needs
+    ``recovery_cycles`` fresh cycles. The frames were fresh when read (no age check then); the
+    stall is made real with a sleep longer than the window set afterwards."""
+    r = Rig("stall-mid-cycle", LONG)
+    try:
+        activate(r, 20)
+        r.sensors(5e-4)
+        r.loop.drain()
+        assert r.loop.stale_frames == 0
+        r.loop.check_age, r.loop.stale_after_s = True, 1e-3
+        time.sleep(0.005)
+        r.loop.cycle()
+        cmd = r.values_of("VALVE_CMD")[-1]
+        assert cmd["Enable"] == 0 and cmd["CurrentSetpoint"] == 0.0
+        assert r.loop.life.state is State.FAULT
+        assert r.loop.life.reason is FailsafeReason.LOOP_OVERRUN and r.loop.wd.overrun_trips == 1
+        r.loop.stale_after_s = 1e9  # on time again
+        enabled = [r.cycle_with(5e-4)["Enable"] for _ in range(LONG.recovery_cycles + 1)]
+        assert enabled[: LONG.recovery_cycles - 1] == [0] * (LONG.recovery_cycles - 1)
+        assert enabled[-1] == 1
     finally:
         r.close()

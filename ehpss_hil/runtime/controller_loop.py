@@ -12,7 +12,9 @@ ACTIVE; the reference starts at that cycle. Realtime: a fixed deadline grid; per
 an overrun count for the watchdog as cycles without data and are stepped without data before the
 next cycle (:meth:`ControllerLoop.catch_up`), so the controller's clock stays on the grid; more
 than the predictors bridge (``RESYNC_SAMPLES``) is a fault (LOOP_OVERRUN), never stepped. A sensor
-frame received longer ago than the watchdog window is stale: counted, never used. Lockstep: one cycle
+frame received longer ago than the watchdog window is stale: counted, never used; a cycle that
+stalls after its drain for longer than that window sends the fail-safe command (LOOP_OVERRUN), not
+the command computed on what it read. Lockstep: one cycle
 per received sensor pair (triggered by SENSOR_AUX, which the emulator sends after SENSOR_POS).
 """
 
@@ -262,8 +264,12 @@ class ControllerLoop:
     def _command(self) -> tuple[float, bool]:
         st = self.life.state
         if st is State.ACTIVE:
-            return self.driver.step()
-        if st is State.FAULT:
+            command = self.driver.step()
+            if not self._stalled_since_drain():
+                return command
+            self.wd.stall()
+            self._fault()
+        if self.life.state is State.FAULT:
             self.failsafe_cycles += 1
             self.driver.failsafe_cycle()
             if self.opts.watchdog.failsafe == "hold":
@@ -271,6 +277,14 @@ class ControllerLoop:
             return 0.0, False
         self.driver.idle_cycle()
         return 0.0, False
+
+    def _stalled_since_drain(self) -> bool:
+        """Realtime, on buses that stamp the receive time: the cycle stalled after its drain (the
+        process was stopped or starved mid-cycle) for longer than the watchdog window, so the
+        command just computed rests on data that is stale by the time it would be sent. It is
+        not sent: the watchdog trips LOOP_OVERRUN and the fail-safe command goes out instead.
+        (A process frozen inside the send itself still sends afterwards: no check can see that.)"""
+        return self.check_age and not self.lockstep and time.time() - self._rx_now > self.stale_after_s
 
     def catch_up(self, periods: int, overrun: bool = True) -> None:
         """Grid periods the loop slept through (``overrun``: the deadline timer skipped them;

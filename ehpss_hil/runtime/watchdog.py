@@ -95,6 +95,14 @@ class SensorWatchdog:
                 self._trip(reason)
         return self.tripped
 
+    def stall(self) -> None:
+        """The cycle stalled after reading its data for longer than the window (the process was
+        stopped or starved mid-cycle): LOOP_OVERRUN, and recovery needs ``recovery_cycles``
+        fresh cycles from now on."""
+        self.fresh_cycles = 0
+        if not self.tripped:
+            self._trip(FailsafeReason.LOOP_OVERRUN)
+
     def _trip(self, reason: FailsafeReason) -> None:
         self.tripped = True
         self.reason = reason
