@@ -39,6 +39,9 @@ faults:
 reference: {{kinds: [sine, square], amplitude_m: [0.0005, 0.002], omega_rad_s: [3.0, 8.0]}}
 noise_scale: [0.5, 2.0]
 """
+#: the killed-and-resumed campaign: enough runs that a loaded host cannot finish them all
+#: between the third journal line and the SIGKILL, few enough to run twice more
+RESUMED_SAMPLES = 120
 #: waits that only keep a broken run from hanging (s)
 LIMIT_S = 300.0
 
@@ -131,7 +134,7 @@ def _wait_lines(journal: Path, n: int, proc: subprocess.Popen[bytes]) -> int:
 
 
 def test_resume_after_sigkill_skips_finished_runs_and_ends_with_the_same_table(tmp_path: Path) -> None:
-    f = _tiny(tmp_path / "tiny.yaml", samples=40)
+    f = _tiny(tmp_path / "tiny.yaml", samples=RESUMED_SAMPLES)
     out = tmp_path / "killed"
     proc = subprocess.Popen(
         [*EHPSS_HIL, "campaign", str(f), "--workers", "2", "--out", str(out), "--no-figures"],
@@ -147,21 +150,23 @@ def test_resume_after_sigkill_skips_finished_runs_and_ends_with_the_same_table(t
         os.killpg(proc.pid, signal.SIGKILL)  # the campaign and its pool, at once
         proc.wait()
     kept = read_journal(out / JOURNAL_NAME)
-    assert 3 <= len(kept) < 40
+    assert 3 <= len(kept) < RESUMED_SAMPLES
     with open(out / JOURNAL_NAME, "ab") as j:  # a torn record, as a power cut would leave it
         j.write(b'{"run_hash": "abc", "metr')
     again = _cli("campaign", str(f), "--workers", "2", "--out", str(out), "--resume", "--no-figures")
     assert again.returncode == 0, again.stderr
-    assert f"{40 - len(kept)} run(s) done" in again.stdout
+    assert f"{RESUMED_SAMPLES - len(kept)} run(s) done" in again.stdout
     assert f"{len(kept)} skipped" in again.stdout
     fresh = run_campaign(load_campaign(f), tmp_path / "fresh", workers=1, figures=False)
-    assert fresh.ran == 40
+    assert fresh.ran == RESUMED_SAMPLES
     assert _digest(out) == _digest(tmp_path / "fresh")
-    assert len(read_journal(out / JOURNAL_NAME)) == 40
+    assert len(read_journal(out / JOURNAL_NAME)) == RESUMED_SAMPLES
 
 
 def test_ctrl_c_stops_keeps_finished_runs_and_exits_130(tmp_path: Path) -> None:
-    f = _tiny(tmp_path / "tiny.yaml", samples=40)
+    # far more runs than are done before the signal lands, however long a loaded host keeps
+    # this test from sending it (40 runs were all done once): the rest is never run
+    f = _tiny(tmp_path / "tiny.yaml", samples=2000)
     out = tmp_path / "int"
     proc = subprocess.Popen(
         [*EHPSS_HIL, "campaign", str(f), "--workers", "2", "--out", str(out), "--no-figures"],

@@ -44,6 +44,7 @@ def _run(name: str, mode: str) -> tuple[SimResult, RunMetrics]:
         "poweron-loe-drift",
         "poweron-kq",
         "kq-loss",
+        "stuck-square",
     ],
 )
 def test_mmac_does_no_harm(name: str) -> None:
@@ -216,3 +217,16 @@ def test_leaving_the_fail_safe_mid_motion_with_a_drift_present() -> None:
         if mode == "mmac":
             assert ctrl.inner.k_dft_hat == pytest.approx(0.5, abs=0.01)
     assert err["mmac"] < 0.05 * err["nrc"]
+
+
+def test_a_model_adapting_up_through_the_failed_sensor_threshold_is_not_fed_back_at_once() -> None:
+    """k_Q 0.6 mid-sine (campaign run 146): a reinitialized position model switched in at
+    θ ≈ 0.12 adapts up through the failed-sensor threshold while y_s/θ̂ is far from x̂. Fed back
+    at once (before: the loop drove the piston 0.34 mm off, RMS 45.8 µm against nrc's 2.2 µm) it
+    is a jolt; held off until the reading through θ̂ lands near x̂ or the increments show the
+    sensor alive, the run is within the RMS no-harm bound. Its worst peak (19 µm) is still above
+    nrc's 5.3 µm + 10 µm: not asserted here (docs/control.md, the campaign's harm list)."""
+    mm = _run("kq-step-slow-sine", "mmac")[1]
+    nrc = _run("kq-step-slow-sine", "nrc")[1]
+    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
+    assert mm.max_error_m <= 50 * UM

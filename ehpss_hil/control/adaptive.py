@@ -35,6 +35,9 @@ FLOW_HOLD_S = 0.02
 #: this long (s): the valve model's stop is placed with k̂_LOE, the plant's with k_LOE, and the
 #: difference dies out with the valve poles (≈ 0.6 ms time constant)
 SPOOL_STOP_HOLD_S = 0.005
+#: a sensor declared failed whose increment gain θ_prod is this many times the failed-sensor
+#: threshold (0.3 with the default 0.15) follows the spool: it is fed back again
+FOLLOWS_FACTOR = 2.0
 #: an adaptive estimate within this of its clip counts as at its limit (dimensionless)
 AT_LIMIT_MARGIN = 0.01
 
@@ -127,7 +130,7 @@ class MmacController(LoopBase):
                 # x̂ missed samples, was dead-reckoned, or integrated a spool slamming into its
                 # stop (a transient no model of the valve follows exactly)
                 td = self.k_dft_hat
-                if not self.pos_sup.guarded and td >= self._failed_below and not self.flow.flow_fault:
+                if not self.pos_sup.guarded and self.sensor_alive(td) and not self.flow.flow_fault:
                     # re-anchor on the trusted sensor and start the regression over from here: a
                     # dead-reckoned offset must not be taken for a drift, nor the sensor's reading
                     # through the present θ̂_D for evidence (x̂ = y_s/θ̂_D, x0 = y0/θ̂_D)
@@ -166,7 +169,7 @@ class MmacController(LoopBase):
         """Keep x0 = y0/θ with θ = θ̂_D·k̂_Q in use: x̂ moves with x0 (x̂ − x0 is unchanged), so
         it stays the absolute position while the sensor gain estimate changes; a failed-sensor
         model (θ below ``sensor_failed_below``) leaves it where it is."""
-        if theta >= self._failed_below:
+        if self.sensor_alive(theta):
             x0 = self._y0 / theta
             self.xhat.x += x0 - self._x0
             self._x0 = x0
@@ -180,7 +183,7 @@ class MmacController(LoopBase):
         """θ̂_D when the position sensor may place x̂ across a redone span: trusted (not guarded,
         not failed) and not under the flow-gain hypothesis; else None."""
         td = self.k_dft_hat
-        if self.pos_sup.guarded or td < self._failed_below or self.flow.flow_fault:
+        if self.pos_sup.guarded or not self.sensor_alive(td) or self.flow.flow_fault:
             return None
         return td
 
@@ -248,6 +251,12 @@ class MmacController(LoopBase):
 
     def _position_guarded(self) -> bool:
         return self.pos_sup.guarded and not self.flow.flow_fault
+
+    def _sensor_follows_spool(self) -> bool:
+        """The offset-free increment estimate θ_prod (fresh) says the sensor moves with the
+        spool integral, at :data:`FOLLOWS_FACTOR` times the failed-sensor threshold or more."""
+        fl = self.flow
+        return fl.product_fresh and fl.theta_prod >= FOLLOWS_FACTOR * self._failed_below
 
     def index_values(self) -> list[float]:
         """J of the spool models then the position models."""

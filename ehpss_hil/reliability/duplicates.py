@@ -56,6 +56,9 @@ class DupResult:
     acted_on_late: int = 0
     #: cycles whose command was not the newest usable sample of that cycle
     wrong_sample: int = 0
+    #: cycles the controller spent in its fail-safe (its summary): a starved host trips the
+    #: watchdog, and the samples of those cycles are consumed without being acted on
+    failsafe_cycles: int = 0
     controller_exit: int | None = None
     error: str = ""
 
@@ -108,6 +111,8 @@ def analyse(out: Path, res: DupResult) -> DupResult:
     summary = summary_json(out, "controller")
     counted = summary.get("received_by_verdict")
     res.counted = dict(counted) if isinstance(counted, dict) else {}
+    failsafe = summary.get("failsafe_cycles")
+    res.failsafe_cycles = int(failsafe) if isinstance(failsafe, int) else 0
     cycles = _cycles(ctl, codec)[:-1]  # the last one is the shutdown command
     res.cycles = len(cycles)
     acted = [s for _, s, en in cycles if en and s > 0]
