@@ -19,7 +19,6 @@ own exit code when it means something (2 bad config or output, 3 missing interfa
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -32,8 +31,9 @@ import yaml
 from . import PROJECT_ROOT, __version__
 from .bus.netns import PrivateNetns, netns_unavailable_reason
 from .canlog.sidecar import write_json_atomic
+from .childprocs import last_line, spawn, stop, wait_for_line
 from .config import DEFAULT_MULTICAST_GROUP
-from .errors import BusUnavailableError, EhpssError, OutputError, ProcessFailedError
+from .errors import BusUnavailableError, OutputError, ProcessFailedError
 from .rundir import prepare_run_dir, record_outputs
 from .scenario import Scenario, load_scenario
 from .schema import load_yaml
@@ -245,56 +245,6 @@ def _monitor_command(plan: RunPlan, out: Path, netns: PrivateNetns | None) -> li
     ]
 
 
-def _spawn(argv: list[str], prefix: list[str], out: Path, name: str) -> subprocess.Popen[bytes]:
-    with open(out / f"{name}.out", "wb") as stdout:  # the child keeps its own descriptor
-        return subprocess.Popen(
-            [*prefix, *argv],
-            stdout=stdout,
-            stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL,
-            cwd=PROJECT_ROOT,
-        )
-
-
-def _stop(proc: subprocess.Popen[bytes], timeout_s: float = 10.0) -> int | None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-    return proc.returncode
-
-
-def _wait_for_line(
-    path: Path, needle: str, timeout_s: float, procs: dict[str, subprocess.Popen[bytes]]
-) -> None:
-    """Wait until ``needle`` appears in the growing file ``path`` (e.g. the controller's
-    heartbeat in the bus log: the controller is on the bus and the logger hears it)."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if path.exists() and needle in path.read_text(errors="replace"):
-            return
-        dead = {n: p.returncode for n, p in procs.items() if p.poll() is not None}
-        if dead:
-            name, code = next(iter(dead.items()))
-            raise ProcessFailedError(
-                f"{name} ended during start-up (exit {code}): {_last_line(path.parent / f'{name}.out')}", code
-            )
-        time.sleep(0.05)
-    raise EhpssError(f"start-up timed out: {needle!r} not seen in {path} after {timeout_s:g} s")
-
-
-def _last_line(path: Path) -> str:
-    """The last non-empty line of a process's output (its one-line error), or a pointer to it."""
-    try:
-        lines = [ln for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
-    except OSError:
-        lines = []
-    return lines[-1].strip() if lines else f"no output (see {path})"
-
-
 def _namespace(interface: str, quiet: bool) -> PrivateNetns | None:
     """A private namespace for the embedded bus when one can be made; else None after saying
     so on stderr (BusUnavailableError when the host cannot route the multicast group)."""
@@ -332,33 +282,33 @@ def execute(plan: RunPlan) -> RunResult:
     procs: dict[str, subprocess.Popen[bytes]] = {}
     try:
         if plan.bus_logger:
-            procs["logger"] = _spawn(cmds["logger"], prefix, out, "logger")
-            _wait_for_line(out / "logger.out", "logging ", plan.startup_timeout_s, procs)
+            procs["logger"] = spawn(cmds["logger"], prefix, out, "logger")
+            wait_for_line(out / "logger.out", "logging ", plan.startup_timeout_s, procs)
         if plan.monitor_port is not None:
             cmds["monitor"] = _monitor_command(plan, out, netns)
-            procs["monitor"] = _spawn(cmds["monitor"], [], out, "monitor")
-            _wait_for_line(out / "monitor.out", "monitor: http://", plan.startup_timeout_s, procs)
+            procs["monitor"] = spawn(cmds["monitor"], [], out, "monitor")
+            wait_for_line(out / "monitor.out", "monitor: http://", plan.startup_timeout_s, procs)
             if not plan.quiet:
-                print(_last_line(out / "monitor.out"), file=sys.stderr, flush=True)
-        procs["controller"] = _spawn(cmds["controller"], prefix, out, "controller")
+                print(last_line(out / "monitor.out"), file=sys.stderr, flush=True)
+        procs["controller"] = spawn(cmds["controller"], prefix, out, "controller")
         node = int((load_yaml(out / "controller.yaml").get("ids") or {}).get("controller_node", 1))
         hb = f"{0x700 + node:03X}#"  # the controller's own boot-up heartbeat: it is on the bus
-        _wait_for_line(out / "controller.log", hb, plan.startup_timeout_s, procs)
-        procs["emulator"] = _spawn(cmds["emulator"], prefix, out, "emulator")
+        wait_for_line(out / "controller.log", hb, plan.startup_timeout_s, procs)
+        procs["emulator"] = spawn(cmds["emulator"], prefix, out, "emulator")
         limit = sc.duration_s * (60.0 if plan.lockstep else 1.0) + 30.0
         try:
             res.exit_codes["emulator"] = procs["emulator"].wait(timeout=limit)
         except subprocess.TimeoutExpired:
-            res.exit_codes["emulator"] = _stop(procs["emulator"])
+            res.exit_codes["emulator"] = stop(procs["emulator"])
         time.sleep(0.1)
-        res.exit_codes["controller"] = _stop(procs["controller"])
+        res.exit_codes["controller"] = stop(procs["controller"])
         if "logger" in procs:
-            res.exit_codes["logger"] = _stop(procs["logger"])
+            res.exit_codes["logger"] = stop(procs["logger"])
         if "monitor" in procs:
-            res.exit_codes["monitor"] = _stop(procs["monitor"])
+            res.exit_codes["monitor"] = stop(procs["monitor"])
     finally:
         for p in procs.values():
-            _stop(p, 2.0)
+            stop(p, 2.0)
         if netns is not None:
             netns.close()
     res.wall_s = time.monotonic() - t0

@@ -45,6 +45,8 @@ def _run(name: str, mode: str) -> tuple[SimResult, RunMetrics]:
         "poweron-kq",
         "kq-loss",
         "stuck-square",
+        "sensor-fail-square",
+        "drift-then-stuck-square",
     ],
 )
 def test_mmac_does_no_harm(name: str) -> None:
@@ -230,3 +232,26 @@ def test_a_model_adapting_up_through_the_failed_sensor_threshold_is_not_fed_back
     nrc = _run("kq-step-slow-sine", "nrc")[1]
     assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
     assert mm.max_error_m <= 50 * UM
+
+
+@pytest.mark.parametrize(("name", "worst_m"), [("stuck-square", 2.5e-3), ("drift-then-stuck-square", 4e-3)])
+def test_a_sensor_frozen_while_trusted_does_not_send_the_piston_away(name: str, worst_m: float) -> None:
+    """A reading that freezes (holding, or mid-motion after a drift) while the sensor is
+    trusted: nrc and oracle (which knows no stuck fault) wind the piston up to 44 resp. 22 mm
+    away. mmac finds the sensor dead in the first full-flow stop phase (the reading does not move
+    while the spool integral does) and tracks on x̂ from there, within ``worst_m``."""
+    mm = _run(name, "mmac")[1]
+    nrc = _run(name, "nrc")[1]
+    assert nrc.max_error_m > 0.02
+    assert mm.max_error_m <= worst_m
+
+
+def test_a_guard_released_over_a_dead_sensor_does_not_hand_the_loop_back_to_it() -> None:
+    """The sensor fails (k_DFT 0) while holding; the position guard carries the loop on x̂ and,
+    with no motion to score, later releases while the fixed 0.5 model is active. Fed back, the
+    dead reading (0 through 0.5) would drive the piston 20 mm away; held off until it is
+    consistent with x̂ or follows the spool, mmac does what the oracle (which knows k_DFT = 0)
+    does."""
+    mm = _run("sensor-fail-square", "mmac")[1]
+    oracle = _run("sensor-fail-square", "oracle")[1]
+    assert mm.rms_error_m <= oracle.rms_error_m + 5 * UM

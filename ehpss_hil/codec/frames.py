@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass
-from enum import IntEnum
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +28,7 @@ from ..errors import FrameError, FrameIdError
 from .e2e import CounterCheck, E2EState, crc_ok, protect
 from .layout import BitLayout, LayoutMiss
 from .ratelimit import RateLimit
+from .verdict import Decoded, Verdict
 
 DBC_ID_BASE = 0x100
 HEARTBEAT_BASE = 0x700
@@ -36,35 +36,7 @@ HEARTBEAT_BASE = 0x700
 MAX_STANDARD_ID = 0x7FF
 _DBC_NODE_IDS = {"HEARTBEAT_CTRL": 0x01, "HEARTBEAT_EMU": 0x02}
 
-
-class Verdict(IntEnum):
-    """Classification of one received frame. Only OK and OK_SOME_LOST carry usable data."""
-
-    OK = 0
-    REPEATED = 1
-    WRONG_SEQUENCE = 2
-    OK_SOME_LOST = 3
-    CRC_ERROR = 4
-    BAD_DLC = 5
-    UNKNOWN_ID = 6
-    OUT_OF_RANGE = 7
-
-    @property
-    def usable(self) -> bool:
-        """True when the frame's data may be acted on."""
-        return self in (Verdict.OK, Verdict.OK_SOME_LOST)
-
-
-@dataclass(slots=True)
-class Decoded:
-    """A classified frame: its verdict, its DBC name (None if unknown), its physical values and
-    its sequence counter's low 4 bits (None: not E2E protected, or not usable)."""
-
-    verdict: Verdict
-    name: str | None
-    values: dict[str, Any] | None
-    timestamp_s: float = 0.0
-    counter: int | None = None
+__all__ = ["DBC_ID_BASE", "HEARTBEAT_BASE", "MAX_STANDARD_ID", "Decoded", "FrameCodec", "Verdict"]
 
 
 @dataclass(frozen=True, slots=True)

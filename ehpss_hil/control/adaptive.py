@@ -25,6 +25,7 @@ from .estimator import Nlms, per_sample_gain
 from .flowgain import FlowGainMonitor
 from .monitor import HarmMonitor
 from .sampleclock import SampleClock
+from .stillsensor import StillSensor
 from .supervisor import Supervisor
 from .tuning import ControlTuning
 
@@ -60,6 +61,7 @@ class MmacController(LoopBase):
         )
         self.pos_sup = Supervisor(self.pos_bank, t, ts, guard_epsilon=t.position_guard_epsilon)
         self.flow = FlowGainMonitor(self.params.plant, ts, self.scale_spool_m, t)
+        self.still = StillSensor(self.params.plant.velocity_gain_1_s, ts)
         self.clock = SampleClock(self.valve, self.xhat, self.flow if t.flow_gain_test else None)
         self.monitor = HarmMonitor(
             t.flow_gain_min_deviation,
@@ -90,6 +92,9 @@ class MmacController(LoopBase):
         self.pos_sup.reset()
         self.flow.reset()
         self.monitor.reset()
+        self.still.reset()
+        self._dead = False  # the sensor stood still through a stop phase (stillsensor.py)
+        self._dead_evidence = 0  # excited increments of θ_prod taken since it was found dead
         self._in_flow = False
         self._flow_spool_model = self.spool_sup.active
         self._pos_model = self.pos_sup.active
@@ -125,6 +130,15 @@ class MmacController(LoopBase):
             else:
                 sb.update(y_v, v)
                 ss.update(abs(v) * self._inv_s_spool)
+            x_dead = self.still.update(y_v >= lvl or y_v <= -lvl, y_v, meas.position_m, xh)
+            if x_dead is not None and not self.flow.flow_fault:
+                # the sensor stood still through a full-flow stop phase: hold it off, put x̂
+                # where the spool took the piston, and regress from here (a stuck reading then
+                # fits the failed-sensor model)
+                self.sensor_held_off = self._dead = True
+                self._dead_evidence = 0
+                self.xhat.x = xh = x_dead
+                self._y0, self._x0 = meas.position_m, x_dead
             pb, ps = self.pos_bank, self.pos_sup
             if (gap and not resync) or stopped:
                 # x̂ missed samples, was dead-reckoned, or integrated a spool slamming into its
@@ -169,7 +183,7 @@ class MmacController(LoopBase):
         """Keep x0 = y0/θ with θ = θ̂_D·k̂_Q in use: x̂ moves with x0 (x̂ − x0 is unchanged), so
         it stays the absolute position while the sensor gain estimate changes; a failed-sensor
         model (θ below ``sensor_failed_below``) leaves it where it is."""
-        if self.sensor_alive(theta):
+        if self.sensor_alive(theta) and not self.pos_sup.guarded:
             x0 = self._y0 / theta
             self.xhat.x += x0 - self._x0
             self._x0 = x0
@@ -196,6 +210,8 @@ class MmacController(LoopBase):
         """
         fl = self.flow
         prod = fl.product(meas.position_m, y_v, self.clock.span, self._spool_hold == 0)
+        if self._dead and fl.product_updated:
+            self._dead_evidence += 1
         spool_model = self.spool_sup.active
         if spool_model != self._flow_spool_model:
             # the pressure prediction scales with k̂_LOE: evidence taken with another k̂_LOE
@@ -251,6 +267,14 @@ class MmacController(LoopBase):
 
     def _position_guarded(self) -> bool:
         return self.pos_sup.guarded and not self.flow.flow_fault
+
+    def _sensor_dead(self) -> bool:
+        """Found standing still through a full-flow stop phase (:class:`StillSensor`) and not
+        seen following the spool since: θ_prod, over a full window (M excited increments) of
+        increments taken after the finding, at a live sensor's gain."""
+        if self._dead and self._dead_evidence >= self.flow.increment_window and self._sensor_follows_spool():
+            self._dead = False
+        return self._dead
 
     def _sensor_follows_spool(self) -> bool:
         """The offset-free increment estimate θ_prod (fresh) says the sensor moves with the

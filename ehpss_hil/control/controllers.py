@@ -115,7 +115,7 @@ class LoopBase(Controller):
         self.k_dft_hat = 1.0
         self.k_q_hat = 1.0
         self.sensor_trusted = True
-        self.sensor_failed = False
+        self.sensor_held_off = False
         self.nominal = False
         self._ramp_left = self._ramp_len = 0
         self._ramp_from = (1.0, 1.0)
@@ -182,9 +182,11 @@ class LoopBase(Controller):
         ``y_s/θ̂_D``); untrusted: x̂ alone. This makes the return to the sensor bumpless.
         """
         td = self.k_dft_hat
-        self._judge_failed(meas, td)
         guarded = self._position_guarded()
-        model_trusted = sensor_trusted(td, self._failed_below, guarded, meas.fresh) and not self.sensor_failed
+        self._judge_failed(meas, td, guarded)
+        model_trusted = (
+            sensor_trusted(td, self._failed_below, guarded, meas.fresh) and not self.sensor_held_off
+        )
         # nominal: the estimates are set aside, the guard (no model explains the sensor) is not
         trusted = (meas.fresh and not guarded) if self.nominal else model_trusted
         self.sensor_trusted = trusted
@@ -214,18 +216,25 @@ class LoopBase(Controller):
     def _position_guarded(self) -> bool:
         return False
 
-    def _judge_failed(self, meas: Measurement, theta_d: float) -> None:
-        """:attr:`sensor_failed`: set while θ̂_D is below ``sensor_failed_below``; cleared only
-        when a fresh reading through θ̂_D lands within ``sensor_return_gap`` of the model
-        position k̂_Q·x̂ (m), or when :meth:`_sensor_follows_spool` (x̂ may be the one that is
-        off). A stuck sensor's gain estimate, or a reinitialized model adapting up from near 0,
-        crosses the threshold while the reading through it is far from the piston: fed back at
-        once, it would drive the piston away."""
-        if theta_d < self._failed_below:
-            self.sensor_failed = True
-        elif self.sensor_failed and meas.fresh:
+    def _judge_failed(self, meas: Measurement, theta_d: float, guarded: bool) -> None:
+        """:attr:`sensor_held_off`: set while θ̂_D is below ``sensor_failed_below`` (the sensor
+        declared failed), the position guard is up (no model explains it) or the sensor is
+        dead (:meth:`_sensor_dead`); cleared only when
+        a fresh reading through θ̂_D lands within ``sensor_return_gap`` of the model position
+        k̂_Q·x̂ (m), or when :meth:`_sensor_follows_spool` (x̂ may be the one that is off). A
+        stuck sensor's gain estimate, a reinitialized model adapting up from near 0, or a
+        guard released over a dead sensor would otherwise hand the loop a reading far from the
+        piston: fed back at once, it drives the piston away."""
+        if theta_d < self._failed_below or guarded or self._sensor_dead():
+            self.sensor_held_off = True
+        elif self.sensor_held_off and meas.fresh:
             gap = abs(meas.position_m / theta_d - self.k_q_hat * self.xhat.x)
-            self.sensor_failed = gap > self._return_gap_m and not self._sensor_follows_spool()
+            self.sensor_held_off = gap > self._return_gap_m and not self._sensor_follows_spool()
+
+    def _sensor_dead(self) -> bool:
+        """The sensor was found standing still through a full-flow motion and has not followed
+        the spool since; never in the base loop."""
+        return False
 
     def _sensor_follows_spool(self) -> bool:
         """An independent witness that the sensor's increments follow the spool (a live
@@ -235,7 +244,7 @@ class LoopBase(Controller):
     def sensor_alive(self, theta_d: float) -> bool:
         """The sensor, read through ``theta_d``, is not failed (θ above the threshold and not
         declared failed)."""
-        return theta_d >= self._failed_below and not self.sensor_failed
+        return theta_d >= self._failed_below and not self.sensor_held_off
 
     # ---- probes ----------------------------------------------------------------------------
     def probe(self) -> tuple[int, int, float, float]:

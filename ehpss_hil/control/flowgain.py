@@ -140,6 +140,11 @@ class FlowGainMonitor:
         """θ_prod had an excited increment within the last M updates."""
         return self._stale <= self._m
 
+    @property
+    def product_updated(self) -> bool:
+        """θ_prod took an excited increment on the last :meth:`product` call."""
+        return self._stale == 0
+
     def restart(self) -> None:
         """Empty the evidence window (the hypotheses or the pressure model changed); the
         decision stands until new evidence overturns it."""

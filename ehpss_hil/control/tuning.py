@@ -76,9 +76,10 @@ class ControlTuning:
     #: the do-no-harm monitor: a sensor whose increments follow the spool integral with at least
     #: this gain is not failed
     monitor_sensor_alive: float = field(default=0.5, metadata=rng(0.0, 2.5))
-    #: a sensor declared failed (θ̂_D below ``sensor_failed_below``) is fed back again only when,
-    #: read through θ̂_D, it is within this of the model position x̂ (fraction of the reference
-    #: amplitude): an estimate that merely crossed the threshold is not a sensor that came back
+    #: a sensor held off (declared failed: θ̂_D below ``sensor_failed_below``; guarded; dead) is
+    #: fed back again only when, read through θ̂_D, it is within this of the model position x̂
+    #: (fraction of the reference amplitude), or its increments follow the spool: an estimate
+    #: that merely crossed the threshold, or a released guard, is not a sensor that came back
     sensor_return_gap: float = field(default=0.5, metadata=rng(0.0, 1e3, lo_open=True))
     #: the position-increment regression (mmac-paper, smac, and mmac's flow-gain product): its
     #: window (samples)
