@@ -67,7 +67,7 @@ def _prepare_controller(path: Path, c: ControllerConfig) -> None:
     from ..runtime.frameio import process_codec
 
     params = load_params(c.params or None)
-    process_codec(c.dbc, c.ids, str(path), c.protocol, c.dbc_map)
+    process_codec(c.dbc, c.ids, str(path), c.protocol, c.dbc_map, c.nodes, params.plant.spool_stroke_m)
     loop_options(c)
     default_factory(c.mode, params, 1.0 / c.rate_hz, c)
 
