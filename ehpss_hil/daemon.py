@@ -12,6 +12,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from .blas import limit_blas_threads
 from .bus import open_bus
@@ -145,7 +146,13 @@ def run_daemon(a: DaemonArgs) -> int:
     """Configure, run until stopped, shut down fail-safe; returns the exit code (0)."""
     cfg = resolve_config(a)
     params = load_params(cfg.params or None)
-    codec = process_codec(cfg.dbc, cfg.ids, str(a.config), cfg.protocol, cfg.dbc_map)
+    if a.lockstep and cfg.protocol == "cia408":
+        raise ConfigError(
+            str(a.config), "protocol", "cia408 runs in realtime only (the master's SYNC paces the nodes)"
+        )
+    codec = process_codec(
+        cfg.dbc, cfg.ids, str(a.config), cfg.protocol, cfg.dbc_map, cfg.nodes, params.plant.spool_stroke_m
+    )
     limit_sensor_rate(codec, params.plant.piston_speed_max_m_s, 1.0 / cfg.rate_hz)
     controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
     if not isinstance(controller, Controller):
@@ -177,9 +184,13 @@ def run_daemon(a: DaemonArgs) -> int:
     except BaseException:
         bus.shutdown()
         raise
-    io = FrameIO(bus, codec, OWN_FRAMES, logger)
+    cia408 = cfg.protocol == "cia408"
+    io = FrameIO(bus, codec, (*OWN_FRAMES, "SYNC") if cia408 else OWN_FRAMES, logger)
+    session = master = None
     try:
-        loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us))
+        if cia408:
+            session, master = _cia408_master(bus, codec, cfg)
+        loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us), master)
     except BaseException:
         io.close()
         bus.shutdown()
@@ -190,6 +201,8 @@ def run_daemon(a: DaemonArgs) -> int:
         limit_blas_threads(1)  # idle OpenBLAS workers spin and steal the loop's CPU
         _prepare_rt(cfg.rt)
         loop.start()
+        if session is not None:
+            session.start(codec)  # type: ignore[arg-type]
         log.info(
             "mode %s on %s:%s at %g Hz%s",
             cfg.mode,
@@ -205,6 +218,8 @@ def run_daemon(a: DaemonArgs) -> int:
     finally:
         try:
             loop.shutdown()
+            if session is not None:
+                session.stop()
         finally:
             restore_handlers(previous)
             io.close()
@@ -212,6 +227,13 @@ def run_daemon(a: DaemonArgs) -> int:
     summary = {**loop.summary(), "rejected_datagrams": io.rejected_datagrams()}
     publish_summary(format_summary, summary, a.summary_json)
     return 0
+
+
+def _cia408_master(bus: Any, codec: Any, cfg: ControllerConfig) -> tuple[Any, Any]:
+    """The CANopen master's start-up session and its part of each cycle (``protocol: cia408``)."""
+    from .runtime.cia408_master import CyclicMaster, MasterSession
+
+    return MasterSession(bus, cfg.nodes), CyclicMaster(codec, cfg.nodes, cfg.rate_hz)
 
 
 def _prepare_rt(rt: RtOptions) -> None:

@@ -12,6 +12,7 @@ on the PDOs of a CiA 408 valve and a CiA 406 encoder, everything else native.
   first (the nodes answer in node order): classified, it gives ``Position`` and the ``Spool`` of
   the newest valve TPDO. A PDO has no sequence counter: the codec numbers the encoder TPDOs it
   receives (mod 16) as SENSOR_POS's counter, so a lost one is not seen.
+* SYNC (0x080, no data) is the master's, sent by the loop after each command.
 * VALVE_CMD is the valve's RPDO 1: the control word (:attr:`Cia408Codec.control_word`, set each
   cycle by the master's :class:`~.drive.DeviceDrive`) and ``CurrentSetpoint`` as the ±16384
   set-point (0 without ``Enable`` or when the control word asks for less than ACTIVE).
@@ -42,6 +43,7 @@ from .cyclic import (
     encoder_tpdo,
     frame,
     step_of_nm,
+    sync_frame,
     unpack_encoder_tpdo,
     unpack_valve_rpdo,
     unpack_valve_tpdo,
@@ -80,11 +82,13 @@ class Cia408Codec(FrameCodec):
             "SENSOR_POS": cobid.TPDO1 + encoder_node,
             "SENSOR_AUX": cobid.TPDO1 + valve_node,
             "VALVE_CMD": cobid.RPDO1 + valve_node,
+            "SYNC": cobid.SYNC,
         }
         self._lengths = {
             "SENSOR_POS": ENCODER_TPDO.size,
             "SENSOR_AUX": VALVE_TPDO.size,
             "VALVE_CMD": VALVE_RPDO.size,
+            "SYNC": 0,
         }
         self._names = {i: n for n, i in self._ids.items()}
         for name in MAPPED:  # the native IDs of the replaced frames are no longer read
@@ -102,6 +106,11 @@ class Cia408Codec(FrameCodec):
     def native_ids(self) -> list[tuple[str, int]]:
         """(name, ID) of every frame this codec still handles natively."""
         return [(n, super(Cia408Codec, self).can_id(n)) for n in self.names if n not in self._ids]
+
+    @property
+    def names(self) -> list[str]:
+        """The native DBC's frame names and ``SYNC`` (the master's, sent each cycle)."""
+        return [*super().names, "SYNC"]
 
     def can_id(self, name: str) -> int:
         i = self._ids.get(name)
@@ -148,6 +157,8 @@ class Cia408Codec(FrameCodec):
     ) -> can.Message:
         if name not in self._ids:
             return super().encode(name, values, timestamp_s, counter)
+        if name == "SYNC":
+            return sync_frame(timestamp_s)
         sc = self.scaling
         if name == "VALVE_CMD":
             current = self._finite(name, values, "CurrentSetpoint")

@@ -82,7 +82,7 @@ def check_identity(node: Any, profile: int, role: str) -> NodeIdentity:
     return ident
 
 
-def _await_state(node: Any, state: str, role: str) -> None:
+def await_state(node: Any, state: str, role: str) -> None:
     """Heartbeats until one shows ``state`` (one sent before the command may come first)."""
     end = time.monotonic() + STATE_TIMEOUT_S
     seen = None
@@ -107,7 +107,7 @@ def start_node(node: Any, profile: int, role: str) -> NodeIdentity:
     except (SdoAbortedError, SdoCommunicationError) as exc:
         raise NodeError(f"{role} node {node.id}: cannot set the heartbeat time (0x1017): {exc}") from exc
     node.nmt.state = "OPERATIONAL"
-    _await_state(node, "OPERATIONAL", role)
+    await_state(node, "OPERATIONAL", role)
     return ident
 
 

@@ -1,0 +1,189 @@
+"""The controller as the CANopen master of ``protocol: cia408`` (docs/hardware.md).
+
+:class:`MasterSession` is the start-up and the end, through ``canopen``'s master on the loop's
+own bus (a notifier thread only while it runs, none during the cycle): wait for each node's
+heartbeat, check its identity (0x1000: CiA 408 valve, CiA 406 encoder), configure it by SDO
+(:mod:`ehpss_hil.protocol.cia408.configure`), NMT start, OPERATIONAL confirmed in the heartbeat;
+after the loop, NMT stop.
+
+:class:`CyclicMaster` is the master's part of each cycle, in the loop's thread: the nodes'
+heartbeats (consumed, counted in cycles) and EMCY frames, the CiA 408 device drive (control word
+from the newest status word, :class:`~ehpss_hil.protocol.cia408.drive.DeviceDrive`), and the
+fail-safe reason when a node's heartbeat stops or shows another NMT state (HEARTBEAT_LOST), an
+EMCY with an error code arrives (EMCY) or the status word leaves ACTIVE (DEVICE_FAULT). The loop
+sends the SYNC after its command (frame ``SYNC`` of the codec).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any
+
+import can
+
+from ..config import Cia408Config
+from ..errors import NodeError
+from ..protocol.cia408 import cobid
+from ..protocol.cia408.codec import Cia408Codec
+from ..protocol.cia408.configure import configure_encoder, configure_valve
+from ..protocol.cia408.cyclic import Scaling, step_of_nm, unpack_emcy, unpack_heartbeat
+from ..protocol.cia408.drive import DeviceDrive
+from ..protocol.cia408.eds import ENCODER_EDS, VALVE_EDS
+from ..protocol.cia408.objects import EMCY_NO_ERROR, PROFILE_ENCODER, PROFILE_VALVE, NmtState
+from ..protocol.cia408.startup import NodeIdentity, await_state, check_identity
+from .lifecycle import FailsafeReason
+
+log = logging.getLogger("ehpss_hil.controller")
+
+#: how long the start-up waits for a node's first heartbeat (s): the nodes may boot after us
+NODE_WAIT_S = 120.0
+#: the start-up notifier's read timeout (s): how long stopping it may take
+NOTIFIER_CYCLE_S = 0.05
+
+
+class MasterSession:
+    """``canopen``'s Network on ``bus`` for the start-up and the NMT stop of the nodes of ``c``."""
+
+    def __init__(self, bus: can.BusABC, c: Cia408Config) -> None:
+        import canopen
+
+        self.c = c
+        self.bus = bus
+        self.net = canopen.Network(bus)
+        self.valve = self.net.add_node(c.valve_node, str(c.valve_eds or VALVE_EDS))
+        self.encoder = self.net.add_node(c.encoder_node, str(c.encoder_eds or ENCODER_EDS))
+        self.identities: tuple[NodeIdentity, NodeIdentity] | None = None
+
+    def start(self, codec: Cia408Codec) -> tuple[NodeIdentity, NodeIdentity]:
+        """Start-up of both nodes (module docstring); the encoder's measuring step goes into
+        ``codec``'s scaling. Raises :class:`NodeError`."""
+        self.net.notifier = can.Notifier(self.bus, self.net.listeners, NOTIFIER_CYCLE_S)
+        try:
+            for node, role in ((self.valve, "valve"), (self.encoder, "encoder")):
+                self._await_heartbeat(node, role)
+            valve = check_identity(self.valve, PROFILE_VALVE, "valve")
+            encoder = check_identity(self.encoder, PROFILE_ENCODER, "encoder")
+            configure_valve(self.valve, self.c)
+            step_nm = configure_encoder(self.encoder, self.c)
+            sc = codec.scaling
+            codec.scaling = Scaling(sc.full_scale_current_a, sc.spool_stroke_m, step_of_nm(step_nm))
+            for node, role in ((self.valve, "valve"), (self.encoder, "encoder")):
+                node.nmt.state = "OPERATIONAL"
+                await_state(node, "OPERATIONAL", role)
+        finally:
+            self.net.notifier.stop(NOTIFIER_CYCLE_S * 20)
+            self.net.notifier = None
+        self.identities = (valve, encoder)
+        log.info("cia408 start-up: %s; %s", valve.text(), encoder.text())
+        return valve, encoder
+
+    @staticmethod
+    def _await_heartbeat(node: Any, role: str) -> None:
+        from canopen.nmt import NmtError
+
+        try:
+            node.nmt.wait_for_heartbeat(NODE_WAIT_S)
+        except NmtError as exc:
+            raise NodeError(f"{role} node {node.id}: no heartbeat within {NODE_WAIT_S:g} s") from exc
+
+    def stop(self) -> None:
+        """NMT stop of both nodes (nothing awaited)."""
+        for node in (self.valve, self.encoder):
+            node.nmt.state = "STOPPED"
+
+
+class CyclicMaster:
+    """The master's work in each cycle of the loop (module docstring); ``rate_hz`` the loop's."""
+
+    def __init__(self, codec: Cia408Codec, c: Cia408Config, rate_hz: float) -> None:
+        self.codec = codec
+        self.drive = DeviceDrive()
+        nodes = (c.valve_node, c.encoder_node)
+        self._hb_ids = {cobid.HEARTBEAT + n: n for n in nodes}
+        self._emcy_ids = {cobid.EMCY + n: n for n in nodes}
+        #: cycles without a node's heartbeat after which it is lost
+        self.hb_timeout_cycles = max(1, math.ceil(c.node_heartbeat_timeout_ms * 1e-3 * rate_hz))
+        self._hb_cycle = dict.fromkeys(nodes, 0)
+        self._cycle = 0
+        #: the fail-safe reason (the first one latches) and the cycle it came in
+        self.reason: FailsafeReason | None = None
+        self.fault_cycle: int | None = None
+        self.fault_text = ""
+        #: the last EMCY with an error code: (node, code, error register), and how many came
+        self.emcy: tuple[int, int, int] | None = None
+        self.emcy_frames = 0
+
+    @property
+    def ready(self) -> bool:
+        """The valve is ACTIVE and nothing failed: the controller may start."""
+        return self.reason is None and self.drive.active
+
+    def on_frame(self, msg: can.Message) -> None:
+        """A received frame the loop does not consume (heartbeats and EMCY of the nodes are used)."""
+        fid = msg.arbitration_id
+        node = self._hb_ids.get(fid)
+        if node is not None:
+            self._hb_cycle[node] = self._cycle
+            state = unpack_heartbeat(bytes(msg.data))
+            if state is not NmtState.OPERATIONAL:
+                shown = state.name if state is not None else bytes(msg.data).hex()
+                self._fail(FailsafeReason.HEARTBEAT_LOST, f"node {node}: heartbeat shows {shown}")
+            return
+        node = self._emcy_ids.get(fid)
+        if node is not None:
+            e = unpack_emcy(bytes(msg.data))
+            if e is not None and e[0] != EMCY_NO_ERROR:
+                self.emcy = (node, e[0], e[1])
+                self.emcy_frames += 1
+                self._fail(
+                    FailsafeReason.EMCY, f"node {node}: EMCY 0x{e[0]:04X} (error register 0x{e[1]:02X})"
+                )
+
+    def update(self, cycles: int) -> FailsafeReason | None:
+        """Before this cycle's command: heartbeat timeouts, the control word from the newest
+        status word; returns the fail-safe reason (None: none)."""
+        self._cycle = cycles
+        for node, seen in self._hb_cycle.items():
+            if cycles - seen > self.hb_timeout_cycles:
+                self._fail(
+                    FailsafeReason.HEARTBEAT_LOST, f"node {node}: no heartbeat for {cycles - seen} cycles"
+                )
+        self.codec.control_word = self.drive.update(self.codec.status_word)
+        if self.drive.left_active is not None:
+            self._fail(
+                FailsafeReason.DEVICE_FAULT,
+                f"valve status word 0x{self.codec.status_word:04X}: {self.drive.left_active.name}",
+            )
+        elif self.drive.gave_up:
+            self._fail(FailsafeReason.DEVICE_FAULT, "valve fault persists after the fault resets")
+        return self.reason
+
+    def _fail(self, reason: FailsafeReason, text: str) -> None:
+        if self.reason is not None:
+            return
+        self.reason, self.fault_cycle, self.fault_text = reason, self._cycle, text
+        log.error("cycle %d: cia408 master: %s -> %s", self._cycle, text, reason.name)
+        self.drive.disable()
+        self.codec.control_word = self.drive.control_word
+
+    def stop(self) -> None:
+        """The stop sequence's control word: DISABLED (the loop then sends set-point 0)."""
+        self.drive.disable()
+        self.codec.control_word = self.drive.control_word
+
+    def summary(self) -> dict[str, Any]:
+        """Counters and the fault (JSON-able)."""
+        return {
+            "valve_state": self.drive.state.name,
+            "control_word": self.codec.control_word,
+            "status_word": self.codec.status_word,
+            "fault_reason": self.reason.name if self.reason is not None else None,
+            "fault_cycle": self.fault_cycle,
+            "fault": self.fault_text,
+            "emcy": None
+            if self.emcy is None
+            else {"node": self.emcy[0], "code": self.emcy[1], "register": self.emcy[2]},
+            "emcy_frames": self.emcy_frames,
+            "fault_resets": self.drive.fault_resets,
+        }
