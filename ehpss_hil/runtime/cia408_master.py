@@ -113,6 +113,7 @@ class CyclicMaster:
         #: the last EMCY with an error code: (node, code, error register), and how many came
         self.emcy: tuple[int, int, int] | None = None
         self.emcy_frames = 0
+        self._pending: tuple[FailsafeReason, str] | None = None
 
     @property
     def ready(self) -> bool:
@@ -124,11 +125,11 @@ class CyclicMaster:
         fid = msg.arbitration_id
         node = self._hb_ids.get(fid)
         if node is not None:
-            self._hb_cycle[node] = self._cycle
+            self._hb_cycle[node] = self._cycle + 1  # the cycle that drains it (the next update)
             state = unpack_heartbeat(bytes(msg.data))
             if state is not NmtState.OPERATIONAL:
                 shown = state.name if state is not None else bytes(msg.data).hex()
-                self._fail(FailsafeReason.HEARTBEAT_LOST, f"node {node}: heartbeat shows {shown}")
+                self._heard(FailsafeReason.HEARTBEAT_LOST, f"node {node}: heartbeat shows {shown}")
             return
         node = self._emcy_ids.get(fid)
         if node is not None:
@@ -136,7 +137,7 @@ class CyclicMaster:
             if e is not None and e[0] != EMCY_NO_ERROR:
                 self.emcy = (node, e[0], e[1])
                 self.emcy_frames += 1
-                self._fail(
+                self._heard(
                     FailsafeReason.EMCY, f"node {node}: EMCY 0x{e[0]:04X} (error register 0x{e[1]:02X})"
                 )
 
@@ -144,6 +145,8 @@ class CyclicMaster:
         """Before this cycle's command: heartbeat timeouts, the control word from the newest
         status word; returns the fail-safe reason (None: none)."""
         self._cycle = cycles
+        if self._pending is not None:
+            self._fail(*self._pending)
         for node, seen in self._hb_cycle.items():
             if cycles - seen > self.hb_timeout_cycles:
                 self._fail(
@@ -158,6 +161,11 @@ class CyclicMaster:
         elif self.drive.gave_up:
             self._fail(FailsafeReason.DEVICE_FAULT, "valve fault persists after the fault resets")
         return self.reason
+
+    def _heard(self, reason: FailsafeReason, text: str) -> None:
+        """A failure in a received frame, taken by the next :meth:`update` (the first one)."""
+        if self._pending is None:
+            self._pending = (reason, text)
 
     def _fail(self, reason: FailsafeReason, text: str) -> None:
         if self.reason is not None:
