@@ -26,7 +26,7 @@ from .config import (
 from .control.base import Controller
 from .errors import ConfigError
 from .physics.params import Params, load_params
-from .runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
+from .runtime.controller_loop import CIA408_OWN_FRAMES, OWN_FRAMES, ControllerLoop, LoopOptions
 from .runtime.frameio import FrameIO, limit_sensor_rate, open_process_logger, process_codec
 from .runtime.rt import apply_rt_options, freeze_gc
 from .runtime.signals import install_stop_handlers, restore_handlers
@@ -185,7 +185,7 @@ def run_daemon(a: DaemonArgs) -> int:
         bus.shutdown()
         raise
     cia408 = cfg.protocol == "cia408"
-    io = FrameIO(bus, codec, (*OWN_FRAMES, "SYNC") if cia408 else OWN_FRAMES, logger)
+    io = FrameIO(bus, codec, (*OWN_FRAMES, *CIA408_OWN_FRAMES) if cia408 else OWN_FRAMES, logger)
     session = master = None
     try:
         if cia408:

@@ -69,6 +69,12 @@ def test_an_emcy_is_the_reason_with_its_code_and_disables_the_valve() -> None:
     assert rig.cycle() is FailsafeReason.EMCY  # the EMCY comes before the status word is checked
     assert rig.master.emcy == (CFG.valve_node, 0x5000, 1) and rig.master.fault_cycle == rig.cycles - 1
     assert rig.codec.control_word == BIT_D and not rig.master.ready
+    assert rig.master.device_values() == {
+        "EmcyNode": CFG.valve_node,
+        "EmcyCode": 0x5000,
+        "ErrorRegister": 1,
+        "StatusWord": 0x0001,  # FAULT: D with R (ready) clear
+    }
     assert rig.cycle() is FailsafeReason.EMCY  # latched: the status word leaving ACTIVE adds nothing
 
 

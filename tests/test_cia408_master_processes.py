@@ -3,8 +3,8 @@ CiA 408 valve + CiA 406 encoder (``configs/emulator-cia408.yaml``) as two real p
 ``ehpss-hil run`` on the embedded bus, realtime, in a private network namespace: start-up by SDO
 and NMT, SYNC from the controller's loop, tracking on the encoder's position value, the stop
 sequence; an injected device fault (the emulator's EMCY) puts the controller into fail-safe with
-reason EMCY. Tracking is judged only when both processes kept time (their summaries say so);
-nothing is timed."""
+reason EMCY in CTRL_STATUS and the EMCY code in CTRL_DEVICE. Tracking is judged only when both
+processes kept time (their summaries say so); nothing is timed."""
 
 from __future__ import annotations
 
@@ -133,3 +133,6 @@ def test_realtime_emcy_puts_the_controller_into_failsafe_with_its_reason(tmp_pat
     status = [codec.classify(m).values for m in log[at:] if m.arbitration_id == codec.can_id("CTRL_STATUS")]
     first_fault = next(v for v in status if v is not None and v["State"] == State.FAULT)
     assert first_fault["FailsafeReason"] == FailsafeReason.EMCY
+    device = [codec.classify(m).values for m in log[at:] if m.arbitration_id == codec.can_id("CTRL_DEVICE")]
+    assert device and device[0] is not None
+    assert (device[0]["EmcyNode"], device[0]["EmcyCode"], device[0]["ErrorRegister"]) == (VALVE, 0x5000, 1)

@@ -11,7 +11,8 @@ heartbeats (consumed, counted in cycles) and EMCY frames, the CiA 408 device dri
 from the newest status word, :class:`~ehpss_hil.protocol.cia408.drive.DeviceDrive`), and the
 fail-safe reason when a node's heartbeat stops or shows another NMT state (HEARTBEAT_LOST), an
 EMCY with an error code arrives (EMCY) or the status word leaves ACTIVE (DEVICE_FAULT). The loop
-sends the SYNC after its command (frame ``SYNC`` of the codec).
+sends the SYNC after its command (frame ``SYNC`` of the codec) and, with each CTRL_STATUS,
+CTRL_DEVICE (:meth:`CyclicMaster.device_values`: the last EMCY code and the status word).
 """
 
 from __future__ import annotations
@@ -179,6 +180,17 @@ class CyclicMaster:
         """The stop sequence's control word: DISABLED (the loop then sends set-point 0)."""
         self.drive.disable()
         self.codec.control_word = self.drive.control_word
+
+    def device_values(self) -> dict[str, int]:
+        """CTRL_DEVICE's signals: the last EMCY (node, code, error register; 0 = none) and the
+        valve's status word."""
+        node, code, register = self.emcy if self.emcy is not None else (0, 0, 0)
+        return {
+            "EmcyNode": node,
+            "EmcyCode": code,
+            "ErrorRegister": register,
+            "StatusWord": self.codec.status_word,
+        }
 
     def summary(self) -> dict[str, Any]:
         """Counters and the fault (JSON-able)."""

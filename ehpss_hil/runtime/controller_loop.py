@@ -47,6 +47,8 @@ if TYPE_CHECKING:
 log = logging.getLogger("ehpss_hil.controller")
 
 OWN_FRAMES = ("VALVE_CMD", "CTRL_STATUS", "CTRL_INDEX", "CTRL_STATS", "HEARTBEAT_CTRL")
+#: the frames the CANopen master (``protocol: cia408``) sends besides
+CIA408_OWN_FRAMES = ("SYNC", "CTRL_DEVICE")
 _E2E_VERDICTS = (Verdict.CRC_ERROR, Verdict.REPEATED, Verdict.WRONG_SEQUENCE, Verdict.BAD_DLC)
 _SEQUENCE_VERDICTS = (Verdict.REPEATED, Verdict.WRONG_SEQUENCE)
 #: who put the loop into FAULT, for the log (anything else: the CANopen master's device checks)
@@ -368,8 +370,11 @@ class ControllerLoop:
 
     # ---- status frames ----------------------------------------------------------------------
     def send_status(self, all_index: bool = False) -> None:
-        """CTRL_STATUS now, its CTRL_INDEX frames one per following cycle (or all at once)."""
+        """CTRL_STATUS now (with CTRL_DEVICE under the CANopen master), its CTRL_INDEX frames one
+        per following cycle (or all at once)."""
         self.reporter.send(self.controller, self.life, all_index)
+        if self.master is not None:
+            self.io.send("CTRL_DEVICE", self.master.device_values())
 
     # ---- drivers ----------------------------------------------------------------------------
     def start(self) -> None:
