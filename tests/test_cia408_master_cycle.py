@@ -33,10 +33,10 @@ class Rig:
     def heartbeat(self, node: int, state: int = NmtState.OPERATIONAL) -> None:
         self.master.on_frame(can.Message(arbitration_id=cobid.HEARTBEAT + node, data=bytes([state])))
 
-    def cycle(self, heartbeats: bool = True) -> FailsafeReason | None:
+    def cycle(self, heartbeats: bool = True, tpdos: bool = True) -> FailsafeReason | None:
         """Drain (the valve's TPDO, EMCY, heartbeats), update, command, SYNC."""
         sent, self.nodes.sent = self.nodes.sent, []
-        for msg in [*sent, *self.nodes.sync()]:
+        for msg in [*sent, *(self.nodes.sync() if tpdos else [])]:
             if msg.arbitration_id == self.codec.can_id("SENSOR_AUX"):
                 self.codec.classify(msg)
             else:
@@ -105,3 +105,11 @@ def test_heartbeat_loss_and_a_node_leaving_operational() -> None:
     rig.heartbeat(CFG.encoder_node, NmtState.STOPPED)
     assert rig.cycle(heartbeats=False) is FailsafeReason.HEARTBEAT_LOST
     assert "STOPPED" in rig.master.fault_text
+
+
+def test_a_cycle_without_the_status_word_is_not_fresh_for_the_watchdog() -> None:
+    rig = Rig()
+    rig.run_until_ready()
+    assert rig.master.status_fresh
+    assert rig.cycle(tpdos=False) is None and not rig.master.status_fresh
+    assert rig.cycle() is None and rig.master.status_fresh and rig.master.ready

@@ -10,9 +10,10 @@ after the loop, NMT stop.
 heartbeats (consumed, counted in cycles) and EMCY frames, the CiA 408 device drive (control word
 from the newest status word, :class:`~ehpss_hil.protocol.cia408.drive.DeviceDrive`), and the
 fail-safe reason when a node's heartbeat stops or shows another NMT state (HEARTBEAT_LOST), an
-EMCY with an error code arrives (EMCY) or the status word leaves ACTIVE (DEVICE_FAULT). The loop
-sends the SYNC after its command (frame ``SYNC`` of the codec) and, with each CTRL_STATUS,
-CTRL_DEVICE (:meth:`CyclicMaster.device_values`: the last EMCY code and the status word).
+EMCY with an error code arrives (EMCY) or the status word leaves ACTIVE (DEVICE_FAULT); these
+latch, and the valve is asked for DISABLED. A cycle without a status word counts for the loop's
+watchdog as a cycle without data (:attr:`CyclicMaster.status_fresh`: SENSOR_TIMEOUT, with the
+watchdog's own recovery).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from ..protocol.cia408.cyclic import Scaling, step_of_nm, unpack_emcy, unpack_he
 from ..protocol.cia408.drive import DeviceDrive
 from ..protocol.cia408.eds import ENCODER_EDS, VALVE_EDS
 from ..protocol.cia408.objects import EMCY_NO_ERROR, PROFILE_ENCODER, PROFILE_VALVE, NmtState
-from ..protocol.cia408.startup import NodeIdentity, await_state, check_identity
+from ..protocol.cia408.startup import NodeIdentity, check_identity, go_operational, stop_nodes
 from .lifecycle import FailsafeReason
 
 log = logging.getLogger("ehpss_hil.controller")
@@ -69,9 +70,8 @@ class MasterSession:
             step_nm = configure_encoder(self.encoder, self.c)
             sc = codec.scaling
             codec.scaling = Scaling(sc.full_scale_current_a, sc.spool_stroke_m, step_of_nm(step_nm))
-            for node, role in ((self.valve, "valve"), (self.encoder, "encoder")):
-                node.nmt.state = "OPERATIONAL"
-                await_state(node, "OPERATIONAL", role)
+            go_operational(self.valve, "valve")
+            go_operational(self.encoder, "encoder")
         finally:
             self.net.notifier.stop(NOTIFIER_CYCLE_S * 20)
             self.net.notifier = None
@@ -90,8 +90,7 @@ class MasterSession:
 
     def stop(self) -> None:
         """NMT stop of both nodes (nothing awaited)."""
-        for node in (self.valve, self.encoder):
-            node.nmt.state = "STOPPED"
+        stop_nodes(self.valve, self.encoder)
 
 
 class CyclicMaster:
@@ -99,6 +98,10 @@ class CyclicMaster:
 
     def __init__(self, codec: Cia408Codec, c: Cia408Config, rate_hz: float) -> None:
         self.codec = codec
+        #: a valve TPDO (a status word) arrived since the last update: the loop's watchdog counts
+        #: a cycle without one as a cycle without data
+        self.status_fresh = False
+        self._valve_tpdos = 0
         self.drive = DeviceDrive()
         nodes = (c.valve_node, c.encoder_node)
         self._hb_ids = {cobid.HEARTBEAT + n: n for n in nodes}
@@ -153,6 +156,8 @@ class CyclicMaster:
                 self._fail(
                     FailsafeReason.HEARTBEAT_LOST, f"node {node}: no heartbeat for {cycles - seen} cycles"
                 )
+        self.status_fresh = self.codec.valve_tpdos != self._valve_tpdos
+        self._valve_tpdos = self.codec.valve_tpdos
         self.codec.control_word = self.drive.update(self.codec.status_word)
         if self.drive.left_active is not None:
             self._fail(

@@ -250,7 +250,8 @@ class ControllerLoop:
                 self._stale_in_cycle,
                 self.stale_after_s * 1e3,
             )
-        tripped = self.wd.update(self._fresh, self._e2e_bad, self._implausible, self._late)
+        fresh = self._fresh and (self.master is None or self.master.status_fresh)
+        tripped = self.wd.update(fresh, self._e2e_bad, self._implausible, self._late)
         if st is State.ACTIVE and device is not None:
             self._fault(device)
         elif st is State.ACTIVE and (tripped or collided):

@@ -96,8 +96,9 @@ class Cia408Codec(FrameCodec):
         self._bounds = {n: super(Cia408Codec, self).signal_bounds(n) for n in MAPPED}
         #: the control word the next VALVE_CMD carries (the master's device drive sets it)
         self.control_word = BIT_D
-        #: the newest status word of the valve (0: none yet)
+        #: the newest status word of the valve (0: none yet) and the valve TPDOs that carried one
         self.status_word = 0
+        self.valve_tpdos = 0
         self._spool_m = 0.0
         self._applied: deque[float] = deque([0.0] * ECHO_DELAY_COMMANDS, maxlen=ECHO_DELAY_COMMANDS)
         self._rx_pos = 0
@@ -207,6 +208,7 @@ class Cia408Codec(FrameCodec):
             if not self._in_range("SENSOR_POS", "Spool", spool):
                 return Decoded(Verdict.OUT_OF_RANGE, name, None, ts)
             self.status_word, self._spool_m = status, spool
+            self.valve_tpdos += 1
             echo = self._applied[0] if status & (STATE_BITS | BIT_R) == _ACTIVE_STATUS else 0.0
             values = {"CoilCurrent": echo, "LoadPressure": 0.0, "Spool": spool, "StatusWord": status}
             return Decoded(Verdict.OK, name, values, ts)
