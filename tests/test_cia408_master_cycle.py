@@ -113,3 +113,12 @@ def test_a_cycle_without_the_status_word_is_not_fresh_for_the_watchdog() -> None
     assert rig.master.status_fresh
     assert rig.cycle(tpdos=False) is None and not rig.master.status_fresh
     assert rig.cycle() is None and rig.master.status_fresh and rig.master.ready
+
+
+def test_an_emcy_before_the_valve_was_active_is_reset_not_latched() -> None:
+    rig = Rig()
+    rig.nodes.valve.on_heartbeat_lost(CFG.master_node)  # our heartbeat missed during start-up
+    assert rig.cycle() is None and rig.master.emcy == (CFG.valve_node, 0x8130, 0x11)
+    for _ in range(6):
+        rig.cycle()
+    assert rig.master.ready and rig.master.drive.fault_resets == 1

@@ -10,10 +10,11 @@ after the loop, NMT stop.
 heartbeats (consumed, counted in cycles) and EMCY frames, the CiA 408 device drive (control word
 from the newest status word, :class:`~ehpss_hil.protocol.cia408.drive.DeviceDrive`), and the
 fail-safe reason when a node's heartbeat stops or shows another NMT state (HEARTBEAT_LOST), an
-EMCY with an error code arrives (EMCY) or the status word leaves ACTIVE (DEVICE_FAULT); these
-latch, and the valve is asked for DISABLED. A cycle without a status word counts for the loop's
-watchdog as a cycle without data (:attr:`CyclicMaster.status_fresh`: SENSOR_TIMEOUT, with the
-watchdog's own recovery).
+EMCY with an error code arrives once the valve has been ACTIVE (EMCY; before, the drive resets
+the fault it reports: the valve may have missed our heartbeat during the start-up) or the
+status word leaves ACTIVE (DEVICE_FAULT); these latch, and the valve is asked for DISABLED. A
+cycle without a status word counts for the loop's watchdog as a cycle without data
+(:attr:`CyclicMaster.status_fresh`: SENSOR_TIMEOUT, with the watchdog's own recovery).
 """
 
 from __future__ import annotations
@@ -141,9 +142,11 @@ class CyclicMaster:
             if e is not None and e[0] != EMCY_NO_ERROR:
                 self.emcy = (node, e[0], e[1])
                 self.emcy_frames += 1
-                self._heard(
-                    FailsafeReason.EMCY, f"node {node}: EMCY 0x{e[0]:04X} (error register 0x{e[1]:02X})"
-                )
+                text = f"node {node}: EMCY 0x{e[0]:04X} (error register 0x{e[1]:02X})"
+                if self.drive.was_active:
+                    self._heard(FailsafeReason.EMCY, text)
+                else:  # e.g. our heartbeat missed during the start-up: the drive resets it
+                    log.warning("%s before the valve was ACTIVE: reset by the device drive", text)
 
     def update(self, cycles: int) -> FailsafeReason | None:
         """Before this cycle's command: heartbeat timeouts, the control word from the newest
