@@ -188,7 +188,9 @@ class Cia408Config:
     1 mA: the plant's spool reaches its ±10 mm stroke at ≈ 0.61 mA). The emulator takes
     ``heartbeat_time_ms`` (0x1017) and the timeouts 0x1016.1 (the master's heartbeat) and
     0x1400.5 (the set-point RPDO) as power-on values; the master writes the same three by SDO at
-    start-up and takes a node whose heartbeat is ``node_heartbeat_timeout_ms`` late as lost.
+    start-up and takes a node whose heartbeat is ``node_heartbeat_timeout_ms`` late as lost;
+    ``sync``: the master sends SYNC after each command (``produce``) or another node does
+    (``follow``: then ``rt.wake_on_sensor`` starts each cycle on the TPDOs the SYNC brings).
     EDS paths: empty = the shipped files (``eds/``). The resolution and the EDS files are
     checked by ``ehpss_hil.protocol.cia408.check``."""
 
@@ -200,6 +202,7 @@ class Cia408Config:
     master_heartbeat_timeout_ms: int = field(default=0, metadata=rng(0, 65535))
     setpoint_timeout_ms: int = field(default=0, metadata=rng(0, 65535))
     node_heartbeat_timeout_ms: int = field(default=300, metadata=rng(1, 65535))
+    sync: Literal["produce", "follow"] = "produce"
     valve_eds: str = ""
     encoder_eds: str = ""
 

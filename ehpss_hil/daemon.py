@@ -184,11 +184,10 @@ def run_daemon(a: DaemonArgs) -> int:
     except BaseException:
         bus.shutdown()
         raise
-    cia408 = cfg.protocol == "cia408"
-    io = FrameIO(bus, codec, (*OWN_FRAMES, *CIA408_OWN_FRAMES) if cia408 else OWN_FRAMES, logger)
+    io = FrameIO(bus, codec, _own_frames(cfg), logger)
     session = master = None
     try:
-        if cia408:
+        if cfg.protocol == "cia408":
             session, master = _cia408_master(bus, codec, cfg)
         loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us), master)
     except BaseException:
@@ -227,6 +226,14 @@ def run_daemon(a: DaemonArgs) -> int:
     summary = {**loop.summary(), "rejected_datagrams": io.rejected_datagrams()}
     publish_summary(format_summary, summary, a.summary_json)
     return 0
+
+
+def _own_frames(cfg: ControllerConfig) -> tuple[str, ...]:
+    """The frames the controller sends: the CANopen master's besides (SYNC only when it is the
+    producer; a SYNC from another node is then no collision)."""
+    if cfg.protocol != "cia408":
+        return OWN_FRAMES
+    return (*OWN_FRAMES, *(f for f in CIA408_OWN_FRAMES if f != "SYNC" or cfg.nodes.sync == "produce"))
 
 
 def _cia408_master(bus: Any, codec: Any, cfg: ControllerConfig) -> tuple[Any, Any]:

@@ -7,8 +7,9 @@ heartbeat, check its identity (0x1000: CiA 408 valve, CiA 406 encoder), configur
 after the loop, NMT stop.
 
 :class:`CyclicMaster` is the master's part of each cycle, in the loop's thread: the nodes'
-heartbeats (consumed, counted in cycles) and EMCY frames, the CiA 408 device drive (control word
-from the newest status word, :class:`~ehpss_hil.protocol.cia408.drive.DeviceDrive`), and the
+heartbeats (consumed, counted in cycles) and EMCY frames (and another producer's SYNCs, counted),
+the CiA 408 device drive (control word from the newest status word,
+:class:`~ehpss_hil.protocol.cia408.drive.DeviceDrive`), and the
 fail-safe reason when a node's heartbeat stops or shows another NMT state (HEARTBEAT_LOST), an
 EMCY with an error code arrives once the valve has been ACTIVE (EMCY; before, the drive resets
 the fault it reports: the valve may have missed our heartbeat during the start-up) or the
@@ -99,6 +100,10 @@ class CyclicMaster:
 
     def __init__(self, codec: Cia408Codec, c: Cia408Config, rate_hz: float) -> None:
         self.codec = codec
+        #: the loop sends SYNC after each command (else another node produces it)
+        self.produces_sync = c.sync == "produce"
+        #: SYNC frames received from another producer (``sync: follow``)
+        self.syncs_seen = 0
         #: a valve TPDO (a status word) arrived since the last update: the loop's watchdog counts
         #: a cycle without one as a cycle without data
         self.status_fresh = False
@@ -128,6 +133,9 @@ class CyclicMaster:
     def on_frame(self, msg: can.Message) -> None:
         """A received frame the loop does not consume (heartbeats and EMCY of the nodes are used)."""
         fid = msg.arbitration_id
+        if fid == cobid.SYNC:
+            self.syncs_seen += 1
+            return
         node = self._hb_ids.get(fid)
         if node is not None:
             self._hb_cycle[node] = self._cycle + 1  # the cycle that drains it (the next update)
@@ -213,5 +221,6 @@ class CyclicMaster:
             if self.emcy is None
             else {"node": self.emcy[0], "code": self.emcy[1], "register": self.emcy[2]},
             "emcy_frames": self.emcy_frames,
+            "sync": "produced" if self.produces_sync else f"followed ({self.syncs_seen} seen)",
             "fault_resets": self.drive.fault_resets,
         }

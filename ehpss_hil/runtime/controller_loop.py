@@ -346,7 +346,7 @@ class ControllerLoop:
         self._update_state()
         current, enable = self._command()
         self.send_command(current, enable)
-        if self.master is not None:
+        if self.master is not None and self.master.produces_sync:
             self.io.send("SYNC", {})
         if self._fresh:
             self.stats.latency.add(time.time() - self._pos_ts)
