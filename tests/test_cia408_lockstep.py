@@ -71,3 +71,15 @@ def test_cia408_master_gives_the_native_metrics(case: str, mode: str) -> None:
     assert max(diffs) <= tol, (diffs, tol)
     assert cia.switches == native.switches
     assert [e.recovery_s for e in cia.events] == [e.recovery_s for e in native.events]
+
+
+def test_the_protocol_config_brings_its_tuning() -> None:
+    """Without a tuning of its own, a cia408 run takes the config's (mmac without its flow-gain
+    test: the valve reports no load pressure, and a pressure of 0 would read as a k_Q loss)."""
+    sc = load_scenario(ROOT / "scenarios" / "case2-drift.yaml")
+    tuning = load_controller_config(CIA_CFG).tuning
+    assert tuning.flow_gain_test is False
+    implied = run_scenario(sc, "mmac", transport="frames", protocol_config=CIA_CFG)
+    explicit = run_scenario(sc, "mmac", tuning=tuning, transport="frames", protocol_config=CIA_CFG)
+    assert (implied.x_true_m == explicit.x_true_m).all() and (implied.current_a == explicit.current_a).all()
+    assert compute_metrics(implied).rms_error_m < 2e-6

@@ -94,9 +94,14 @@ def run_scenario(
 ) -> SimResult:
     """Simulate ``scenario`` with controller ``mode``; returns every per-sample array.
     ``protocol_config``: a controller config whose protocol profile the frames transport speaks
-    on both sides (the emulator impersonating the mapped electronics)."""
+    on both sides (the emulator impersonating the mapped electronics); its tuning is the one
+    used when ``tuning`` is None (cia408 needs mmac without its flow-gain test)."""
     limit_blas_threads(1)
     prm = params if params is not None else load_params()
+    if protocol_config and tuning is None:
+        from ..config import load_controller_config
+
+        tuning = load_controller_config(protocol_config).tuning
     ts = scenario.sample_time_s
     ctrl = make_controller(mode, prm, ts, tuning, scenario.reference)
     emu = PlantEmulation(prm, scenario)
