@@ -128,6 +128,8 @@ class Cia408Codec(FrameCodec):
         return None if name in self._ids else super().data_ids(name)
 
     def signal_bounds(self, name: str) -> dict[str, tuple[float | None, float | None]]:
+        if name == "SYNC":
+            return {}
         return self._bounds[name] if name in self._bounds else super().signal_bounds(name)
 
     def limit_rate(self, name: str, signal: str, step_m: float) -> RateLimit:
