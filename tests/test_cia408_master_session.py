@@ -13,6 +13,7 @@ import pytest
 from _cia408 import Cia408Rig, wait_until
 
 from ehpss_hil.config import CanIds, Cia408Config
+from ehpss_hil.errors import NodeError
 from ehpss_hil.physics.params import load_params
 from ehpss_hil.protocol import make_codec
 from ehpss_hil.protocol.cia408.codec import Cia408Codec
@@ -54,3 +55,15 @@ def test_start_up_writes_the_configuration_and_starts_the_nodes() -> None:
             assert wait_until(lambda: r.proc.valve.nmt == r.proc.encoder.nmt == NmtState.STOPPED)
         finally:
             bus.shutdown()
+
+
+def test_a_node_that_never_answers_is_one_error_naming_it() -> None:
+    bus = can.Bus(interface="virtual", channel="master-session-empty", receive_own_messages=False)
+    try:
+        codec = make_codec("cia408", "", CanIds(), "test", None, MASTER, load_params().plant.spool_stroke_m)
+        assert isinstance(codec, Cia408Codec)
+        with pytest.raises(NodeError) as exc:
+            MasterSession(bus, MASTER, wait_s=1.5).start(codec)
+        assert str(exc.value) == "valve node 32: no answer within 1.5 s" and exc.value.exit_code == 3
+    finally:
+        bus.shutdown()

@@ -1,10 +1,10 @@
 """The controller as the CANopen master of ``protocol: cia408`` (docs/hardware.md).
 
 :class:`MasterSession` is the start-up and the end, through ``canopen``'s master on the loop's
-own bus (a notifier thread only while it runs, none during the cycle): wait for each node's
-heartbeat, check its identity (0x1000: CiA 408 valve, CiA 406 encoder), configure it by SDO
-(:mod:`ehpss_hil.protocol.cia408.configure`), NMT start, OPERATIONAL confirmed in the heartbeat;
-after the loop, NMT stop.
+own bus (a notifier thread only while it runs, none during the cycle): wait for each node to
+answer (its boot-up or heartbeat awaited between tries), check its identity (0x1000: CiA 408
+valve, CiA 406 encoder), configure it by SDO (:mod:`ehpss_hil.protocol.cia408.configure`), NMT
+start, OPERATIONAL confirmed in the heartbeat; after the loop, NMT stop.
 
 :class:`CyclicMaster` is the master's part of each cycle, in the loop's thread: the nodes'
 heartbeats (consumed, counted in cycles) and EMCY frames (and another producer's SYNCs, counted),
@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from typing import Any
 
 import can
@@ -34,25 +35,29 @@ from ..protocol.cia408.configure import configure_encoder, configure_valve
 from ..protocol.cia408.cyclic import Scaling, step_of_nm, unpack_emcy, unpack_heartbeat
 from ..protocol.cia408.drive import DeviceDrive
 from ..protocol.cia408.eds import ENCODER_EDS, VALVE_EDS
-from ..protocol.cia408.objects import EMCY_NO_ERROR, PROFILE_ENCODER, PROFILE_VALVE, NmtState
-from ..protocol.cia408.startup import NodeIdentity, check_identity, go_operational, stop_nodes
+from ..protocol.cia408.objects import DEVICE_TYPE, EMCY_NO_ERROR, PROFILE_ENCODER, PROFILE_VALVE, NmtState
+from ..protocol.cia408.startup import SDO_TIMEOUT_S, NodeIdentity, check_identity, go_operational, stop_nodes
 from .lifecycle import FailsafeReason
 
 log = logging.getLogger("ehpss_hil.controller")
 
-#: how long the start-up waits for a node's first heartbeat (s): the nodes may boot after us
+#: how long the start-up waits for a node to answer (s): the nodes may boot after us
 NODE_WAIT_S = 120.0
+#: between two tries, how long it waits for a boot-up or heartbeat of the node (s)
+NODE_POLL_S = 1.0
 #: the start-up notifier's read timeout (s): how long stopping it may take
 NOTIFIER_CYCLE_S = 0.05
 
 
 class MasterSession:
-    """``canopen``'s Network on ``bus`` for the start-up and the NMT stop of the nodes of ``c``."""
+    """``canopen``'s Network on ``bus`` for the start-up and the NMT stop of the nodes of ``c``;
+    ``wait_s``: how long a node may take to answer (s)."""
 
-    def __init__(self, bus: can.BusABC, c: Cia408Config) -> None:
+    def __init__(self, bus: can.BusABC, c: Cia408Config, wait_s: float = NODE_WAIT_S) -> None:
         import canopen
 
         self.c = c
+        self.wait_s = wait_s
         self.bus = bus
         self.net = canopen.Network(bus)
         self.valve = self.net.add_node(c.valve_node, str(c.valve_eds or VALVE_EDS))
@@ -65,7 +70,7 @@ class MasterSession:
         self.net.notifier = can.Notifier(self.bus, self.net.listeners, NOTIFIER_CYCLE_S)
         try:
             for node, role in ((self.valve, "valve"), (self.encoder, "encoder")):
-                self._await_heartbeat(node, role)
+                _await_node(node, role, self.wait_s)
             valve = check_identity(self.valve, PROFILE_VALVE, "valve")
             encoder = check_identity(self.encoder, PROFILE_ENCODER, "encoder")
             configure_valve(self.valve, self.c)
@@ -81,18 +86,30 @@ class MasterSession:
         log.info("cia408 start-up: %s; %s", valve.text(), encoder.text())
         return valve, encoder
 
-    @staticmethod
-    def _await_heartbeat(node: Any, role: str) -> None:
-        from canopen.nmt import NmtError
-
-        try:
-            node.nmt.wait_for_heartbeat(NODE_WAIT_S)
-        except NmtError as exc:
-            raise NodeError(f"{role} node {node.id}: no heartbeat within {NODE_WAIT_S:g} s") from exc
-
     def stop(self) -> None:
         """NMT stop of both nodes (nothing awaited)."""
         stop_nodes(self.valve, self.encoder)
+
+
+def _await_node(node: Any, role: str, wait_s: float) -> None:
+    """Until ``node`` answers an SDO read of 0x1000 (a node whose heartbeat is off still does),
+    waiting for its boot-up or heartbeat between tries; NodeError after ``wait_s`` (s)."""
+    from canopen.nmt import NmtError
+    from canopen.sdo import SdoCommunicationError
+
+    node.sdo.RESPONSE_TIMEOUT = SDO_TIMEOUT_S
+    end = time.monotonic() + wait_s
+    while True:
+        try:
+            node.sdo.upload(DEVICE_TYPE, 0)
+            return
+        except SdoCommunicationError as exc:
+            if time.monotonic() > end:
+                raise NodeError(f"{role} node {node.id}: no answer within {wait_s:g} s") from exc
+        try:
+            node.nmt.wait_for_heartbeat(NODE_POLL_S)
+        except NmtError:
+            pass  # none yet: ask again
 
 
 class CyclicMaster:
