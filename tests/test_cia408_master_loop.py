@@ -126,3 +126,19 @@ def test_following_an_external_sync() -> None:
         assert r.loop.life.state is State.ACTIVE and not any(r.io.collisions.by_name.values())
     finally:
         r.close()
+
+
+def test_periods_the_loop_slept_through_count_as_sensor_samples(rig: Rig) -> None:
+    """The controller stalls 2 periods (no SYNC sent) while the emulator runs on: the TPDO of
+    the next SYNC stands for 3 samples (its counter is that SYNC's cycle), as the native E2E
+    counter would say; numbering the TPDOs on arrival would say 1."""
+    rig.step(50)
+    rig.loop.poll_cycle()  # cycle 50 sends SYNC 50
+    for _ in range(3):  # the emulator answers SYNC 50, then runs on without SYNCs
+        rig.proc.step_period()
+    rig.loop.poll_cycle(skipped=2)  # cycles 51–52 slept through; cycle 53 uses TPDO(50)
+    assert rig.loop.meas.samples == 1 and rig.io.sent["SYNC"] == 52
+    rig.proc.step_period()  # answers SYNC 53
+    rig.loop.poll_cycle()
+    assert rig.loop.meas.samples == 3 and rig.loop.skipped_periods == 2
+    assert rig.loop.life.state is State.ACTIVE

@@ -152,6 +152,7 @@ class CyclicMaster:
         fid = msg.arbitration_id
         if fid == cobid.SYNC:
             self.syncs_seen += 1
+            self.codec.sync_seen(self._cycle + 1)  # the cycle that drains it
             return
         node = self._hb_ids.get(fid)
         if node is not None:

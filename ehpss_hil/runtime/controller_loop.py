@@ -347,7 +347,7 @@ class ControllerLoop:
         current, enable = self._command()
         self.send_command(current, enable)
         if self.master is not None and self.master.produces_sync:
-            self.io.send("SYNC", {})
+            self.io.send("SYNC", {"Cycle": self.cycles})
         if self._fresh:
             self.stats.latency.add(time.time() - self._pos_ts)
         self._reset_cycle_rx()

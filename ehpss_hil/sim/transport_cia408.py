@@ -13,7 +13,6 @@ the applied current and the missing load pressure are the codec's (its module do
 from __future__ import annotations
 
 from ..protocol.cia408.codec import Cia408Codec
-from ..protocol.cia408.cyclic import sync_frame
 from ..protocol.cia408.drive import REQUEST
 from ..protocol.cia408.objects import STATUS_OF, DeviceState
 from .transport import SensorValues, _clip
@@ -38,7 +37,7 @@ class Cia408Transport:
     ) -> SensorValues | None:
         """SYNC, then the valve's and the encoder's TPDO; (position, spool, load pressure, current
         echo) as the master decodes them (m, m, Pa, A), None when ``lost``."""
-        sync_frame()
+        self._ctrl.encode("SYNC", {"Cycle": self.syncs})
         self.syncs += 1
         valve = self._emu.encode(
             "SENSOR_AUX", {"Spool": _clip(spool, SPOOL_RANGE_M), "StatusWord": self._status}
