@@ -12,6 +12,7 @@ from collections.abc import Iterator
 import can
 import pytest
 
+from ehpss_hil.codec import Verdict
 from ehpss_hil.config import CanIds, Cia408Config
 from ehpss_hil.control.registry import make_controller
 from ehpss_hil.emulation import PlantEmulation
@@ -141,4 +142,19 @@ def test_periods_the_loop_slept_through_count_as_sensor_samples(rig: Rig) -> Non
     rig.proc.step_period()  # answers SYNC 53
     rig.loop.poll_cycle()
     assert rig.loop.meas.samples == 3 and rig.loop.skipped_periods == 2
+    assert rig.loop.life.state is State.ACTIVE
+
+
+def test_a_node_answering_missed_syncs_at_once_gives_one_sample(rig: Rig) -> None:
+    """The emulator falls 3 SYNCs behind and answers them in one period with one sample: the
+    controller steps on it once, as 3 samples after the last, not as 3 samples of one value."""
+    rig.step(50)
+    for _ in range(3):  # SYNCs 50, 51, 52 sent; the emulator stalls
+        rig.loop.poll_cycle()
+    rig.proc.step_period()  # three TPDO rounds, one sample
+    assert rig.proc.encoder.tpdos == 53
+    before = rig.codec.counts_by_name["SENSOR_POS"][Verdict.OK]
+    rig.loop.poll_cycle()
+    assert rig.codec.counts_by_name["SENSOR_POS"][Verdict.OK] == before + 3
+    assert rig.loop.meas.samples == 3 and rig.loop.meas.fresh
     assert rig.loop.life.state is State.ACTIVE

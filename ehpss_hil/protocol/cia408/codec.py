@@ -11,11 +11,12 @@ on the PDOs of a CiA 408 valve and a CiA 406 encoder, everything else native.
 * SENSOR_POS is the encoder's TPDO 1 (position value). Both TPDOs answer one SYNC, the valve's
   first (the nodes answer in node order): classified, it gives ``Position`` and the ``Spool`` of
   the newest valve TPDO. A PDO has no sequence counter; SENSOR_POS's counter is the loop cycle
-  (mod 16) of the SYNC the TPDO answers: each SYNC (``encode("SYNC", {"Cycle": n})``, or
-  :meth:`Cia408Codec.sync_seen` for another producer's) queues its cycle, each encoder TPDO
-  takes the oldest queued (the nodes answer the SYNCs in order). So periods the loop slept
-  through (no SYNC sent) count as sensor samples, as the native E2E counter counts the
-  emulator's periods, and the controller's sample clock bridges them.
+  (mod 16) of the newest SYNC before the TPDO (``encode("SYNC", {"Cycle": n})``, or
+  :meth:`Cia408Codec.sync_seen` for another producer's): the node measures when it answers. So
+  periods the loop slept through (no SYNC sent) count as sensor samples, as the native E2E
+  counter counts the emulator's periods, and the controller's sample clock bridges them. A
+  second TPDO under the same newest SYNC (a node that fell behind answers the SYNCs it missed
+  all at once, with one sample) is classified OK without values: no new sample.
 * SYNC (0x080, no data) is the master's, sent by the loop after each command.
 * VALVE_CMD is the valve's RPDO 1: the control word (:attr:`Cia408Codec.control_word`, set each
   cycle by the master's :class:`~.drive.DeviceDrive`) and ``CurrentSetpoint`` as the ±16384
@@ -61,8 +62,6 @@ _ACTIVE_STATUS = STATUS_OF[DeviceState.ACTIVE]
 #: commands back to the one the valve applied over the sample a TPDO carries (one sample of
 #: transport delay: the command sent two cycles before the one being computed)
 ECHO_DELAY_COMMANDS = 2
-#: SYNCs remembered while their TPDOs are due (older ones were not answered: dropped)
-SYNCS_PENDING = 8
 #: the logical frames the PDOs carry
 MAPPED = ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD")
 
@@ -108,7 +107,8 @@ class Cia408Codec(FrameCodec):
         self._spool_m = 0.0
         self._applied: deque[float] = deque([0.0] * ECHO_DELAY_COMMANDS, maxlen=ECHO_DELAY_COMMANDS)
         #: the cycles (mod 16) of the SYNCs not answered yet, oldest first
-        self._syncs: deque[int] = deque(maxlen=SYNCS_PENDING)
+        self._sync: int | None = None  # the cycle (mod 16) of the newest SYNC
+        self._pos_sync: int | None = None  # … the last encoder TPDO came under
         self._pos_counter = 0x0F
 
     # ---- lookup -------------------------------------------------------------------------------
@@ -189,10 +189,10 @@ class Cia408Codec(FrameCodec):
     def sync_seen(self, cycle: int) -> None:
         """A SYNC went out (or came from another producer) in loop cycle ``cycle``: the TPDOs
         answering it carry that sample."""
-        self._syncs.append(cycle & 0x0F)
+        self._sync = cycle & 0x0F
 
     def _next_sync(self) -> int:
-        return ((self._syncs[-1] if self._syncs else self._pos_counter) + 1) & 0x0F
+        return ((self._sync if self._sync is not None else self._pos_counter) + 1) & 0x0F
 
     # ---- receive ------------------------------------------------------------------------------
     def classify(self, frame: can.Message) -> Decoded:
@@ -233,8 +233,11 @@ class Cia408Codec(FrameCodec):
             return Decoded(Verdict.OK, name, values, ts)
         if name == "SENSOR_POS":
             position = sc.position_m(unpack_encoder_tpdo(data) or 0)
-            counter = self._syncs.popleft() if self._syncs else (self._pos_counter + 1) & 0x0F
-            self._pos_counter = counter
+            sync = self._sync
+            if sync is not None and sync == self._pos_sync:  # answered already: no new sample
+                return Decoded(Verdict.OK, name, None, ts, sync)
+            counter = sync if sync is not None else (self._pos_counter + 1) & 0x0F
+            self._pos_sync, self._pos_counter = sync, counter
             rate = self._rate.get(self._ids[name])
             if not self._in_range(name, "Position", position) or (
                 rate is not None and not rate[1].check(position, counter)
