@@ -190,3 +190,15 @@ def test_a_native_frame_on_a_master_cob_id_is_a_config_error() -> None:
     with pytest.raises(ConfigError, match=r"ids\.id_base") as exc:
         make_codec("cia408", "", CanIds(id_base=0x170), "test", None, CFG, STROKE_M)  # SETPOINT at 0x1A0
     assert "SETPOINT at 0x1A0 is the TPDO1 of node 32" in str(exc.value)
+
+
+def test_the_daemon_refuses_lockstep_with_cia408_in_one_line() -> None:
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    cmd = [sys.executable, "-m", "ehpss_hil.cli", "controller", "-c", "configs/controller-cia408.yaml"]
+    p = subprocess.run([*cmd, "--lockstep"], cwd=root, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and p.stderr.count("\n") == 1
+    assert "protocol: cia408 runs in realtime only" in p.stderr
