@@ -191,6 +191,9 @@ class Cia408Config:
     start-up and takes a node whose heartbeat is ``node_heartbeat_timeout_ms`` late as lost;
     ``sync``: the master sends SYNC after each command (``produce``) or another node does
     (``follow``: then ``rt.wake_on_sensor`` starts each cycle on the TPDOs the SYNC brings).
+    ``position_source``: the piston position from the encoder's position value (``encoder``)
+    or from an INTEGER32 object of the valve (``valve``: ``valve_position_object``/``_sub`` in
+    steps of ``valve_position_step_nm``, mapped into the valve's TPDO 2; no encoder node).
     EDS paths: empty = the shipped files (``eds/``). The resolution and the EDS files are
     checked by ``ehpss_hil.protocol.cia408.check``."""
 
@@ -203,6 +206,10 @@ class Cia408Config:
     setpoint_timeout_ms: int = field(default=0, metadata=rng(0, 65535))
     node_heartbeat_timeout_ms: int = field(default=300, metadata=rng(1, 65535))
     sync: Literal["produce", "follow"] = "produce"
+    position_source: Literal["encoder", "valve"] = "encoder"
+    valve_position_object: int = field(default=0x2100, metadata=rng(0x2000, 0x9FFF))
+    valve_position_sub: int = field(default=0, metadata=rng(0, 254))
+    valve_position_step_nm: int = field(default=100, metadata=rng(1, 1_000_000))
     valve_eds: str = ""
     encoder_eds: str = ""
 

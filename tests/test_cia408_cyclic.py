@@ -202,3 +202,20 @@ def test_the_daemon_refuses_lockstep_with_cia408_in_one_line() -> None:
     p = subprocess.run([*cmd, "--lockstep"], cwd=root, capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and p.stderr.count("\n") == 1
     assert "protocol: cia408 runs in realtime only" in p.stderr
+
+
+@pytest.mark.parametrize(
+    ("changes", "key"),
+    [
+        ({"valve_position_object": 0x2101}, "cia408.valve_position_object"),  # not in the EDS
+        ({"valve_position_object": 0x6301, "valve_position_sub": 1}, "cia408.valve_position_object"),  # INT16
+        ({"valve_position_step_nm": 2000}, "cia408.valve_position_step_nm"),  # coarser than 1 µm
+    ],
+)
+def test_a_valve_position_the_master_cannot_use_is_refused(changes: dict[str, int], key: str) -> None:
+    from dataclasses import replace
+
+    c = replace(CFG, position_source="valve", **changes)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError) as exc:
+        make_codec("cia408", "", CanIds(), "test", None, c, STROKE_M)
+    assert exc.value.key_path == key

@@ -83,3 +83,20 @@ def test_the_protocol_config_brings_its_tuning() -> None:
     explicit = run_scenario(sc, "mmac", tuning=tuning, transport="frames", protocol_config=CIA_CFG)
     assert (implied.x_true_m == explicit.x_true_m).all() and (implied.current_a == explicit.current_a).all()
     assert compute_metrics(implied).rms_error_m < 2e-6
+
+
+def test_the_position_from_the_valve_runs_alike(tmp_path: Path) -> None:
+    """``position_source: valve`` (the valve's 0x2100 in its TPDO 2, 100 nm steps as the
+    encoder's): the same run, sample for sample."""
+    text = (ROOT / "configs" / "controller-cia408.yaml").read_text()
+    text = text.replace("params: params.yaml", f"params: {ROOT / 'configs' / 'params.yaml'}")
+    text = text.replace("dbc: ../dbc/ehpss.dbc", f"dbc: {ROOT / 'dbc' / 'ehpss.dbc'}")
+    cfg = tmp_path / "valve-position.yaml"
+    cfg.write_text(text.replace("position_source: encoder", "position_source: valve"))
+    codec = config_codec(str(cfg))
+    assert isinstance(codec, Cia408Codec) and codec.can_id("SENSOR_POS") == 0x2A0
+    sc = load_scenario(ROOT / "scenarios" / "case1-loe.yaml")
+    valve = run_scenario(sc, "mmac", transport="frames", protocol_config=str(cfg))
+    encoder = run_scenario(sc, "mmac", transport="frames", protocol_config=CIA_CFG)
+    assert valve.frame_counts["OK"] == 3 * len(valve.t_s) and valve.fresh.all()
+    assert (valve.current_a == encoder.current_a).all() and (valve.x_true_m == encoder.x_true_m).all()

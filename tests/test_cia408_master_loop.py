@@ -36,9 +36,9 @@ RATE_HZ = 1000.0
 class Rig:
     """Controller loop + emulator on virtual channel ``channel``; a host bus for NMT/SYNC."""
 
-    def __init__(self, channel: str, sync: str = "produce") -> None:
+    def __init__(self, channel: str, sync: str = "produce", position_source: str = "encoder") -> None:
         params = load_params()
-        self.cfg = Cia408Config(sync=sync)  # type: ignore[arg-type]
+        self.cfg = Cia408Config(sync=sync, position_source=position_source)  # type: ignore[arg-type]
         codec = make_codec("cia408", "", CanIds(), "test", None, self.cfg, params.plant.spool_stroke_m)
         assert isinstance(codec, Cia408Codec)
         self.codec = codec
@@ -55,6 +55,11 @@ class Rig:
         emu = PlantEmulation(params, Scenario(name="loop", duration_s=100.0))
         self.proc = CanopenEmulatorProcess(emu, emu_io, valve, enc, CanopenOptions(1000))
         self.proc.boot()
+        if position_source == "valve":  # what the start-up writes (0x2100 into TPDO 2)
+            for sub, value in ((1, 0x2A0), (2, 1)):
+                valve.store.set(0x1801, sub, value)
+            valve.store.set(0x1A01, 1, 0x21000020)
+            valve.store.set(0x1A01, 0, 1)
         self.host(cobid.NMT, bytes([NmtCommand.START, 0]))
         self.proc.step_period()  # NMT start taken
         for _ in self.io.drain():  # the boot-up messages: the start-up's (MasterSession) to read
@@ -158,3 +163,17 @@ def test_a_node_answering_missed_syncs_at_once_gives_one_sample(rig: Rig) -> Non
     assert rig.codec.counts_by_name["SENSOR_POS"][Verdict.OK] == before + 3
     assert rig.loop.meas.samples == 3 and rig.loop.meas.fresh
     assert rig.loop.life.state is State.ACTIVE
+
+
+def test_the_position_from_an_object_of_the_valve() -> None:
+    r = Rig("loop-valve-position", position_source="valve")
+    try:
+        r.step(99)
+        sent = r.proc.valve.position_value  # measured in the emulator's last period
+        assert sent != 0  # the piston moved
+        r.step(1)  # the controller's cycle 99 reads it from the valve's TPDO 2
+        assert r.loop.life.state is State.ACTIVE and r.io.sent["SYNC"] == 100
+        assert r.codec.counts_by_name["SENSOR_POS"][Verdict.OK] == 99
+        assert r.loop.meas.position_m == pytest.approx(sent * 1e-7, abs=1e-12)
+    finally:
+        r.close()

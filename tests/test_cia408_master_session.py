@@ -67,3 +67,22 @@ def test_a_node_that_never_answers_is_one_error_naming_it() -> None:
         assert str(exc.value) == "valve node 32: no answer within 1.5 s" and exc.value.exit_code == 3
     finally:
         bus.shutdown()
+
+
+def test_with_the_position_from_the_valve_its_tpdo2_is_mapped_and_no_encoder_started() -> None:
+    c = replace(MASTER, position_source="valve")
+    channel = "master-session-valve-position"
+    with Cia408Rig({"interface": "virtual", "receive_own_messages": False, "channel": channel}) as r:
+        bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        try:
+            codec = make_codec("cia408", "", CanIds(), "test", None, c, load_params().plant.spool_stroke_m)
+            assert isinstance(codec, Cia408Codec) and codec.can_id("SENSOR_POS") == 0x2A0
+            session = MasterSession(bus, c)
+            assert [i.profile for i in session.start(codec)] == [408]
+            v = r.proc.valve.store
+            assert [v.get(0x1801, s) for s in (1, 2)] == [0x2A0, 1]
+            assert [v.get(0x1A01, s) for s in (0, 1)] == [1, 0x21000020]
+            assert r.proc.valve.nmt == NmtState.OPERATIONAL
+            assert r.proc.encoder.nmt == NmtState.PRE_OPERATIONAL  # not the master's
+        finally:
+            bus.shutdown()

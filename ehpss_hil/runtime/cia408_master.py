@@ -61,34 +61,44 @@ class MasterSession:
         self.bus = bus
         self.net = canopen.Network(bus)
         self.valve = self.net.add_node(c.valve_node, str(c.valve_eds or VALVE_EDS))
-        self.encoder = self.net.add_node(c.encoder_node, str(c.encoder_eds or ENCODER_EDS))
-        self.identities: tuple[NodeIdentity, NodeIdentity] | None = None
+        #: the CiA 406 encoder (None: the position comes from the valve)
+        self.encoder = (
+            self.net.add_node(c.encoder_node, str(c.encoder_eds or ENCODER_EDS))
+            if c.position_source == "encoder"
+            else None
+        )
+        self.identities: tuple[NodeIdentity, ...] = ()
 
-    def start(self, codec: Cia408Codec) -> tuple[NodeIdentity, NodeIdentity]:
-        """Start-up of both nodes (module docstring); the encoder's measuring step goes into
+    def start(self, codec: Cia408Codec) -> tuple[NodeIdentity, ...]:
+        """Start-up of the nodes (module docstring); the encoder's measuring step goes into
         ``codec``'s scaling. Raises :class:`NodeError`."""
         self.net.notifier = can.Notifier(self.bus, self.net.listeners, NOTIFIER_CYCLE_S)
+        enc = self.encoder
         try:
-            for node, role in ((self.valve, "valve"), (self.encoder, "encoder")):
-                _await_node(node, role, self.wait_s)
-            valve = check_identity(self.valve, PROFILE_VALVE, "valve")
-            encoder = check_identity(self.encoder, PROFILE_ENCODER, "encoder")
+            for node, role in ((self.valve, "valve"), (enc, "encoder")):
+                if node is not None:
+                    _await_node(node, role, self.wait_s)
+            ids = [check_identity(self.valve, PROFILE_VALVE, "valve")]
+            if enc is not None:
+                ids.append(check_identity(enc, PROFILE_ENCODER, "encoder"))
             configure_valve(self.valve, self.c)
-            step_nm = configure_encoder(self.encoder, self.c)
-            sc = codec.scaling
-            codec.scaling = Scaling(sc.full_scale_current_a, sc.spool_stroke_m, step_of_nm(step_nm))
+            if enc is not None:
+                step_nm = configure_encoder(enc, self.c)
+                sc = codec.scaling
+                codec.scaling = Scaling(sc.full_scale_current_a, sc.spool_stroke_m, step_of_nm(step_nm))
             go_operational(self.valve, "valve")
-            go_operational(self.encoder, "encoder")
+            if enc is not None:
+                go_operational(enc, "encoder")
         finally:
             self.net.notifier.stop(NOTIFIER_CYCLE_S * 20)
             self.net.notifier = None
-        self.identities = (valve, encoder)
-        log.info("cia408 start-up: %s; %s", valve.text(), encoder.text())
-        return valve, encoder
+        self.identities = tuple(ids)
+        log.info("cia408 start-up: %s", "; ".join(i.text() for i in ids))
+        return self.identities
 
     def stop(self) -> None:
-        """NMT stop of both nodes (nothing awaited)."""
-        stop_nodes(self.valve, self.encoder)
+        """NMT stop of the nodes (nothing awaited)."""
+        stop_nodes(*(n for n in (self.valve, self.encoder) if n is not None))
 
 
 def _await_node(node: Any, role: str, wait_s: float) -> None:
@@ -126,7 +136,7 @@ class CyclicMaster:
         self.status_fresh = False
         self._valve_tpdos = 0
         self.drive = DeviceDrive()
-        nodes = (c.valve_node, c.encoder_node)
+        nodes = (c.valve_node, c.encoder_node) if c.position_source == "encoder" else (c.valve_node,)
         self._hb_ids = {cobid.HEARTBEAT + n: n for n in nodes}
         self._emcy_ids = {cobid.EMCY + n: n for n in nodes}
         #: cycles without a node's heartbeat after which it is lost

@@ -45,7 +45,6 @@ from .cyclic import (
     VALVE_RPDO,
     VALVE_TPDO,
     Scaling,
-    encoder_tpdo,
     frame,
     step_of_nm,
     sync_frame,
@@ -55,7 +54,7 @@ from .cyclic import (
     valve_rpdo,
     valve_tpdo,
 )
-from .objects import BIT_D, BIT_H, BIT_M, BIT_R, MEASURING_STEP, STATE_BITS, STATUS_OF, DeviceState
+from .objects import BIT_D, BIT_H, BIT_M, BIT_R, STATE_BITS, STATUS_OF, DeviceState
 
 _ACTIVE_REQUEST = BIT_D | BIT_H | BIT_M
 _ACTIVE_STATUS = STATUS_OF[DeviceState.ACTIVE]
@@ -78,13 +77,14 @@ class Cia408Codec(FrameCodec):
         id_base: int = 0x100,
         node_ids: dict[str, int] | None = None,
         max_delta_counter: int = 3,
+        position_from_valve: bool = False,
     ) -> None:
         super().__init__(dbc_path, id_base, node_ids, max_delta_counter)
         self.valve_node = valve_node
         self.encoder_node = encoder_node
         self.scaling = scaling
         self._ids = {
-            "SENSOR_POS": cobid.TPDO1 + encoder_node,
+            "SENSOR_POS": (cobid.TPDO2 + valve_node) if position_from_valve else (cobid.TPDO1 + encoder_node),
             "SENSOR_AUX": cobid.TPDO1 + valve_node,
             "VALVE_CMD": cobid.RPDO1 + valve_node,
             "SYNC": cobid.SYNC,
@@ -182,9 +182,8 @@ class Cia408Codec(FrameCodec):
             spool = sc.spool_raw(self._finite(name, values, "Spool"))
             status = int(values.get("StatusWord", _ACTIVE_STATUS))
             return valve_tpdo(self.valve_node, status, spool, timestamp_s)
-        return encoder_tpdo(
-            self.encoder_node, sc.position_raw(self._finite(name, values, "Position")), timestamp_s
-        )
+        raw = sc.position_raw(self._finite(name, values, "Position"))
+        return frame(self._ids[name], ENCODER_TPDO.pack(raw), timestamp_s)
 
     def sync_seen(self, cycle: int) -> None:
         """A SYNC went out (or came from another producer) in loop cycle ``cycle``: the TPDOs
@@ -261,6 +260,7 @@ def _master_ids(valve_node: int, encoder_node: int) -> dict[int, str]:
         for base, what in (
             (cobid.EMCY, "EMCY"),
             (cobid.TPDO1, "TPDO1"),
+            (cobid.TPDO2, "TPDO2"),
             (cobid.RPDO1, "RPDO1"),
             (cobid.SDO_TX, "SDO"),
             (cobid.SDO_RX, "SDO"),
@@ -271,15 +271,13 @@ def _master_ids(valve_node: int, encoder_node: int) -> dict[int, str]:
 
 
 def master_codec(c: Cia408Config, spool_stroke_m: float, dbc: str, ids: CanIds, src: str) -> Cia408Codec:
-    """The master's codec for the nodes of ``c`` (their EDS files checked, the encoder's
-    measuring step from its EDS until start-up reads it by SDO); a native frame on one of the
-    master's COB-IDs is a :class:`ConfigError` naming ``ids.id_base``."""
-    from .check import check_nodes
+    """The master's codec for the nodes of ``c`` (their EDS files checked; the position step
+    :func:`.check.position_step_nm`, the encoder's until start-up reads it by SDO); a native
+    frame on one of the master's COB-IDs is a :class:`ConfigError` naming ``ids.id_base``."""
+    from .check import check_nodes, position_step_nm
 
-    _, encoder_od = check_nodes(c, src)
-    step_nm = int(encoder_od[MEASURING_STEP][1].default or 0)
-    if step_nm <= 0:
-        raise ConfigError(src, "cia408.encoder_eds", f"measuring step 0x6005.1 is {step_nm} nm")
+    valve_od, encoder_od = check_nodes(c, src)
+    step_nm = position_step_nm(c, valve_od, encoder_od, src)
     scaling = Scaling(c.full_scale_current_a, spool_stroke_m, step_of_nm(step_nm))
     try:
         codec = Cia408Codec(
@@ -290,6 +288,7 @@ def master_codec(c: Cia408Config, spool_stroke_m: float, dbc: str, ids: CanIds, 
             id_base=ids.id_base,
             node_ids={"HEARTBEAT_CTRL": ids.controller_node, "HEARTBEAT_EMU": ids.emulator_node},
             max_delta_counter=ids.max_delta_counter,
+            position_from_valve=c.position_source == "valve",
         )
     except FrameIdError as exc:
         raise ConfigError(src, "ids.id_base", str(exc)) from exc

@@ -10,6 +10,8 @@ What it writes (node n; the PDO layouts of :mod:`.cyclic`):
   open loop); RPDO 1: 0x1600 = [0x6040 (16 bit), 0x6300.1 (16 bit)], 0x1400.2 = 1 (synchronous:
   the set-point applies at the SYNC the master sends after it), 0x1400.5 event timer =
   ``setpoint_timeout_ms``; TPDO 1: 0x1A00 = [0x6041, 0x6301.1], 0x1800.2 = 1 (every SYNC);
+* with ``position_source: valve``, the valve's TPDO 2: 0x1A01 = [``valve_position_object``
+  (32 bit)], 0x1801.2 = 1, COB-ID 0x280+n (and no encoder);
 * the encoder: TPDO 1: 0x1A00 = [0x6004 (32 bit)], 0x1800.2 = 1; 0x6005.1 read.
 
 A PDO is remapped as CiA 301 asks: its COB-ID marked invalid (bit 31), the mapping count 0, the
@@ -110,6 +112,9 @@ def configure_valve(node: Any, c: Cia408Config) -> None:
     n = node.id
     map_pdo(node, RPDO_COMM, RPDO_MAP, cobid.RPDO1 + n, VALVE_RPDO_MAP, role, c.setpoint_timeout_ms)
     map_pdo(node, TPDO_COMM, TPDO_MAP, cobid.TPDO1 + n, VALVE_TPDO_MAP, role)
+    if c.position_source == "valve":
+        entry = ((c.valve_position_object, c.valve_position_sub, 32),)
+        map_pdo(node, TPDO_COMM + 1, TPDO_MAP + 1, cobid.TPDO2 + n, entry, role)
 
 
 def configure_encoder(node: Any, c: Cia408Config) -> int:
