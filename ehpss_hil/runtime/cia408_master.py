@@ -45,6 +45,9 @@ log = logging.getLogger("ehpss_hil.controller")
 NODE_WAIT_S = 120.0
 #: between two tries, how long it waits for a boot-up or heartbeat of the node (s)
 NODE_POLL_S = 1.0
+#: a status word from the cycle before still counts as fresh: the valve's TPDO and the
+#: encoder's, sent back to back, may fall on either side of a drain
+STATUS_SLACK_CYCLES = 1
 #: the start-up notifier's read timeout (s): how long stopping it may take
 NOTIFIER_CYCLE_S = 0.05
 
@@ -103,23 +106,24 @@ class MasterSession:
 
 def _await_node(node: Any, role: str, wait_s: float) -> None:
     """Until ``node`` answers an SDO read of 0x1000 (a node whose heartbeat is off still does),
-    waiting for its boot-up or heartbeat between tries; NodeError after ``wait_s`` (s)."""
+    each try after its boot-up or heartbeat or :data:`NODE_POLL_S`; NodeError after ``wait_s``
+    (s)."""
     from canopen.nmt import NmtError
     from canopen.sdo import SdoCommunicationError
 
     node.sdo.RESPONSE_TIMEOUT = SDO_TIMEOUT_S
     end = time.monotonic() + wait_s
     while True:
+        try:  # a booting node's boot-up message, a running one's heartbeat: ask at once
+            node.nmt.wait_for_heartbeat(NODE_POLL_S)
+        except NmtError:
+            pass  # none: its heartbeat may be off
         try:
             node.sdo.upload(DEVICE_TYPE, 0)
             return
         except SdoCommunicationError as exc:
             if time.monotonic() > end:
                 raise NodeError(f"{role} node {node.id}: no answer within {wait_s:g} s") from exc
-        try:
-            node.nmt.wait_for_heartbeat(NODE_POLL_S)
-        except NmtError:
-            pass  # none yet: ask again
 
 
 class CyclicMaster:
@@ -131,10 +135,11 @@ class CyclicMaster:
         self.produces_sync = c.sync == "produce"
         #: SYNC frames received from another producer (``sync: follow``)
         self.syncs_seen = 0
-        #: a valve TPDO (a status word) arrived since the last update: the loop's watchdog counts
-        #: a cycle without one as a cycle without data
+        #: a valve TPDO (a status word) arrived in this cycle or the one before: the loop's
+        #: watchdog counts a cycle without one as a cycle without data
         self.status_fresh = False
         self._valve_tpdos = 0
+        self._status_cycle = -STATUS_SLACK_CYCLES - 1
         self.drive = DeviceDrive()
         nodes = (c.valve_node, c.encoder_node) if c.position_source == "encoder" else (c.valve_node,)
         self._hb_ids = {cobid.HEARTBEAT + n: n for n in nodes}
@@ -195,8 +200,9 @@ class CyclicMaster:
                 self._fail(
                     FailsafeReason.HEARTBEAT_LOST, f"node {node}: no heartbeat for {cycles - seen} cycles"
                 )
-        self.status_fresh = self.codec.valve_tpdos != self._valve_tpdos
-        self._valve_tpdos = self.codec.valve_tpdos
+        if self.codec.valve_tpdos != self._valve_tpdos:
+            self._valve_tpdos, self._status_cycle = self.codec.valve_tpdos, cycles
+        self.status_fresh = cycles - self._status_cycle <= STATUS_SLACK_CYCLES
         self.codec.control_word = self.drive.update(self.codec.status_word)
         if self.drive.left_active is not None:
             self._fail(
