@@ -219,3 +219,14 @@ def test_a_valve_position_the_master_cannot_use_is_refused(changes: dict[str, in
     with pytest.raises(ConfigError) as exc:
         make_codec("cia408", "", CanIds(), "test", None, c, STROKE_M)
     assert exc.value.key_path == key
+
+
+def test_check_config_summarizes_the_master() -> None:
+    from pathlib import Path
+
+    from ehpss_hil.commands.check_config import summarize
+
+    cfg = Path(__file__).resolve().parent.parent / "configs" / "controller-cia408.yaml"
+    assert summarize(cfg).endswith(
+        ", protocol cia408 master (valve node 32, position from encoder node 33, SYNC produced)"
+    )
