@@ -290,6 +290,13 @@ class ControllerConfig:
                 f"must equal ids.controller_node ({self.ids.controller_node}): the valve consumes the "
                 "controller's heartbeat",
             )
+        n = self.nodes
+        if n.heartbeat_time_ms and n.node_heartbeat_timeout_ms <= n.heartbeat_time_ms:
+            raise ConfigError(
+                "",
+                "cia408.node_heartbeat_timeout_ms",
+                f"must exceed cia408.heartbeat_time_ms ({n.heartbeat_time_ms} ms), the nodes' period",
+            )
         if self.mode == "mmac" and self.tuning.flow_gain_test:
             raise ConfigError(
                 "",

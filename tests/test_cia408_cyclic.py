@@ -184,6 +184,9 @@ def test_controller_config_constraints_of_the_master() -> None:
         _controller(mode="nrc", cia408=Cia408Config(master_node=5))
     with pytest.raises(ConfigError, match="cia408"):
         ControllerConfig(cia408=Cia408Config())  # only read with protocol cia408
+    with pytest.raises(ConfigError) as exc:
+        _controller(mode="nrc", cia408=Cia408Config(heartbeat_time_ms=100, node_heartbeat_timeout_ms=100))
+    assert exc.value.key_path == "cia408.node_heartbeat_timeout_ms"
 
 
 def test_a_native_frame_on_a_master_cob_id_is_a_config_error() -> None:

@@ -123,3 +123,12 @@ def test_an_emcy_before_the_valve_was_active_is_reset_not_latched() -> None:
     for _ in range(6):
         rig.cycle()
     assert rig.master.ready and rig.master.drive.fault_resets == 1
+
+
+def test_no_heartbeat_watch_when_the_start_up_turns_heartbeats_off() -> None:
+    from dataclasses import replace
+
+    rig = Rig()
+    rig.master = CyclicMaster(rig.codec, replace(CFG, heartbeat_time_ms=0), RATE_HZ)
+    reasons = [rig.cycle(heartbeats=False) for _ in range(rig.master.hb_timeout_cycles + 5)]
+    assert set(reasons) == {None} and rig.master.ready

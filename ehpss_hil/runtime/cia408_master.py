@@ -146,7 +146,8 @@ class CyclicMaster:
         self._emcy_ids = {cobid.EMCY + n: n for n in nodes}
         #: cycles without a node's heartbeat after which it is lost
         self.hb_timeout_cycles = max(1, math.ceil(c.node_heartbeat_timeout_ms * 1e-3 * rate_hz))
-        self._hb_cycle = dict.fromkeys(nodes, 0)
+        #: the nodes whose heartbeat is watched (none when the start-up turns heartbeats off)
+        self._hb_cycle = dict.fromkeys(nodes if c.heartbeat_time_ms else (), 0)
         self._cycle = 0
         #: the fail-safe reason (the first one latches) and the cycle it came in
         self.reason: FailsafeReason | None = None
