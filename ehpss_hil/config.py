@@ -181,14 +181,21 @@ class DbcMap:
 
 @dataclass(frozen=True)
 class Cia408Config:
-    """``protocol: cia408`` (emulator): the CANopen nodes firmware-sim impersonates — a CiA 408
-    valve and a CiA 406 linear encoder (docs/hardware.md). Node ids 1…127; times in ms (0 = off);
-    ``full_scale_current_a``: the coil current of a +100 % set-point (16384), so its LSB is
-    full_scale/16384 and must meet the controller's current resolution (the default 1 mA: the
-    plant's spool reaches its ±10 mm stroke at ≈ 0.61 mA). The timeouts are the
-    power-on values of 0x1016.1 (the master's heartbeat) and 0x1400.5 (the set-point RPDO);
-    a master may change them by SDO. EDS paths: empty = the shipped files (``eds/``). The
-    resolution and the EDS files are checked by ``ehpss_hil.protocol.cia408.check``."""
+    """``protocol: cia408``: a CiA 408 valve and a CiA 406 linear encoder — the nodes firmware-sim
+    impersonates, and the nodes the controller masters (docs/hardware.md). Node ids 1…127; times
+    in ms (0 = off); ``full_scale_current_a``: the coil current of a +100 % set-point (16384), so
+    its LSB is full_scale/16384 and must meet the controller's current resolution (the default
+    1 mA: the plant's spool reaches its ±10 mm stroke at ≈ 0.61 mA). The emulator takes
+    ``heartbeat_time_ms`` (0x1017) and the timeouts 0x1016.1 (the master's heartbeat) and
+    0x1400.5 (the set-point RPDO) as power-on values; the master writes the same three by SDO at
+    start-up and takes a node whose heartbeat is ``node_heartbeat_timeout_ms`` late as lost;
+    ``sync``: the master sends SYNC after each command (``produce``) or another node does
+    (``follow``: then ``rt.wake_on_sensor`` starts each cycle on the TPDOs the SYNC brings).
+    ``position_source``: the piston position from the encoder's position value (``encoder``)
+    or from an INTEGER32 object of the valve (``valve``: ``valve_position_object``/``_sub`` in
+    steps of ``valve_position_step_nm``, mapped into the valve's TPDO 2; no encoder node).
+    EDS paths: empty = the shipped files (``eds/``). The resolution and the EDS files are
+    checked by ``ehpss_hil.protocol.cia408.check``."""
 
     valve_node: int = field(default=32, metadata=rng(1, 127))
     encoder_node: int = field(default=33, metadata=rng(1, 127))
@@ -197,6 +204,12 @@ class Cia408Config:
     heartbeat_time_ms: int = field(default=100, metadata=rng(0, 65535))
     master_heartbeat_timeout_ms: int = field(default=0, metadata=rng(0, 65535))
     setpoint_timeout_ms: int = field(default=0, metadata=rng(0, 65535))
+    node_heartbeat_timeout_ms: int = field(default=300, metadata=rng(1, 65535))
+    sync: Literal["produce", "follow"] = "produce"
+    position_source: Literal["encoder", "valve"] = "encoder"
+    valve_position_object: int = field(default=0x2100, metadata=rng(0x2000, 0x9FFF))
+    valve_position_sub: int = field(default=0, metadata=rng(0, 254))
+    valve_position_step_nm: int = field(default=100, metadata=rng(1, 1_000_000))
     valve_eds: str = ""
     encoder_eds: str = ""
 
@@ -239,15 +252,14 @@ class ControllerConfig:
     protocol: Protocol = "native"
     dbc_map: DbcMap | None = None
 
+    cia408: Cia408Config | None = None
+
     def __post_init__(self) -> None:
         _check_protocol(self.protocol, self.dbc_map)
         if self.protocol == "cia408":
-            raise ConfigError(
-                "",
-                "protocol",
-                "cia408 is emulator-only so far: the controller as a CANopen master is not built yet "
-                "(expected native or dbc-map)",
-            )
+            self._check_cia408()
+        elif self.cia408 is not None:
+            raise ConfigError("", "cia408", f"only read with protocol: cia408 (protocol is {self.protocol})")
         if self.mode not in DAEMON_MODES:
             raise ConfigError(
                 "",
@@ -267,6 +279,35 @@ class ControllerConfig:
                 raise ConfigError(
                     "", f"tuning.{key}", f"expected [low, high] with low < high, got [{lo:g}, {hi:g}]"
                 )
+
+    def _check_cia408(self) -> None:
+        """The master's own constraints: its heartbeat is the controller's (0x700 + node), and a
+        CiA 408 valve in spool-position mode reports no load pressure for mmac's flow-gain test."""
+        if self.nodes.master_node != self.ids.controller_node:
+            raise ConfigError(
+                "",
+                "cia408.master_node",
+                f"must equal ids.controller_node ({self.ids.controller_node}): the valve consumes the "
+                "controller's heartbeat",
+            )
+        n = self.nodes
+        if n.heartbeat_time_ms and n.node_heartbeat_timeout_ms <= n.heartbeat_time_ms:
+            raise ConfigError(
+                "",
+                "cia408.node_heartbeat_timeout_ms",
+                f"must exceed cia408.heartbeat_time_ms ({n.heartbeat_time_ms} ms), the nodes' period",
+            )
+        if self.mode == "mmac" and self.tuning.flow_gain_test:
+            raise ConfigError(
+                "",
+                "tuning.flow_gain_test",
+                "must be false with protocol cia408 (the valve reports no load pressure)",
+            )
+
+    @property
+    def nodes(self) -> Cia408Config:
+        """The CANopen node settings (``cia408:``, or their defaults)."""
+        return self.cia408 if self.cia408 is not None else Cia408Config()
 
 
 @dataclass(frozen=True)
@@ -395,6 +436,7 @@ def load_controller_config(path: str | Path, data: object = None) -> ControllerC
         dbc=_existing(p, "dbc", _resolve(base, cfg.dbc)),
         dbc_map=_resolve_map(p, base, cfg.dbc_map),
         reference=cfg.reference.loaded(base, str(p)),
+        cia408=_resolve_eds(p, base, cfg.cia408),
     )
 
 

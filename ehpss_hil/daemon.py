@@ -12,6 +12,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from .blas import limit_blas_threads
 from .bus import open_bus
@@ -25,7 +26,7 @@ from .config import (
 from .control.base import Controller
 from .errors import ConfigError
 from .physics.params import Params, load_params
-from .runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
+from .runtime.controller_loop import CIA408_OWN_FRAMES, OWN_FRAMES, ControllerLoop, LoopOptions
 from .runtime.frameio import FrameIO, limit_sensor_rate, open_process_logger, process_codec
 from .runtime.rt import apply_rt_options, freeze_gc
 from .runtime.signals import install_stop_handlers, restore_handlers
@@ -145,7 +146,13 @@ def run_daemon(a: DaemonArgs) -> int:
     """Configure, run until stopped, shut down fail-safe; returns the exit code (0)."""
     cfg = resolve_config(a)
     params = load_params(cfg.params or None)
-    codec = process_codec(cfg.dbc, cfg.ids, str(a.config), cfg.protocol, cfg.dbc_map)
+    if a.lockstep and cfg.protocol == "cia408":
+        raise ConfigError(
+            str(a.config), "protocol", "cia408 runs in realtime only (the master's SYNC paces the nodes)"
+        )
+    codec = process_codec(
+        cfg.dbc, cfg.ids, str(a.config), cfg.protocol, cfg.dbc_map, cfg.nodes, params.plant.spool_stroke_m
+    )
     limit_sensor_rate(codec, params.plant.piston_speed_max_m_s, 1.0 / cfg.rate_hz)
     controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
     if not isinstance(controller, Controller):
@@ -177,9 +184,12 @@ def run_daemon(a: DaemonArgs) -> int:
     except BaseException:
         bus.shutdown()
         raise
-    io = FrameIO(bus, codec, OWN_FRAMES, logger)
+    io = FrameIO(bus, codec, _own_frames(cfg), logger)
+    session = master = None
     try:
-        loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us))
+        if cfg.protocol == "cia408":
+            session, master = _cia408_master(bus, codec, cfg)
+        loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us), master)
     except BaseException:
         io.close()
         bus.shutdown()
@@ -190,6 +200,8 @@ def run_daemon(a: DaemonArgs) -> int:
         limit_blas_threads(1)  # idle OpenBLAS workers spin and steal the loop's CPU
         _prepare_rt(cfg.rt)
         loop.start()
+        if session is not None:
+            session.start(codec)  # type: ignore[arg-type]
         log.info(
             "mode %s on %s:%s at %g Hz%s",
             cfg.mode,
@@ -205,6 +217,8 @@ def run_daemon(a: DaemonArgs) -> int:
     finally:
         try:
             loop.shutdown()
+            if session is not None:
+                session.stop()
         finally:
             restore_handlers(previous)
             io.close()
@@ -212,6 +226,21 @@ def run_daemon(a: DaemonArgs) -> int:
     summary = {**loop.summary(), "rejected_datagrams": io.rejected_datagrams()}
     publish_summary(format_summary, summary, a.summary_json)
     return 0
+
+
+def _own_frames(cfg: ControllerConfig) -> tuple[str, ...]:
+    """The frames the controller sends: the CANopen master's besides (SYNC only when it is the
+    producer; a SYNC from another node is then no collision)."""
+    if cfg.protocol != "cia408":
+        return OWN_FRAMES
+    return (*OWN_FRAMES, *(f for f in CIA408_OWN_FRAMES if f != "SYNC" or cfg.nodes.sync == "produce"))
+
+
+def _cia408_master(bus: Any, codec: Any, cfg: ControllerConfig) -> tuple[Any, Any]:
+    """The CANopen master's start-up session and its part of each cycle (``protocol: cia408``)."""
+    from .runtime.cia408_master import CyclicMaster, MasterSession
+
+    return MasterSession(bus, cfg.nodes), CyclicMaster(codec, cfg.nodes, cfg.rate_hz)
 
 
 def _prepare_rt(rt: RtOptions) -> None:

@@ -133,6 +133,7 @@ class CanopenEmulatorProcess:
             self.periods += 1
         y = self.emu.measure()
         self.valve.measure(y.spool_m)
+        self.valve.measure_position(y.position_m)
         self.encoder.measure(y.position_m)
         for _ in range(syncs):
             for node in self.nodes:

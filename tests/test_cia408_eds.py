@@ -97,9 +97,10 @@ def test_emulator_config_refuses_what_cia408_cannot_do(data: dict[str, object], 
     assert exc.value.key_path == key and str(exc.value).startswith(f"emu.yaml: {key}: ")
 
 
-def test_the_controller_refuses_cia408_until_it_is_a_master() -> None:
-    with pytest.raises(ConfigError, match="emulator-only so far"):
+def test_the_controller_as_cia408_master_refuses_mmac_with_its_flow_gain_test() -> None:
+    with pytest.raises(ConfigError, match="the valve reports no load pressure") as exc:
         ControllerConfig(protocol="cia408")
+    assert exc.value.key_path == "tuning.flow_gain_test"
 
 
 def test_firmware_sim_exits_2_with_one_line_for_a_bad_cia408_section(tmp_path: Path) -> None:

@@ -67,7 +67,7 @@ def _prepare_controller(path: Path, c: ControllerConfig) -> None:
     from ..runtime.frameio import process_codec
 
     params = load_params(c.params or None)
-    process_codec(c.dbc, c.ids, str(path), c.protocol, c.dbc_map)
+    process_codec(c.dbc, c.ids, str(path), c.protocol, c.dbc_map, c.nodes, params.plant.spool_stroke_m)
     loop_options(c)
     default_factory(c.mode, params, 1.0 / c.rate_hz, c)
 
@@ -144,7 +144,16 @@ def _summarize(path: Path) -> str:
         f"controller: {c.bus.interface}:{c.bus.channel} at {c.rate_hz:g} Hz, mode {c.mode}, "
         f"watchdog {c.watchdog.timeout_cycles} cycles -> {c.watchdog.failsafe}"
         + _protocol_text(c.protocol, c.dbc_map)
+        + (_master_text(c) if c.protocol == "cia408" else "")
     )
+
+
+def _master_text(c: ControllerConfig) -> str:
+    """``, protocol cia408 master (valve node 32, position from encoder node 33, SYNC produced)``."""
+    n = c.nodes
+    source = "the valve" if n.position_source == "valve" else f"encoder node {n.encoder_node}"
+    sync = "produced" if n.sync == "produce" else "followed"
+    return f", protocol cia408 master (valve node {n.valve_node}, position from {source}, SYNC {sync})"
 
 
 def _summarize_campaign(path: Path, data: Any) -> str:

@@ -12,6 +12,7 @@ from ..control.registry import DAEMON_MODES
 from ..orchestrate import CONTROLLER_YAML, EMULATOR_YAML, RunPlan, check_exit_codes, execute
 from ..run_metrics import metrics_from_run
 from ..rundir import RUN_LOGS, record_outputs
+from ..schema import load_yaml
 
 NAME = "run"
 
@@ -83,6 +84,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _sends_truth(emulator_yaml: Path) -> bool:
+    """PLANT_TRUTH on, unless the emulator cannot send it (``protocol: cia408``: then the run's
+    metrics say what they lack)."""
+    data = load_yaml(emulator_yaml)
+    return not (isinstance(data, dict) and data.get("protocol") == "cia408")
+
+
 def run(args: argparse.Namespace) -> int:
     out = args.out or Path("out/runs") / f"{args.scenario.stem}-{args.mode}"
     plan = RunPlan(
@@ -100,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         monitor_inject=args.monitor_allow_inject,
         controller_yaml=args.controller_config,
         emulator_yaml=args.emulator_config,
+        truth=_sends_truth(args.emulator_config),
     )
     res = execute(plan)
     check_exit_codes(res)

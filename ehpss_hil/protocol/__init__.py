@@ -6,15 +6,14 @@ and VALVE_CMD by their native names and SI signals (:mod:`.logical`), and the pr
 which bytes carry them. ``native``: our own DBC (``dbc/ehpss.dbc``). ``dbc-map``: a vendor DBC
 and a map of the logical signals onto its messages (:mod:`.dbcmap`, checked by :mod:`.mapcheck`).
 ``cia408``: CANopen with the valve profile CiA 408 and a CiA 406 encoder (:mod:`.cia408`); the
-emulator impersonates those nodes (``firmware_sim/canopen_node/``); the controller's side, a
-codec mapping the logical frames onto PDOs plus a start-up step (NMT, SDO configuration), is
-still to come.
+emulator impersonates those nodes (``firmware_sim/canopen_node/``); the controller masters them
+(:class:`.cia408.codec.Cia408Codec` maps the logical frames onto their PDOs).
 """
 
 from __future__ import annotations
 
 from ..codec import FrameCodec
-from ..config import PROTOCOLS, CanIds, DbcMap
+from ..config import PROTOCOLS, CanIds, Cia408Config, DbcMap
 from ..errors import ConfigError, FrameIdError
 
 __all__ = ["PROTOCOLS", "make_codec"]
@@ -34,17 +33,30 @@ def _native(dbc: str, ids: CanIds, src: str) -> FrameCodec:
         raise ConfigError(src, "dbc", f"cannot load {dbc}: {exc}") from exc
 
 
-def make_codec(protocol: str, dbc: str, ids: CanIds, src: str, dbc_map: DbcMap | None = None) -> FrameCodec:
-    """The codec of a process config: ``protocol`` (``native`` or ``dbc-map`` with ``dbc_map``),
-    the native DBC ``dbc`` (empty: the shipped one) and the ID layout ``ids``. A bad DBC, map or
-    ID layout is a :class:`ConfigError` naming its key (exit 2)."""
+def make_codec(
+    protocol: str,
+    dbc: str,
+    ids: CanIds,
+    src: str,
+    dbc_map: DbcMap | None = None,
+    cia408: Cia408Config | None = None,
+    spool_stroke_m: float = 0.0,
+) -> FrameCodec:
+    """The codec of a process config: ``protocol`` (``native``, ``dbc-map`` with ``dbc_map``, or
+    the master's ``cia408`` with its nodes ``cia408`` and the valve's spool stroke (m)), the
+    native DBC ``dbc`` (empty: the shipped one) and the ID layout ``ids``. A bad DBC, map, EDS
+    or ID layout is a :class:`ConfigError` naming its key (exit 2)."""
     native = _native(dbc, ids, src)
     if protocol == "native":
         return native
     if protocol == "cia408":
-        raise ConfigError(
-            src, "protocol", "cia408 carries no DBC frames (its nodes: ehpss_hil.protocol.cia408)"
-        )
+        if cia408 is None or spool_stroke_m <= 0.0:
+            raise ConfigError(
+                src, "protocol", "cia408 needs its nodes (cia408:) and the spool stroke (params)"
+            )
+        from .cia408.codec import master_codec
+
+        return master_codec(cia408, spool_stroke_m, dbc, ids, src)
     if protocol != "dbc-map" or dbc_map is None:
         raise ConfigError(src, "protocol", f"expected one of {', '.join(PROTOCOLS)} (dbc-map with dbc_map)")
     from .dbcmap import MappedCodec

@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import can
 
@@ -42,11 +43,18 @@ from .stats import LoopStats
 from .status_frames import StatusReporter
 from .watchdog import SensorWatchdog
 
+if TYPE_CHECKING:
+    from .cia408_master import CyclicMaster
+
 log = logging.getLogger("ehpss_hil.controller")
 
 OWN_FRAMES = ("VALVE_CMD", "CTRL_STATUS", "CTRL_INDEX", "CTRL_STATS", "HEARTBEAT_CTRL")
+#: the frames the CANopen master (``protocol: cia408``) sends besides
+CIA408_OWN_FRAMES = ("SYNC", "CTRL_DEVICE")
 _E2E_VERDICTS = (Verdict.CRC_ERROR, Verdict.REPEATED, Verdict.WRONG_SEQUENCE, Verdict.BAD_DLC)
 _SEQUENCE_VERDICTS = (Verdict.REPEATED, Verdict.WRONG_SEQUENCE)
+#: who put the loop into FAULT, for the log (anything else: the CANopen master's device checks)
+_SOURCE = {None: "watchdog", FailsafeReason.ID_COLLISION: "second transmitter"}
 
 
 @dataclass(frozen=True)
@@ -76,10 +84,20 @@ class LoopOptions:
 
 
 class ControllerLoop:
-    """One controller instance on one bus."""
+    """One controller instance on one bus; ``master``: the CANopen master's part of each cycle
+    (``protocol: cia408``: it goes ACTIVE only with the valve ACTIVE, its faults are fail-safe
+    reasons, a SYNC follows each command)."""
 
-    def __init__(self, controller: Controller, io: FrameIO, reference: Reference, opts: LoopOptions) -> None:
+    def __init__(
+        self,
+        controller: Controller,
+        io: FrameIO,
+        reference: Reference,
+        opts: LoopOptions,
+        master: CyclicMaster | None = None,
+    ) -> None:
         self.controller = controller
+        self.master = master
         self.io = io
         self.codec = io.codec
         self.opts = opts
@@ -153,6 +171,8 @@ class ControllerLoop:
         so the reference stays on the plant's sample clock."""
         fid = msg.arbitration_id
         if fid not in self._rx_ids:
+            if self.master is not None:
+                self.master.on_frame(msg)
             return None
         d = self.codec.classify(msg)
         if fid == self.id_pos:
@@ -216,8 +236,9 @@ class ControllerLoop:
     def _update_state(self) -> None:
         st = self.life.state
         collided = self.guard.update(self.cycles)
+        device = self.master.update(self.cycles) if self.master is not None else None
         if st is State.CONFIGURED:
-            if self._fresh:
+            if self._fresh and (self.master is None or self.master.ready):
                 self.wd.reset()
                 self.life.to(State.ACTIVE)
                 log.info("first sensor data: ACTIVE (mode %s)", self.controller.mode)
@@ -231,8 +252,11 @@ class ControllerLoop:
                 self._stale_in_cycle,
                 self.stale_after_s * 1e3,
             )
-        tripped = self.wd.update(self._fresh, self._e2e_bad, self._implausible, self._late)
-        if st is State.ACTIVE and (tripped or collided):
+        fresh = self._fresh and (self.master is None or self.master.status_fresh)
+        tripped = self.wd.update(fresh, self._e2e_bad, self._implausible, self._late)
+        if st is State.ACTIVE and device is not None:
+            self._fault(device)
+        elif st is State.ACTIVE and (tripped or collided):
             self._fault(None if tripped else FailsafeReason.ID_COLLISION)
         elif st is State.FAULT and collided:  # the more specific diagnosis
             if self.life.reason is not FailsafeReason.ID_COLLISION:
@@ -242,7 +266,7 @@ class ControllerLoop:
                     self.life.reason.name,
                 )
             self.life.reason = FailsafeReason.ID_COLLISION
-        elif st is State.FAULT and not tripped:
+        elif st is State.FAULT and not tripped and device is None:
             self.driver.restart()
             self.life.to(State.ACTIVE)
             log.warning(
@@ -256,7 +280,7 @@ class ControllerLoop:
         log.error(
             "cycle %d: %s: %s -> FAULT, fail-safe %s",
             self.cycles,
-            "watchdog" if reason is None else "second transmitter",
+            _SOURCE.get(reason, "device"),
             why.name,
             self.opts.watchdog.failsafe,
         )
@@ -336,6 +360,8 @@ class ControllerLoop:
         self._update_state()
         current, enable = self._command()
         self.send_command(current, enable)
+        if self.master is not None and self.master.produces_sync:
+            self.io.send("SYNC", {"Cycle": self.cycles})
         if self._fresh:
             self.stats.latency.add(time.time() - self._pos_ts)
         self._reset_cycle_rx()
@@ -359,8 +385,11 @@ class ControllerLoop:
 
     # ---- status frames ----------------------------------------------------------------------
     def send_status(self, all_index: bool = False) -> None:
-        """CTRL_STATUS now, its CTRL_INDEX frames one per following cycle (or all at once)."""
+        """CTRL_STATUS now (with CTRL_DEVICE under the CANopen master), its CTRL_INDEX frames one
+        per following cycle (or all at once)."""
         self.reporter.send(self.controller, self.life, all_index)
+        if self.master is not None:
+            self.io.send("CTRL_DEVICE", self.master.device_values())
 
     # ---- drivers ----------------------------------------------------------------------------
     def start(self) -> None:
@@ -401,6 +430,8 @@ class ControllerLoop:
         """Zero current with Enable 0, state STOPPED, final status and heartbeat."""
         for _ in self.io.drain():  # log what arrived since the last cycle
             pass
+        if self.master is not None:
+            self.master.stop()  # control word DISABLED with the set-point 0
         self.send_command(0.0, False)
         self.life.to(State.STOPPED)
         self.send_status(all_index=True)

@@ -32,7 +32,7 @@ from ..bus import (
 )
 from ..codec import FrameCodec
 from ..codec.ratelimit import RateLimit, position_step_bound_m
-from ..config import BusConfig, CanIds, DbcMap, LogConfig
+from ..config import BusConfig, CanIds, Cia408Config, DbcMap, LogConfig
 from ..errors import ConfigError, FrameError
 from ..protocol import make_codec
 from .collisions import IdCollisions, SentFrames
@@ -73,12 +73,18 @@ def open_can_logger(
 
 
 def process_codec(
-    dbc: str, ids: CanIds, config_path: str, protocol: str = "native", dbc_map: DbcMap | None = None
+    dbc: str,
+    ids: CanIds,
+    config_path: str,
+    protocol: str = "native",
+    dbc_map: DbcMap | None = None,
+    cia408: Cia408Config | None = None,
+    spool_stroke_m: float = 0.0,
 ) -> FrameCodec:
     """The frame codec of a process config (:func:`ehpss_hil.protocol.make_codec`): its DBC
     (empty: the shipped one), ID layout and protocol profile; a bad DBC, map or ID layout is a
     :class:`ConfigError` naming its key (exit 2)."""
-    return make_codec(protocol, dbc, ids, config_path, dbc_map)
+    return make_codec(protocol, dbc, ids, config_path, dbc_map, cia408, spool_stroke_m)
 
 
 def limit_sensor_rate(codec: FrameCodec, speed_max_m_s: float, ts_s: float) -> RateLimit:

@@ -33,6 +33,12 @@ class FailsafeReason(IntEnum):
     #: a second transmitter: our VALVE_CMD from another node, the emulator's CommandConflict,
     #: a second SENSOR_POS stream (runtime/foreign.py; ``watchdog.on_collision: fault``)
     ID_COLLISION = 6
+    #: protocol cia408: the valve's status word left ACTIVE (runtime/cia408_master.py)
+    DEVICE_FAULT = 7
+    #: protocol cia408: an EMCY with an error code from a node
+    EMCY = 8
+    #: protocol cia408: a node's heartbeat stopped or shows a state other than OPERATIONAL
+    HEARTBEAT_LOST = 9
 
 
 #: CiA 301 heartbeat NMT state for each lifecycle state

@@ -121,4 +121,5 @@ def loop_summary(loop: ControllerLoop) -> dict[str, object]:
         "received_by_verdict": {v.name: n for v, n in loop.codec.counts.items()},
         "stats": loop.stats.summary(),
         "max_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+        **({"cia408": loop.master.summary()} if loop.master is not None else {}),
     }

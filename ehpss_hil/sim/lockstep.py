@@ -30,9 +30,11 @@ from ..errors import ConfigError
 from ..physics.faults import FaultState
 from ..physics.params import Params, load_params
 from ..physics.reference import ReferenceModel
+from ..protocol.cia408.codec import Cia408Codec
 from ..report.result import N_SLOTS, SimResult
 from ..scenario import Scenario
 from .transport import FramesTransport, QuantizeTransport
+from .transport_cia408 import Cia408Transport
 
 TRANSPORTS = ("quantize", "frames")
 
@@ -41,7 +43,7 @@ _QUANTIZE: QuantizeTransport | None = None
 _Y_M: dict[tuple[Params, float, bytes], np.ndarray] = {}
 
 
-def _transport(kind: str, protocol_config: str = "") -> QuantizeTransport | FramesTransport:
+def _transport(kind: str, protocol_config: str = "") -> QuantizeTransport | FramesTransport | Cia408Transport:
     global _QUANTIZE  # stateless, built once per process (the DBC parse is slow)
     if protocol_config and kind != "frames":
         raise ConfigError("", "transport", "a protocol profile runs with the frames transport only")
@@ -51,7 +53,10 @@ def _transport(kind: str, protocol_config: str = "") -> QuantizeTransport | Fram
         return _QUANTIZE
     if kind == "frames":
         if protocol_config:
-            return FramesTransport(config_codec(protocol_config), config_codec(protocol_config))
+            emu, ctrl = config_codec(protocol_config), config_codec(protocol_config)
+            if isinstance(emu, Cia408Codec) and isinstance(ctrl, Cia408Codec):
+                return Cia408Transport(emu, ctrl)
+            return FramesTransport(emu, ctrl)
         return FramesTransport(FrameCodec(), FrameCodec())
     raise ConfigError("", "transport", f"unknown transport {kind!r}; choose {', '.join(TRANSPORTS)}")
 
@@ -62,7 +67,8 @@ def config_codec(path: str) -> FrameCodec:
     from ..protocol import make_codec
 
     cfg = load_controller_config(path)
-    return make_codec(cfg.protocol, cfg.dbc, cfg.ids, path, cfg.dbc_map)
+    stroke = load_params(cfg.params or None).plant.spool_stroke_m
+    return make_codec(cfg.protocol, cfg.dbc, cfg.ids, path, cfg.dbc_map, cfg.nodes, stroke)
 
 
 def reference_output(params: Params, ts_s: float, x_d: np.ndarray) -> np.ndarray:
@@ -88,9 +94,14 @@ def run_scenario(
 ) -> SimResult:
     """Simulate ``scenario`` with controller ``mode``; returns every per-sample array.
     ``protocol_config``: a controller config whose protocol profile the frames transport speaks
-    on both sides (the emulator impersonating the mapped electronics)."""
+    on both sides (the emulator impersonating the mapped electronics); its tuning is the one
+    used when ``tuning`` is None (cia408 needs mmac without its flow-gain test)."""
     limit_blas_threads(1)
     prm = params if params is not None else load_params()
+    if protocol_config and tuning is None:
+        from ..config import load_controller_config
+
+        tuning = load_controller_config(protocol_config).tuning
     ts = scenario.sample_time_s
     ctrl = make_controller(mode, prm, ts, tuning, scenario.reference)
     emu = PlantEmulation(prm, scenario)
@@ -110,7 +121,7 @@ def run_scenario(
 def _loop(
     emu: PlantEmulation,
     ctrl: LoopBase,
-    tr: QuantizeTransport | FramesTransport,
+    tr: QuantizeTransport | FramesTransport | Cia408Transport,
     x_d: list[float],
     delay: int,
     set_truth: Callable[[FaultState], None] | None,

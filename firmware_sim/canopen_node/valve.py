@@ -2,7 +2,8 @@
 
 RPDO 1 carries the control word (0x6040) and the spool set-point (0x6300.1), TPDO 1 the status
 word (0x6041) and the spool actual value (0x6301.1), both ±16384 = ±100 % (the set-point of the
-full-scale current, the actual value of the spool stroke). The plant gets
+full-scale current, the actual value of the spool stroke). The cylinder position is served in
+0x2100 (manufacturer-specific, 100 nm steps; TPDO 2 is free to map it, off by default). The plant gets
 ``set-point / 16384 × full_scale_current_a`` in ACTIVE and 0 A in every other state. Faults:
 the master's heartbeat lost (0x1016) or the set-point RPDO late (0x1400.5 event timer) while
 ACTIVE → FAULT_HOLD with EMCY 0x8130 / 0x8250; an injected device fault → FAULT with its code.
@@ -27,6 +28,8 @@ from ehpss_hil.protocol.cia408.objects import (
     ERR_REG_GENERIC,
     SCALE_100_PERCENT,
     STATUS_WORD,
+    VALVE_POSITION,
+    VALVE_POSITION_STEP_NM,
     VPOC_ACTUAL,
     VPOC_SETPOINT,
     VPOC_SUB,
@@ -39,6 +42,7 @@ from .store import Key
 
 log = logging.getLogger("firmware_sim")
 _INT16_MAX = 32767
+_INT32_MAX = 2**31 - 1
 
 
 class ValveNode(CanopenSlave):
@@ -58,9 +62,11 @@ class ValveNode(CanopenSlave):
         self.full_scale_current_a = full_scale_current_a
         self._actual_per_m = SCALE_100_PERCENT / stroke_m
         self.spool_actual = 0
+        self.position_value = 0
         super().__init__(node_id, od, send, overrides)
         self.store.live[(STATUS_WORD, 0)] = lambda: self.device.status_word
         self.store.live[(VPOC_ACTUAL, VPOC_SUB)] = lambda: self.spool_actual
+        self.store.live[(VALVE_POSITION, 0)] = lambda: self.position_value
 
     # ---- process values ---------------------------------------------------------------------
     def current_a(self) -> float:
@@ -74,6 +80,12 @@ class ValveNode(CanopenSlave):
         """The spool position measured this period (m) → the actual value (0x6301.1)."""
         v = round(spool_m * self._actual_per_m)
         self.spool_actual = max(-_INT16_MAX, min(_INT16_MAX, v))
+
+    def measure_position(self, position_m: float) -> None:
+        """The cylinder position measured this period (m) → 0x2100 (steps of
+        ``VALVE_POSITION_STEP_NM``)."""
+        v = round(position_m / (VALVE_POSITION_STEP_NM * 1e-9))
+        self.position_value = max(-_INT32_MAX, min(_INT32_MAX, v))
 
     # ---- hooks ------------------------------------------------------------------------------
     def reset_application(self) -> None:

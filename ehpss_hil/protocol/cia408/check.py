@@ -6,9 +6,11 @@ from __future__ import annotations
 
 from typing import Any
 
+from canopen.objectdictionary import INTEGER32
+
 from ...config import Cia408Config
 from ...errors import ConfigError
-from ..logical import CURRENT_RESOLUTION_A
+from ..logical import CURRENT_RESOLUTION_A, POSITION_RESOLUTION_M
 from .eds import ENCODER_EDS, VALVE_EDS, load_od
 from .objects import (
     CONTROL_WORD,
@@ -71,3 +73,27 @@ def check_nodes(c: Cia408Config, src: str) -> tuple[Any, Any]:
     encoder = load_od(c.encoder_eds or ENCODER_EDS, c.encoder_node, src, "cia408.encoder_eds")
     _check_od(encoder, PROFILE_ENCODER, ENCODER_OBJECTS, src, "cia408.encoder_eds")
     return valve, encoder
+
+
+def position_step_nm(c: Cia408Config, valve_od: Any, encoder_od: Any, src: str) -> int:
+    """The master's position step (nm): the encoder's measuring step 0x6005.1 from its EDS
+    (start-up reads it again by SDO), or with ``position_source: valve`` the configured step of
+    the valve's object, which must be an INTEGER32 the valve can map into its TPDO 2. A step
+    coarser than the controller's position resolution is refused too."""
+    if c.position_source == "encoder":
+        step_nm, key = int(encoder_od[MEASURING_STEP][1].default or 0), "cia408.encoder_eds"
+    else:
+        key = "cia408.valve_position_object"
+        index, sub = c.valve_position_object, c.valve_position_sub
+        obj = valve_od.get_variable(index, sub) if index in valve_od else None
+        if obj is None or obj.data_type != INTEGER32 or not obj.pdo_mappable:
+            where = f"0x{index:04X}.{sub}"
+            raise ConfigError(src, key, f"the valve EDS has no PDO-mappable INTEGER32 at {where}")
+        if TPDO_COMM + 1 not in valve_od or TPDO_MAP + 1 not in valve_od:
+            raise ConfigError(src, key, "the valve EDS has no TPDO 2 (0x1801/0x1A01) to carry it")
+        step_nm, key = c.valve_position_step_nm, "cia408.valve_position_step_nm"
+    if not 0 < step_nm * 1e-9 <= POSITION_RESOLUTION_M * (1 + 1e-9):
+        raise ConfigError(
+            src, key, f"position step {step_nm} nm (expected 1 … {POSITION_RESOLUTION_M * 1e9:g} nm)"
+        )
+    return step_nm

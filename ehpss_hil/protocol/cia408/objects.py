@@ -46,6 +46,12 @@ CONTROL_MODE_SPOOL_OPEN_LOOP = 1
 #: the CiA 408 16-bit value of 100 % (set-point, actual value)
 SCALE_100_PERCENT = 16384
 
+#: manufacturer-specific (the project's emulated valve): INTEGER32 cylinder position from the
+#: valve's own sensor input, in steps of VALVE_POSITION_STEP_NM; a master may take the position
+#: from it instead of a CiA 406 encoder (``cia408.position_source: valve``)
+VALVE_POSITION = 0x2100
+VALVE_POSITION_STEP_NM = 100
+
 # ---- CiA 406 encoder objects -----------------------------------------------------------
 POSITION_VALUE = 0x6004  #: INTEGER32 position in measuring steps
 MEASURING_STEP = 0x6005  #: sub 1: UNSIGNED32 measuring step (nm)

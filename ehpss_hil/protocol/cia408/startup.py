@@ -82,7 +82,7 @@ def check_identity(node: Any, profile: int, role: str) -> NodeIdentity:
     return ident
 
 
-def _await_state(node: Any, state: str, role: str) -> None:
+def await_state(node: Any, state: str, role: str) -> None:
     """Heartbeats until one shows ``state`` (one sent before the command may come first)."""
     end = time.monotonic() + STATE_TIMEOUT_S
     seen = None
@@ -106,9 +106,14 @@ def start_node(node: Any, profile: int, role: str) -> NodeIdentity:
         node.sdo[PRODUCER_HEARTBEAT].raw = STARTUP_HEARTBEAT_MS
     except (SdoAbortedError, SdoCommunicationError) as exc:
         raise NodeError(f"{role} node {node.id}: cannot set the heartbeat time (0x1017): {exc}") from exc
-    node.nmt.state = "OPERATIONAL"
-    _await_state(node, "OPERATIONAL", role)
+    go_operational(node, role)
     return ident
+
+
+def go_operational(node: Any, role: str) -> None:
+    """NMT start, confirmed by a heartbeat showing OPERATIONAL."""
+    node.nmt.state = "OPERATIONAL"
+    await_state(node, "OPERATIONAL", role)
 
 
 def start_nodes(valve: Any, encoder: Any) -> tuple[NodeIdentity, NodeIdentity]:

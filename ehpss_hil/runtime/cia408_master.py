@@ -1,0 +1,261 @@
+"""The controller as the CANopen master of ``protocol: cia408`` (docs/hardware.md).
+
+:class:`MasterSession` is the start-up and the end, through ``canopen``'s master on the loop's
+own bus (a notifier thread only while it runs, none during the cycle): wait for each node to
+answer (its boot-up or heartbeat awaited between tries), check its identity (0x1000: CiA 408
+valve, CiA 406 encoder), configure it by SDO (:mod:`ehpss_hil.protocol.cia408.configure`), NMT
+start, OPERATIONAL confirmed in the heartbeat; after the loop, NMT stop.
+
+:class:`CyclicMaster` is the master's part of each cycle, in the loop's thread: the nodes'
+heartbeats (consumed, counted in cycles) and EMCY frames (and another producer's SYNCs, counted),
+the CiA 408 device drive (control word from the newest status word,
+:class:`~ehpss_hil.protocol.cia408.drive.DeviceDrive`), and the
+fail-safe reason when a node's heartbeat stops or shows another NMT state (HEARTBEAT_LOST), an
+EMCY with an error code arrives once the valve has been ACTIVE (EMCY; before, the drive resets
+the fault it reports: the valve may have missed our heartbeat during the start-up) or the
+status word leaves ACTIVE (DEVICE_FAULT); these latch, and the valve is asked for DISABLED. A
+cycle without a status word counts for the loop's watchdog as a cycle without data
+(:attr:`CyclicMaster.status_fresh`: SENSOR_TIMEOUT, with the watchdog's own recovery).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Any
+
+import can
+
+from ..config import Cia408Config
+from ..errors import NodeError
+from ..protocol.cia408 import cobid
+from ..protocol.cia408.codec import Cia408Codec
+from ..protocol.cia408.configure import configure_encoder, configure_valve
+from ..protocol.cia408.cyclic import Scaling, step_of_nm, unpack_emcy, unpack_heartbeat
+from ..protocol.cia408.drive import DeviceDrive
+from ..protocol.cia408.eds import ENCODER_EDS, VALVE_EDS
+from ..protocol.cia408.objects import DEVICE_TYPE, EMCY_NO_ERROR, PROFILE_ENCODER, PROFILE_VALVE, NmtState
+from ..protocol.cia408.startup import SDO_TIMEOUT_S, NodeIdentity, check_identity, go_operational, stop_nodes
+from .lifecycle import FailsafeReason
+
+log = logging.getLogger("ehpss_hil.controller")
+
+#: how long the start-up waits for a node to answer (s): the nodes may boot after us
+NODE_WAIT_S = 120.0
+#: between two tries, how long it waits for a boot-up or heartbeat of the node (s)
+NODE_POLL_S = 1.0
+#: a status word from the cycle before still counts as fresh: the valve's TPDO and the
+#: encoder's, sent back to back, may fall on either side of a drain
+STATUS_SLACK_CYCLES = 1
+#: the start-up notifier's read timeout (s): how long stopping it may take
+NOTIFIER_CYCLE_S = 0.05
+
+
+class MasterSession:
+    """``canopen``'s Network on ``bus`` for the start-up and the NMT stop of the nodes of ``c``;
+    ``wait_s``: how long a node may take to answer (s)."""
+
+    def __init__(self, bus: can.BusABC, c: Cia408Config, wait_s: float = NODE_WAIT_S) -> None:
+        import canopen
+
+        self.c = c
+        self.wait_s = wait_s
+        self.bus = bus
+        self.net = canopen.Network(bus)
+        self.valve = self.net.add_node(c.valve_node, str(c.valve_eds or VALVE_EDS))
+        #: the CiA 406 encoder (None: the position comes from the valve)
+        self.encoder = (
+            self.net.add_node(c.encoder_node, str(c.encoder_eds or ENCODER_EDS))
+            if c.position_source == "encoder"
+            else None
+        )
+        self.identities: tuple[NodeIdentity, ...] = ()
+
+    def start(self, codec: Cia408Codec) -> tuple[NodeIdentity, ...]:
+        """Start-up of the nodes (module docstring); the encoder's measuring step goes into
+        ``codec``'s scaling. Raises :class:`NodeError`."""
+        self.net.notifier = can.Notifier(self.bus, self.net.listeners, NOTIFIER_CYCLE_S)
+        enc = self.encoder
+        try:
+            for node, role in ((self.valve, "valve"), (enc, "encoder")):
+                if node is not None:
+                    _await_node(node, role, self.wait_s)
+            ids = [check_identity(self.valve, PROFILE_VALVE, "valve")]
+            if enc is not None:
+                ids.append(check_identity(enc, PROFILE_ENCODER, "encoder"))
+            configure_valve(self.valve, self.c)
+            if enc is not None:
+                step_nm = configure_encoder(enc, self.c)
+                sc = codec.scaling
+                codec.scaling = Scaling(sc.full_scale_current_a, sc.spool_stroke_m, step_of_nm(step_nm))
+            go_operational(self.valve, "valve")
+            if enc is not None:
+                go_operational(enc, "encoder")
+        finally:
+            self.net.notifier.stop(NOTIFIER_CYCLE_S * 20)
+            self.net.notifier = None
+        self.identities = tuple(ids)
+        log.info("cia408 start-up: %s", "; ".join(i.text() for i in ids))
+        return self.identities
+
+    def stop(self) -> None:
+        """NMT stop of the nodes (nothing awaited)."""
+        stop_nodes(*(n for n in (self.valve, self.encoder) if n is not None))
+
+
+def _await_node(node: Any, role: str, wait_s: float) -> None:
+    """Until ``node`` answers an SDO read of 0x1000 (a node whose heartbeat is off still does),
+    each try after its boot-up or heartbeat or :data:`NODE_POLL_S`; NodeError after ``wait_s``
+    (s)."""
+    from canopen.nmt import NmtError
+    from canopen.sdo import SdoCommunicationError
+
+    node.sdo.RESPONSE_TIMEOUT = SDO_TIMEOUT_S
+    end = time.monotonic() + wait_s
+    while True:
+        try:  # a booting node's boot-up message, a running one's heartbeat: ask at once
+            node.nmt.wait_for_heartbeat(NODE_POLL_S)
+        except NmtError:
+            pass  # none: its heartbeat may be off
+        try:
+            node.sdo.upload(DEVICE_TYPE, 0)
+            return
+        except SdoCommunicationError as exc:
+            if time.monotonic() > end:
+                raise NodeError(f"{role} node {node.id}: no answer within {wait_s:g} s") from exc
+
+
+class CyclicMaster:
+    """The master's work in each cycle of the loop (module docstring); ``rate_hz`` the loop's."""
+
+    def __init__(self, codec: Cia408Codec, c: Cia408Config, rate_hz: float) -> None:
+        self.codec = codec
+        #: the loop sends SYNC after each command (else another node produces it)
+        self.produces_sync = c.sync == "produce"
+        #: SYNC frames received from another producer (``sync: follow``)
+        self.syncs_seen = 0
+        #: a valve TPDO (a status word) arrived in this cycle or the one before: the loop's
+        #: watchdog counts a cycle without one as a cycle without data
+        self.status_fresh = False
+        self._valve_tpdos = 0
+        self._status_cycle = -STATUS_SLACK_CYCLES - 1
+        self.drive = DeviceDrive()
+        nodes = (c.valve_node, c.encoder_node) if c.position_source == "encoder" else (c.valve_node,)
+        self._hb_ids = {cobid.HEARTBEAT + n: n for n in nodes}
+        self._emcy_ids = {cobid.EMCY + n: n for n in nodes}
+        #: cycles without a node's heartbeat after which it is lost
+        self.hb_timeout_cycles = max(1, math.ceil(c.node_heartbeat_timeout_ms * 1e-3 * rate_hz))
+        #: the nodes whose heartbeat is watched (none when the start-up turns heartbeats off)
+        self._hb_cycle = dict.fromkeys(nodes if c.heartbeat_time_ms else (), 0)
+        self._cycle = 0
+        #: the fail-safe reason (the first one latches) and the cycle it came in
+        self.reason: FailsafeReason | None = None
+        self.fault_cycle: int | None = None
+        self.fault_text = ""
+        #: the last EMCY with an error code: (node, code, error register), and how many came
+        self.emcy: tuple[int, int, int] | None = None
+        self.emcy_frames = 0
+        self._pending: tuple[FailsafeReason, str] | None = None
+
+    @property
+    def ready(self) -> bool:
+        """The valve is ACTIVE and nothing failed: the controller may start."""
+        return self.reason is None and self.drive.active
+
+    def on_frame(self, msg: can.Message) -> None:
+        """A received frame the loop does not consume (heartbeats and EMCY of the nodes are used)."""
+        fid = msg.arbitration_id
+        if fid == cobid.SYNC:
+            self.syncs_seen += 1
+            self.codec.sync_seen(self._cycle + 1)  # the cycle that drains it
+            return
+        node = self._hb_ids.get(fid)
+        if node is not None:
+            self._hb_cycle[node] = self._cycle + 1  # the cycle that drains it (the next update)
+            state = unpack_heartbeat(bytes(msg.data))
+            if state is not NmtState.OPERATIONAL:
+                shown = state.name if state is not None else bytes(msg.data).hex()
+                self._heard(FailsafeReason.HEARTBEAT_LOST, f"node {node}: heartbeat shows {shown}")
+            return
+        node = self._emcy_ids.get(fid)
+        if node is not None:
+            e = unpack_emcy(bytes(msg.data))
+            if e is not None and e[0] != EMCY_NO_ERROR:
+                self.emcy = (node, e[0], e[1])
+                self.emcy_frames += 1
+                text = f"node {node}: EMCY 0x{e[0]:04X} (error register 0x{e[1]:02X})"
+                if self.drive.was_active:
+                    self._heard(FailsafeReason.EMCY, text)
+                else:  # e.g. our heartbeat missed during the start-up: the drive resets it
+                    log.warning("%s before the valve was ACTIVE: reset by the device drive", text)
+
+    def update(self, cycles: int) -> FailsafeReason | None:
+        """Before this cycle's command: heartbeat timeouts, the control word from the newest
+        status word; returns the fail-safe reason (None: none)."""
+        self._cycle = cycles
+        if self._pending is not None:
+            self._fail(*self._pending)
+        for node, seen in self._hb_cycle.items():
+            if cycles - seen > self.hb_timeout_cycles:
+                self._fail(
+                    FailsafeReason.HEARTBEAT_LOST, f"node {node}: no heartbeat for {cycles - seen} cycles"
+                )
+        if self.codec.valve_tpdos != self._valve_tpdos:
+            self._valve_tpdos, self._status_cycle = self.codec.valve_tpdos, cycles
+        self.status_fresh = cycles - self._status_cycle <= STATUS_SLACK_CYCLES
+        self.codec.control_word = self.drive.update(self.codec.status_word)
+        if self.drive.left_active is not None:
+            self._fail(
+                FailsafeReason.DEVICE_FAULT,
+                f"valve status word 0x{self.codec.status_word:04X}: {self.drive.left_active.name}",
+            )
+        elif self.drive.gave_up:
+            self._fail(FailsafeReason.DEVICE_FAULT, "valve fault persists after the fault resets")
+        return self.reason
+
+    def _heard(self, reason: FailsafeReason, text: str) -> None:
+        """A failure in a received frame, taken by the next :meth:`update` (the first one)."""
+        if self._pending is None:
+            self._pending = (reason, text)
+
+    def _fail(self, reason: FailsafeReason, text: str) -> None:
+        if self.reason is not None:
+            return
+        self.reason, self.fault_cycle, self.fault_text = reason, self._cycle, text
+        log.error("cycle %d: cia408 master: %s -> %s", self._cycle, text, reason.name)
+        self.drive.disable()
+        self.codec.control_word = self.drive.control_word
+
+    def stop(self) -> None:
+        """The stop sequence's control word: DISABLED (the loop then sends set-point 0)."""
+        self.drive.disable()
+        self.codec.control_word = self.drive.control_word
+
+    def device_values(self) -> dict[str, int]:
+        """CTRL_DEVICE's signals: the last EMCY (node, code, error register; 0 = none) and the
+        valve's status word."""
+        node, code, register = self.emcy if self.emcy is not None else (0, 0, 0)
+        return {
+            "EmcyNode": node,
+            "EmcyCode": code,
+            "ErrorRegister": register,
+            "StatusWord": self.codec.status_word,
+        }
+
+    def summary(self) -> dict[str, Any]:
+        """Counters and the fault (JSON-able)."""
+        return {
+            "valve_state": self.drive.state.name,
+            "control_word": self.codec.control_word,
+            "status_word": self.codec.status_word,
+            "fault_reason": self.reason.name if self.reason is not None else None,
+            "fault_cycle": self.fault_cycle,
+            "fault": self.fault_text,
+            "emcy": None
+            if self.emcy is None
+            else {"node": self.emcy[0], "code": self.emcy[1], "register": self.emcy[2]},
+            "emcy_frames": self.emcy_frames,
+            "sync": "produced" if self.produces_sync else f"followed ({self.syncs_seen} seen)",
+            "fault_resets": self.drive.fault_resets,
+        }
