@@ -115,6 +115,22 @@ def test_an_emcy_puts_the_loop_into_failsafe_and_the_valve_gets_zero(rig: Rig) -
     assert rig.loop.summary()["cia408"]["emcy"] == {"node": 32, "code": 0x5000, "register": 1}  # type: ignore[index]
 
 
+def test_an_emcy_while_already_in_failsafe_becomes_the_reason(rig: Rig) -> None:
+    """A starved loop is in its fail-safe (LOOP_OVERRUN) when the valve reports a fault: the
+    device's diagnosis replaces the loop's, and the loop stays in FAULT while the valve is."""
+    rig.step(50)
+    for _ in range(20):  # the loop sleeps through 20 periods (more than it bridges), the nodes not
+        rig.proc.step_period()
+    rig.loop.poll_cycle(skipped=20)
+    rig.proc.step_period()
+    assert (rig.loop.life.state, rig.loop.life.reason) == (State.FAULT, FailsafeReason.LOOP_OVERRUN)
+    rig.proc.valve.inject_fault(0x5000)
+    rig.step(2)
+    assert (rig.loop.life.state, rig.loop.life.reason) == (State.FAULT, FailsafeReason.EMCY)
+    rig.step(200)  # fresh data again: the valve's fault still holds the loop
+    assert (rig.loop.life.state, rig.loop.life.reason) == (State.FAULT, FailsafeReason.EMCY)
+
+
 def test_stop_sends_zero_with_disabled(rig: Rig) -> None:
     rig.step(50)
     rig.loop.shutdown()

@@ -22,13 +22,11 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import can
 
 from ..codec import Verdict
-from ..config import SetpointPolicy, Watchdog
 from ..control.base import Controller, Measurement
 from ..control.sampleclock import RESYNC_SAMPLES
 from ..driver import ControllerDriver
@@ -36,7 +34,8 @@ from ..scenario import Reference, ReferenceBlocks
 from .foreign import CollisionGuard, SetpointGate
 from .frameio import FrameIO
 from .lifecycle import FailsafeReason, Lifecycle, State
-from .loop_run import loop_summary, run_lockstep, run_realtime
+from .loop_options import CIA408_OWN_FRAMES, OWN_FRAMES, LoopOptions
+from .loop_run import catch_up, loop_summary, run_lockstep, run_realtime
 from .periodic import PeriodicFrames
 from .signals import StopFlag
 from .stats import LoopStats
@@ -48,39 +47,12 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("ehpss_hil.controller")
 
-OWN_FRAMES = ("VALVE_CMD", "CTRL_STATUS", "CTRL_INDEX", "CTRL_STATS", "HEARTBEAT_CTRL")
-#: the frames the CANopen master (``protocol: cia408``) sends besides
-CIA408_OWN_FRAMES = ("SYNC", "CTRL_DEVICE")
+__all__ = ["CIA408_OWN_FRAMES", "OWN_FRAMES", "ControllerLoop", "LoopOptions"]
+
 _E2E_VERDICTS = (Verdict.CRC_ERROR, Verdict.REPEATED, Verdict.WRONG_SEQUENCE, Verdict.BAD_DLC)
 _SEQUENCE_VERDICTS = (Verdict.REPEATED, Verdict.WRONG_SEQUENCE)
 #: who put the loop into FAULT, for the log (anything else: the CANopen master's device checks)
 _SOURCE = {None: "watchdog", FailsafeReason.ID_COLLISION: "second transmitter"}
-
-
-@dataclass(frozen=True)
-class LoopOptions:
-    """Rates (Hz) and fail-safe policy of the loop."""
-
-    rate_hz: float = 1000.0
-    status_rate_hz: float = 50.0
-    heartbeat_rate_hz: float = 10.0
-    stats_rate_hz: float = 10.0
-    watchdog: Watchdog = field(default_factory=Watchdog)
-    #: which SETPOINT frames may override x_d
-    setpoint: SetpointPolicy = field(default_factory=SetpointPolicy)
-    current_limit_a: float = 1.0
-    lockstep_idle_s: float = 2.0
-    #: a one-line counter summary in the log every this many seconds of cycles (0 = never)
-    stats_interval_s: float = 10.0
-    #: phase lock: age of the sensor frame at the controller's deadline (s); 0 = free grid
-    #: (off by default: a small age also shrinks the stall tolerance of the watchdog, see
-    #: docs/runtime.md)
-    sensor_age_target_s: float = 0.0
-    #: start the cycle as soon as a usable SENSOR_POS + SENSOR_AUX pair has arrived (waiting on
-    #: the bus socket, never spinning), the deadline being the latest start; needs a bus with
-    #: a file descriptor (udp_multicast, socketcan), else the plain grid is used
-    wake_on_sensor: bool = False
-    stats_capacity: int = 600_000
 
 
 class ControllerLoop:
@@ -243,7 +215,7 @@ class ControllerLoop:
                 self.life.to(State.ACTIVE)
                 log.info("first sensor data: ACTIVE (mode %s)", self.controller.mode)
                 if collided:
-                    self._fault(FailsafeReason.ID_COLLISION)
+                    self.enter_fault(FailsafeReason.ID_COLLISION)
             return
         if self._stale_in_cycle:
             log.warning(
@@ -255,9 +227,9 @@ class ControllerLoop:
         fresh = self._fresh and (self.master is None or self.master.status_fresh)
         tripped = self.wd.update(fresh, self._e2e_bad, self._implausible, self._late)
         if st is State.ACTIVE and device is not None:
-            self._fault(device)
+            self.enter_fault(device)
         elif st is State.ACTIVE and (tripped or collided):
-            self._fault(None if tripped else FailsafeReason.ID_COLLISION)
+            self.enter_fault(None if tripped else FailsafeReason.ID_COLLISION)
         elif st is State.FAULT and collided:  # the more specific diagnosis
             if self.life.reason is not FailsafeReason.ID_COLLISION:
                 log.error(
@@ -266,6 +238,12 @@ class ControllerLoop:
                     self.life.reason.name,
                 )
             self.life.reason = FailsafeReason.ID_COLLISION
+        elif st is State.FAULT and device is not None and self.life.reason is not device:
+            # the device's own diagnosis (EMCY, leaving ACTIVE, a lost heartbeat) is more specific
+            # than a starved loop's or a silent sensor's: it is what has to be cleared first
+            if self.life.reason is not FailsafeReason.ID_COLLISION:
+                log.error("cycle %d: FAULT reason %s -> %s", self.cycles, self.life.reason.name, device.name)
+                self.life.reason = device
         elif st is State.FAULT and not tripped and device is None:
             self.driver.restart()
             self.life.to(State.ACTIVE)
@@ -273,7 +251,7 @@ class ControllerLoop:
                 "cycle %d: sensor data fresh for %d cycles: ACTIVE again", self.cycles, self.wd.fresh_cycles
             )
 
-    def _fault(self, reason: FailsafeReason | None = None) -> None:
+    def enter_fault(self, reason: FailsafeReason | None = None) -> None:
         """ACTIVE → FAULT for ``reason`` (None: the watchdog's)."""
         why = self.wd.reason if reason is None else reason
         self.life.to(State.FAULT, why)
@@ -292,7 +270,7 @@ class ControllerLoop:
             if not self._stalled_since_drain():
                 return command
             self.wd.stall()
-            self._fault()
+            self.enter_fault()
         if self.life.state is State.FAULT:
             self.failsafe_cycles += 1
             self.driver.failsafe_cycle()
@@ -311,34 +289,9 @@ class ControllerLoop:
         return self.check_age and not self.lockstep and time.time() - self._rx_now > self.stale_after_s
 
     def catch_up(self, periods: int, overrun: bool = True) -> None:
-        """Grid periods the loop slept through (``overrun``: the deadline timer skipped them;
-        else lockstep's lost sensor samples): the controller's clock stays on the grid. Each one
-        is a cycle without a sensor frame (``fresh`` False: the predictors advance, the PI
-        integrates, the reference moves on) and without a frame sent (``command_sent`` False:
-        the valve holds the previous command); :attr:`cycles` and so VALVE_CMD's CycleCount count
-        them, so the reference index and CycleCount keep matching the emulator's sample clock.
-
-        Overrun periods count for the watchdog as cycles without data
-        (:meth:`SensorWatchdog.skip`): more than ``RESYNC_SAMPLES`` at once, ``timeout_cycles``
-        at once, or starvation is LOOP_OVERRUN, and then the law is not stepped at all (leaving
-        FAULT resets it). So the law steps here at most ``RESYNC_SAMPLES`` times: lockstep's
-        gaps come from the 4-bit E2E counter."""
-        if periods <= 0:
-            return
-        self.skipped_periods += periods
-        self.cycles += periods
-        st = self.life.state
-        if overrun and st in (State.ACTIVE, State.FAULT):
-            tripped = self.wd.skip(periods)
-            if tripped and st is State.ACTIVE:
-                self._fault()
-        if self.life.state is State.FAULT:
-            self.driver.k += periods
-            self.failsafe_cycles += periods
-            return
-        if self.life.state is not State.ACTIVE:
-            return
-        self.driver.catch_up(periods)
+        """Grid periods the loop slept through (``overrun``) or lockstep's lost sensor samples,
+        each a cycle without data and without a frame sent (:func:`.loop_run.catch_up`)."""
+        catch_up(self, periods, overrun)
 
     def poll_cycle(self, skipped: int = 0, drain: bool = True, late: bool = False) -> float | None:
         """One realtime cycle without waiting: the ``skipped`` grid periods before it
