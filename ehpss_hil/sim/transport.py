@@ -14,8 +14,22 @@ from collections.abc import Callable
 from cantools.database.conversion import LinearConversion
 
 from ..codec.frames import FrameCodec
+from ..codec.verdict import Decoded
 
 SensorValues = tuple[float, float, float, float]
+
+
+def sensor_values(pos: Decoded, aux: Decoded) -> SensorValues | None:
+    """(position, spool, load pressure, coil current) of a classified SENSOR_POS + SENSOR_AUX
+    pair, or None unless both are usable."""
+    if not (pos.verdict.usable and aux.verdict.usable) or pos.values is None or aux.values is None:
+        return None
+    return (
+        float(pos.values["Position"]),
+        float(pos.values["Spool"]),
+        float(aux.values["LoadPressure"]),
+        float(aux.values["CoilCurrent"]),
+    )
 
 
 def _clip(v: float, lim: float) -> float:
@@ -118,15 +132,7 @@ class FramesTransport:
         )
         if lost:
             return None
-        d1, d2 = self._ctrl.classify(f1), self._ctrl.classify(f2)
-        if not (d1.verdict.usable and d2.verdict.usable) or d1.values is None or d2.values is None:
-            return None
-        return (
-            float(d1.values["Position"]),
-            float(d1.values["Spool"]),
-            float(d2.values["LoadPressure"]),
-            float(d2.values["CoilCurrent"]),
-        )
+        return sensor_values(self._ctrl.classify(f1), self._ctrl.classify(f2))
 
     def command(self, current_a: float, k: int, lost: bool) -> float | None:
         """Encode VALVE_CMD on the controller side, classify it on the emulator side unless

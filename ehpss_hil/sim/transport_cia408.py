@@ -15,7 +15,7 @@ from __future__ import annotations
 from ..protocol.cia408.codec import Cia408Codec
 from ..protocol.cia408.drive import REQUEST
 from ..protocol.cia408.objects import STATUS_OF, DeviceState
-from .transport import SensorValues, _clip
+from .transport import SensorValues, _clip, sensor_values
 
 #: the largest |position| (m) and |spool| (m) the sensors report (the native DBC's ranges)
 POSITION_RANGE_M = 0.5
@@ -45,19 +45,8 @@ class Cia408Transport:
         encoder = self._emu.encode("SENSOR_POS", {"Position": _clip(pos, POSITION_RANGE_M)})
         if lost:
             return None
-        d_aux, d_pos = self._ctrl.classify(valve), self._ctrl.classify(encoder)
-        if (
-            not (d_aux.verdict.usable and d_pos.verdict.usable)
-            or d_aux.values is None
-            or d_pos.values is None
-        ):
-            return None
-        return (
-            float(d_pos.values["Position"]),
-            float(d_pos.values["Spool"]),
-            float(d_aux.values["LoadPressure"]),
-            float(d_aux.values["CoilCurrent"]),
-        )
+        d_aux = self._ctrl.classify(valve)  # first: the encoder's SENSOR_POS carries its spool
+        return sensor_values(self._ctrl.classify(encoder), d_aux)
 
     def command(self, current_a: float, k: int, lost: bool) -> float | None:
         """The valve's RPDO 1 from the master; the current the valve applies (A), None if ``lost``."""
