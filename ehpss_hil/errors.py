@@ -125,12 +125,21 @@ class ControlTimeoutError(EhpssError, TimeoutError):
 
 #: exit code of a program that ran out of memory (the environment's limit, not bad input)
 EXIT_OUT_OF_MEMORY = 1
+#: the address space a program needs with a multi-threaded OpenBLAS (bytes): `ehpss-hil sim`
+#: peaks at 287 MB with 2 or more BLAS threads (205 MB with one), plus headroom. Below it, where
+#: the first allocation fails is chance (a MemoryError, a library's parse error, or a library
+#: retrying for ever), so the program refuses at once.
+THREADED_BLAS_MIN_ADDRESS_SPACE = 512 * 2**20
 
 
 def run_console(prog: str, fn: Callable[[], int]) -> int:
     """Run a console command's body: an :class:`EhpssError` becomes one line on stderr
     (``<prog>: error: …``) and its class's exit code; Ctrl-C exits 130; running out of memory
-    (a small ``ulimit -v``) is one line naming the limit, exit :data:`EXIT_OUT_OF_MEMORY`."""
+    (a small ``ulimit -v``) is one line naming the limit, exit :data:`EXIT_OUT_OF_MEMORY`; so is
+    a multi-threaded OpenBLAS under an address-space limit it cannot fit, before anything runs."""
+    if _threaded_blas_does_not_fit():
+        print(f"{prog}: error: out of memory (refused at start){_memory_limits()}", file=sys.stderr)
+        return EXIT_OUT_OF_MEMORY
     try:
         return fn()
     except EhpssError as exc:
@@ -146,6 +155,17 @@ def run_console(prog: str, fn: Callable[[], int]) -> int:
             raise
         print(f"{prog}: error: out of memory ({one_line(str(exc))}){_memory_limits()}", file=sys.stderr)
         return EXIT_OUT_OF_MEMORY
+
+
+def _threaded_blas_does_not_fit() -> bool:
+    """``OPENBLAS_NUM_THREADS`` above 1 (the user's choice) with an address-space limit below
+    :data:`THREADED_BLAS_MIN_ADDRESS_SPACE`."""
+    try:
+        threads = int(os.environ.get("OPENBLAS_NUM_THREADS", "1"))
+    except ValueError:
+        return False
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    return threads > 1 and soft != resource.RLIM_INFINITY and soft < THREADED_BLAS_MIN_ADDRESS_SPACE
 
 
 def _memory_limits() -> str:
