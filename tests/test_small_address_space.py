@@ -7,6 +7,7 @@ a slow host does not."""
 from __future__ import annotations
 
 import os
+import re
 import shlex
 import subprocess
 import sys
@@ -57,8 +58,9 @@ def test_sim_controller_and_emulator_run_under_ulimit_v(kb: int, tmp_path: Path)
         assert r.returncode == 0, (name, r.stderr[-2000:])
         if name == "sim":
             assert "tiny" in r.stdout and "mmac" in r.stdout
-        if name == "controller":
-            assert "controller: cycles 100, final state STOPPED" in r.stdout + r.stderr
+        if name == "controller":  # 100 periods of 1 ms; on a loaded host skipped periods count too
+            m = re.search(r"controller: cycles (\d+), final state STOPPED", r.stdout + r.stderr)
+            assert m is not None and int(m.group(1)) >= 100, (r.stdout + r.stderr)[-2000:]
 
 
 def test_many_blas_threads_the_user_chose_fail_fast_in_one_line(tmp_path: Path) -> None:
