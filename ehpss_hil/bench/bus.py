@@ -11,8 +11,8 @@ from typing import Any
 
 from ..config import load_controller_config
 from ..orchestrate import PROJECT_ROOT
-from ..protocol import make_codec
 from ..protocol.busload import BUS_LOAD_LIMIT, PERIODIC_FRAMES, FrameRate, frame_bits, load
+from ..sim.lockstep import config_codec
 from .common import write_json
 
 NAME = "bus"
@@ -26,7 +26,11 @@ INDEX_FRAMES = {"nrc": 0, "smac": 1, "mmac-paper": 5, "mmac": 9}
 STATS_RATE_HZ = 10.0
 #: the emulator's heartbeat rate (Hz), configs/emulator.yaml
 EMULATOR_HEARTBEAT_HZ = 10.0
-DEFAULT_CONFIGS = ("configs/controller.yaml", "configs/controller-vendor.yaml")
+DEFAULT_CONFIGS = (
+    "configs/controller.yaml",
+    "configs/controller-vendor.yaml",
+    "configs/controller-cia408.yaml",
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -44,11 +48,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def profile_frames(config: str, rate_hz: float, mode: str, extended: bool | None = None) -> list[FrameRate]:
     """The frames a deployment of controller config ``config`` puts on the bus per second at
-    ``rate_hz``; ``extended`` forces the valve frames' ID format (None: the profile's)."""
+    ``rate_hz``; ``extended`` forces the valve frames' ID format (None: the profile's). Under
+    ``cia408`` the valve frames are the PDOs, with the master's SYNC each period (``sync:
+    produce``), CTRL_DEVICE beside CTRL_STATUS, and the nodes' CANopen heartbeats instead of the
+    emulator's."""
     cfg = load_controller_config(config)
-    codec = make_codec(cfg.protocol, cfg.dbc, cfg.ids, config, cfg.dbc_map)
+    codec = config_codec(config)
+    cia408 = cfg.protocol == "cia408"
+    periodic = [*PERIODIC_FRAMES, *(["SYNC"] if cia408 and cfg.nodes.sync == "produce" else [])]
     out = []
-    for name in PERIODIC_FRAMES:
+    for name in periodic:
         shape = codec.shape(name)
         ext = shape.is_extended_id if extended is None else extended
         out.append(FrameRate(name, shape.dlc, ext, rate_hz))
@@ -58,10 +67,14 @@ def profile_frames(config: str, rate_hz: float, mode: str, extended: bool | None
         ("CTRL_INDEX", status * INDEX_FRAMES[mode]),
         ("CTRL_STATS", STATS_RATE_HZ),
         ("HEARTBEAT_CTRL", cfg.heartbeat_rate_hz),
-        ("HEARTBEAT_EMU", EMULATOR_HEARTBEAT_HZ),
+        *((("CTRL_DEVICE", status),) if cia408 else (("HEARTBEAT_EMU", EMULATOR_HEARTBEAT_HZ),)),
     ):
         if hz > 0:
             out.append(FrameRate(name, codec.shape(name).dlc, False, hz))
+    if cia408 and cfg.nodes.heartbeat_time_ms > 0:
+        nodes = 2 if cfg.nodes.position_source == "encoder" else 1
+        hz = 1000.0 / cfg.nodes.heartbeat_time_ms
+        out.extend(FrameRate("node heartbeat", 1, False, hz) for _ in range(nodes))
     return out
 
 
@@ -70,7 +83,8 @@ def _profiles(configs: list[str]) -> list[tuple[str, str, bool | None]]:
     out: list[tuple[str, str, bool | None]] = []
     for c in configs:
         cfg = load_controller_config(c)
-        label = f"{cfg.protocol} ({Path(cfg.dbc_map.dbc if cfg.dbc_map else cfg.dbc or 'ehpss.dbc').name})"
+        dbc = Path(cfg.dbc_map.dbc if cfg.dbc_map else cfg.dbc or "ehpss.dbc").name
+        label = f"{cfg.protocol} ({'CiA 408/406 PDOs' if cfg.protocol == 'cia408' else dbc})"
         out.append((label, c, None))
         if cfg.dbc_map is not None:
             out.append((f"{label}, 29-bit IDs", c, True))
@@ -91,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     for label, config, ext in _profiles(configs):
         for rate in RATES_HZ:
             frames = profile_frames(config, rate, args.mode, ext)
-            valve = sum(f.bits_per_s for f in frames if f.name in PERIODIC_FRAMES)
+            valve = sum(f.bits_per_s for f in frames if f.name in (*PERIODIC_FRAMES, "SYNC"))
             total = sum(f.bits_per_s for f in frames)
             cells = []
             for bps in BITRATES_BPS:
@@ -103,7 +117,9 @@ def run(args: argparse.Namespace) -> int:
                 )
             print(f"{label:44} {rate:5.0f}  {valve:12.0f} {total:11.0f} {cells[0]:>14} {cells[1]:>14}")
         sizes = ", ".join(
-            f"{f.name} {f.data_bytes} B {frame_bits(f.data_bytes, f.extended)} bit" for f in frames[:3]
+            f"{f.name} {f.data_bytes} B {frame_bits(f.data_bytes, f.extended)} bit"
+            for f in frames
+            if f.name in (*PERIODIC_FRAMES, "SYNC")
         )
         print(f"{'':44} ({sizes})")
     fits = [
