@@ -79,6 +79,9 @@ class RunPlan:
     truth: bool = True
     #: how long the controller may take to appear on the bus (slow VMs need more)
     startup_timeout_s: float = 60.0
+    #: how long the emulator may take to finish the scenario (s; None: the duration + 30 s,
+    #: lockstep 60 × the duration + 30 s); past it the run is stopped and fails
+    finish_timeout_s: float | None = None
     #: a non-empty directory that is no run directory: replace the files a run writes (by
     #: exact name) instead of refusing it
     overwrite: bool = False
@@ -97,6 +100,8 @@ class RunResult:
     exit_codes: dict[str, int | None] = field(default_factory=dict)
     metrics: dict[str, Any] | None = None
     wall_s: float = 0.0
+    #: the emulator had not finished the scenario when the finish timeout stopped it (s)
+    unfinished_after_s: float | None = None
 
 
 def multicast_route_reason(group: str = DEFAULT_MULTICAST_GROUP) -> str | None:
@@ -295,11 +300,14 @@ def execute(plan: RunPlan) -> RunResult:
         hb = f"{0x700 + node:03X}#"  # the controller's own boot-up heartbeat: it is on the bus
         wait_for_line(out / "controller.log", hb, plan.startup_timeout_s, procs)
         procs["emulator"] = spawn(cmds["emulator"], prefix, out, "emulator")
-        limit = sc.duration_s * (60.0 if plan.lockstep else 1.0) + 30.0
+        limit = plan.finish_timeout_s
+        if limit is None:
+            limit = sc.duration_s * (60.0 if plan.lockstep else 1.0) + 30.0
         try:
             res.exit_codes["emulator"] = procs["emulator"].wait(timeout=limit)
         except subprocess.TimeoutExpired:
             res.exit_codes["emulator"] = stop(procs["emulator"])
+            res.unfinished_after_s = limit
         time.sleep(0.1)
         res.exit_codes["controller"] = stop(procs["controller"])
         if "logger" in procs:
@@ -342,7 +350,13 @@ def _write_run_json(
 
 def check_exit_codes(res: RunResult) -> None:
     """Raise when a process did not end cleanly (exit 0): :class:`ProcessFailedError` with the
-    processes' exit code when they all share one (3: a missing interface)."""
+    processes' exit code when they all share one (3: a missing interface); also when the
+    emulator had not finished the scenario by the finish timeout (its log is then short)."""
+    if res.unfinished_after_s is not None:
+        raise ProcessFailedError(
+            f"the emulator had not finished the scenario after {res.unfinished_after_s:g} s and was "
+            f"stopped: the logs in {res.out_dir} end early"
+        )
     bad = {k: v for k, v in res.exit_codes.items() if v != 0}
     if bad:
         tails = []

@@ -15,6 +15,7 @@ from _scenarios import short_scenario_yaml
 
 from ehpss_hil.bus.netns import netns_unavailable_reason
 from ehpss_hil.commands.replay import replay_log
+from ehpss_hil.errors import ProcessFailedError
 from ehpss_hil.orchestrate import RunPlan, check_exit_codes, execute
 from ehpss_hil.report.logdata import load_log_run
 from ehpss_hil.run_metrics import metrics_from_run
@@ -43,6 +44,7 @@ def test_lockstep_run_gives_the_simulation_commands_and_metrics(scenario: Path, 
                 mode="mmac",
                 out_dir=out,
                 lockstep=True,
+                finish_timeout_s=STARTUP_LIMIT_S,  # a hang guard: a loaded VM takes its time
                 startup_timeout_s=STARTUP_LIMIT_S,
             )
         )
@@ -130,3 +132,17 @@ def _kept_time(out: Path) -> _Kept:
     if ctl.get("stale_frames", 0):
         why.append(f"{ctl['stale_frames']} stale frames")
     return _Kept("; ".join(why))
+
+
+def test_a_run_stopped_before_the_scenario_ends_fails_naming_it(tmp_path: Path) -> None:
+    """A 5-s realtime scenario with a 1-s finish timeout: the emulator is stopped, the run fails
+    (its logs end early), instead of passing with a short log."""
+    sc = tmp_path / "long.yaml"
+    sc.write_text(short_scenario_yaml("long", 5.0, "{t_s: 4.0, k_loe: 0.5}"))
+    out = tmp_path / "cut"
+    res = execute(
+        RunPlan(scenario_path=sc, out_dir=out, finish_timeout_s=1.0, startup_timeout_s=STARTUP_LIMIT_S)
+    )
+    assert res.unfinished_after_s == 1.0
+    with pytest.raises(ProcessFailedError, match="had not finished the scenario after 1 s"):
+        check_exit_codes(res)

@@ -85,6 +85,7 @@ def test_controller_and_emulator_processes_on_vcan0(vcan0: str, tmp_path: Path) 
             interface="socketcan",
             channel=vcan0,
             lockstep=True,
+            finish_timeout_s=STARTUP_LIMIT_S,  # a hang guard: a loaded VM takes its time
             startup_timeout_s=STARTUP_LIMIT_S,
         )
     )
