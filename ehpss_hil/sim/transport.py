@@ -32,6 +32,13 @@ def sensor_values(pos: Decoded, aux: Decoded) -> SensorValues | None:
     )
 
 
+def applied_current(cmd: Decoded) -> float | None:
+    """The current (A) a classified VALVE_CMD asks the valve for, or None unless usable."""
+    if not cmd.verdict.usable or cmd.values is None:
+        return None
+    return float(cmd.values["CurrentSetpoint"])
+
+
 def _clip(v: float, lim: float) -> float:
     return -lim if v < -lim else lim if v > lim else v
 
@@ -146,12 +153,7 @@ class FramesTransport:
                 "CycleCount": k & 0xFFFF,
             },
         )
-        if lost:
-            return None
-        d = self._emu.classify(f)
-        if not d.verdict.usable or d.values is None:
-            return None
-        return float(d.values["CurrentSetpoint"])
+        return None if lost else applied_current(self._emu.classify(f))
 
     def counts(self) -> dict[str, int]:
         """Verdict counts of both receivers (name → count)."""

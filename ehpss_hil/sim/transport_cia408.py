@@ -15,7 +15,7 @@ from __future__ import annotations
 from ..protocol.cia408.codec import Cia408Codec
 from ..protocol.cia408.drive import REQUEST
 from ..protocol.cia408.objects import STATUS_OF, DeviceState
-from .transport import SensorValues, _clip, sensor_values
+from .transport import SensorValues, _clip, applied_current, sensor_values
 
 #: the largest |position| (m) and |spool| (m) the sensors report (the native DBC's ranges)
 POSITION_RANGE_M = 0.5
@@ -51,12 +51,7 @@ class Cia408Transport:
     def command(self, current_a: float, k: int, lost: bool) -> float | None:
         """The valve's RPDO 1 from the master; the current the valve applies (A), None if ``lost``."""
         f = self._ctrl.encode("VALVE_CMD", {"CurrentSetpoint": current_a, "Enable": 1})
-        if lost:
-            return None
-        d = self._emu.classify(f)
-        if not d.verdict.usable or d.values is None:
-            return None
-        return float(d.values["CurrentSetpoint"])
+        return None if lost else applied_current(self._emu.classify(f))
 
     def counts(self) -> dict[str, int]:
         """Verdict counts of both receivers (name → count) and the SYNCs sent."""
