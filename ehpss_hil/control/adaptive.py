@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 
+from .attribution import SensorAttribution
 from .bank import JointBank, ScalarBank
 from .base import Measurement, NominalMotion, ValveCommand
 from .controllers import JOINT_SLOT0, POSITION_SLOT0, SMAC_SLOT, SPOOL_SLOT0, LoopBase
@@ -62,6 +63,7 @@ class MmacController(LoopBase):
         self.pos_sup = Supervisor(self.pos_bank, t, ts, guard_epsilon=t.position_guard_epsilon)
         self.flow = FlowGainMonitor(self.params.plant, ts, self.scale_spool_m, t)
         self.still = StillSensor(self.params.plant.velocity_gain_1_s, ts)
+        self.attribution = SensorAttribution(self.flow, ts, t.sensor_failed_below)
         self.clock = SampleClock(self.valve, self.xhat, self.flow if t.flow_gain_test else None)
         self.monitor = HarmMonitor(
             t.flow_gain_min_deviation,
@@ -73,10 +75,10 @@ class MmacController(LoopBase):
         )
         self._lim_d_hi = t.k_dft_limits[1] - AT_LIMIT_MARGIN
         self._lim_l_lo = t.k_loe_limits[0] + AT_LIMIT_MARGIN
+        self._alive = t.monitor_sensor_alive
         self._in_flow = False
         self._flow_on = t.flow_gain_test
         self._flow_hold = max(1, round(FLOW_HOLD_S / ts))
-        self._switch_ramp = max(1, round(t.unattributed_switch_ramp_s / ts))
         self._stop_hold = max(1, round(SPOOL_STOP_HOLD_S / ts))
         self._inv_s_spool = 1.0 / self.scale_spool_m
         self._inv_s_pos = 1.0 / self.scale_pos_m
@@ -93,11 +95,12 @@ class MmacController(LoopBase):
         self.flow.reset()
         self.monitor.reset()
         self.still.reset()
+        self.attribution.reset()
+        self._was_trusted = True  # the last fresh sample fed the sensor back, not on the fallback
         self._dead = False  # the sensor stood still through a stop phase (stillsensor.py)
         self._dead_evidence = 0  # excited increments of θ_prod taken since it was found dead
         self._in_flow = False
         self._flow_spool_model = self.spool_sup.active
-        self._pos_model = self.pos_sup.active
         self.clock.reset()
         self._spool_hold = 0  # samples left without spool evidence (the spool was at its stop)
         #: the seed point: the sensor (m) and x̂ (m) at the first sample after the reset; the
@@ -158,13 +161,6 @@ class MmacController(LoopBase):
                 pb.update(meas.position_m - self._y0, xh - self._x0)
                 ps.update(abs(xh - self._x0) * self._inv_s_pos)
             tl = 1.0 if ss.guarded else sb.theta[ss.active]
-            if ps.active != self._pos_model:
-                self._pos_model = ps.active
-                if self._flow_on and not self.flow.attributed:
-                    # whose the deviation is (sensor or flow gain) is not known yet: move the
-                    # compensation over a few samples, so that the pressure test can overturn a
-                    # drift model before it has moved the piston far
-                    self.start_ramp(self._switch_ramp)
             self.k_loe_hat = tl
             self.k_dft_hat = pb.theta[ps.active]
             self.k_q_hat = 1.0
@@ -172,9 +168,15 @@ class MmacController(LoopBase):
             if self._flow_on:
                 self._flow_split(meas, y_v, tl)
                 self._watch(tl)
+                sensor = self.attribution.update(
+                    meas.position_m, self.k_dft_hat, ps.guarded, gap and not resync, self._was_trusted
+                )
+                self.set_position_nominal(not (sensor or self.flow.flow_fault), self._ramp_n)
         else:
             self.clock.dead_cycle(self.k_loe_hat / self.k_q_hat)
         cmd = self._close(meas)
+        if meas.fresh:
+            self._was_trusted = self.sensor_trusted and not self.nominal
         sent = cmd.current_a if math.isfinite(cmd.current_a) else 0.0  # as the loop sends it
         self.clock.commanded(sent, meas.command_sent)
         return cmd
@@ -219,7 +221,7 @@ class MmacController(LoopBase):
             self._flow_spool_model = spool_model
             fl.restart()
             fl.hold_off(self._flow_hold)
-        fl.update(self.clock.echo, meas.load_pressure_pa, self._flow_theta_l(tl), prod)
+        fl.update(self.clock.echo, meas.load_pressure_pa, self._flow_theta_l(tl), prod, self.k_dft_hat)
         if fl.flow_fault:
             self.k_q_hat = prod
             self.k_loe_hat = tl * prod
@@ -267,6 +269,28 @@ class MmacController(LoopBase):
 
     def _position_guarded(self) -> bool:
         return self.pos_sup.guarded and not self.flow.flow_fault
+
+    def _sensor_live(self) -> bool:
+        """The sensor follows the spool, so it may be fed back raw. Under the position guard
+        with no jump of the reading since the guard rose (a flow-gain change or a slow drift:
+        x̂, integrating at the nominal flow gain, is the suspect, not the sensor): θ_prod, fresh
+        or not (no motion is no evidence against it), at :data:`FOLLOWS_FACTOR` times the
+        failed-sensor threshold or more. Otherwise θ_prod must be fresh, at a live sensor's
+        gain and settled, and after a jump (a drift step, a failure) have taken a full window
+        (M excited increments) since the guard rose: increments spanning the jump are not
+        evidence that the sensor follows the spool. Never while the sensor is dead."""
+        fl = self.flow
+        if self._dead:
+            return False
+        guarded = self.pos_sup.guarded
+        att = self.attribution
+        if guarded and not att.jumped_since_guard:
+            return fl.theta_prod >= FOLLOWS_FACTOR * self._failed_below
+        if not (fl.product_fresh and fl.theta_prod >= self._alive):
+            return False
+        if guarded and att.since_guard < fl.increment_window:
+            return False
+        return fl.product_settled
 
     def _sensor_dead(self) -> bool:
         """Found standing still through a full-flow stop phase (:class:`StillSensor`) and not

@@ -117,10 +117,13 @@ class LoopBase(Controller):
         self.sensor_trusted = True
         self.sensor_held_off = False
         self.nominal = False
-        self._ramp_left = self._ramp_len = 0
-        self._ramp_from = (1.0, 1.0)
+        self.position_nominal = False
+        # per divisor (current, feedback): samples left, ramp length, value at the ramp start
+        self._ramp_l = [0, 1, 1.0]
+        self._ramp_d = [0, 1, 1.0]
         self._applied_loe = self._applied_dft = 1.0
         self._blend = 1.0
+        self._held_offset = 0.0  # fed-back position − k̂_Q·x̂ at the last trusted sample (m)
         self._warm_left = self._warm_samples
         self._reset_mode()
 
@@ -142,19 +145,35 @@ class LoopBase(Controller):
             self.start_ramp(self._ramp_n)
             self.nominal = nominal
 
-    def start_ramp(self, samples: int) -> None:
-        """Move the divisors in use from where they are to the targets over ``samples``."""
-        self._ramp_from = (self._applied_loe, self._applied_dft)
-        self._ramp_left = self._ramp_len = samples
+    def set_position_nominal(self, nominal: bool, samples: int) -> None:
+        """Feed the raw sensor back (θ̂_D = 1 in the loop, the estimates kept) or the sensor
+        through θ̂_D; the feedback divisor moves between the two over ``samples``."""
+        if nominal != self.position_nominal:
+            self.start_ramp(samples, current=False)
+            self.position_nominal = nominal
+
+    def start_ramp(self, samples: int, current: bool = True, feedback: bool = True) -> None:
+        """Move the divisors in use (the current's and/or the feedback's) from where they are
+        to their targets over ``samples``."""
+        n = max(1, samples)
+        if current:
+            self._ramp_l = [n, n, self._applied_loe]
+        if feedback:
+            self._ramp_d = [n, n, self._applied_dft]
 
     def _apply(self) -> None:
         """The current divisor and the feedback divisor in use this cycle."""
         tl, td = (1.0, 1.0) if self.nominal else (self.k_loe_hat, self.k_dft_hat)
-        if self._ramp_left > 0:
-            self._ramp_left -= 1
-            f = self._ramp_left / self._ramp_len
-            tl += f * (self._ramp_from[0] - tl)
-            td += f * (self._ramp_from[1] - td)
+        if self.position_nominal:
+            td = 1.0
+        r = self._ramp_l
+        if r[0] > 0:
+            r[0] -= 1
+            tl += r[0] / r[1] * (r[2] - tl)
+        r = self._ramp_d
+        if r[0] > 0:
+            r[0] -= 1
+            td += r[0] / r[1] * (r[2] - td)
         self._applied_loe, self._applied_dft = tl, td
 
     def _saturation(self, meas: Measurement) -> int:
@@ -187,8 +206,13 @@ class LoopBase(Controller):
         model_trusted = (
             sensor_trusted(td, self._failed_below, guarded, meas.fresh) and not self.sensor_held_off
         )
-        # nominal: the estimates are set aside, the guard (no model explains the sensor) is not
-        trusted = (meas.fresh and not guarded) if self.nominal else model_trusted
+        if self.nominal:  # the estimates set aside, the guard (no model explains the sensor) not,
+            # unless the sensor's increments follow the spool (a live sensor the level models miss)
+            trusted = meas.fresh and (not guarded or self._sensor_live())
+        elif model_trusted:
+            trusted = True
+        else:  # the raw sensor, when the position channel compensates nominally and it is live
+            trusted = self.position_nominal and meas.fresh and self._sensor_live()
         self.sensor_trusted = trusted
         self._apply()
         xh, kq = self.xhat, self.k_q_hat
@@ -209,9 +233,14 @@ class LoopBase(Controller):
             if b < 1.0:
                 b = self._blend = min(1.0, b + self._blend_step)
                 y = model_x + b * (y - model_x)
+            self._held_offset = y - model_x
             return self._finish(meas, self.k_f * y)
-        self._blend = 0.0 if meas.fresh else self._blend
-        return self._finish(meas, self.k_f * model_x)
+        if meas.fresh:  # the sensor not trusted: x̂ itself
+            self._blend = 0.0
+            self._held_offset = 0.0
+        # a sample without data: x̂'s motion since the last fed-back position, which may stand
+        # off x̂ (a raw sensor fed back while x̂ integrates at a flow gain that is not the plant's)
+        return self._finish(meas, self.k_f * (model_x + self._held_offset))
 
     def _position_guarded(self) -> bool:
         return False
@@ -230,6 +259,11 @@ class LoopBase(Controller):
         elif self.sensor_held_off and meas.fresh:
             gap = abs(meas.position_m / theta_d - self.k_q_hat * self.xhat.x)
             self.sensor_held_off = gap > self._return_gap_m and not self._sensor_follows_spool()
+
+    def _sensor_live(self) -> bool:
+        """An independent witness says the sensor is alive and follows the spool with a steady
+        gain; never in the base loop."""
+        return False
 
     def _sensor_dead(self) -> bool:
         """The sensor was found standing still through a full-flow motion and has not followed

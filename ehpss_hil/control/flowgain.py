@@ -48,6 +48,7 @@ class FlowGainMonitor:
     """
 
     __slots__ = (
+        "_anchor",
         "_c",
         "_c2",
         "_d",
@@ -55,17 +56,19 @@ class FlowGainMonitor:
         "_floor",
         "_g",
         "_h",
+        "_half_dev",
         "_hi",
         "_hold",
         "_i",
-        "_int",
         "_lo",
         "_m",
         "_mark",
         "_min_dev",
         "_min_evidence",
         "_n",
+        "_nsettled",
         "_on",
+        "_on_d",
         "_pa",
         "_prev",
         "_spp",
@@ -79,8 +82,10 @@ class FlowGainMonitor:
         "flow_fault",
         "k_q",
         "llr",
+        "product_settled",
         "s",
         "sensor_decided",
+        "spool_integral_m",
         "theta_prod",
     )
 
@@ -94,7 +99,9 @@ class FlowGainMonitor:
         self._c = tuple((*tuple(float(ad[i, j]) for j in idx), float(bd[i, 0])) for i in idx)
         self._d = math.exp(-ts_s / t.flow_gain_window_s)
         self._on = t.flow_gain_threshold
+        self._on_d = t.flow_gain_sensor_threshold
         self._min_dev = t.flow_gain_min_deviation
+        self._half_dev = 0.5 * self._min_dev
         self._min_evidence = t.flow_gain_min_evidence_s / ts_s
         self._failed_below = t.sensor_failed_below
         self._lo, self._hi = t.k_dft_limits[0], t.k_dft_limits[1]
@@ -119,9 +126,16 @@ class FlowGainMonitor:
         self._ys = [0.0] * self._m
         self._vs = [0.0] * self._m
         self._i = self._n = 0
-        self._int = self._prev = 0.0
+        #: the running integral K_c·∫y_v of the measured spool (m of piston travel at the nominal
+        #: flow gain), as of the last :meth:`product` call
+        self.spool_integral_m = self._prev = 0.0
         self._hold = 0
         self._stale = 0  # updates since the product estimate last had an excited increment
+        self._anchor = math.inf  # θ_prod where the present run of settled updates began
+        self._nsettled = 0  # excited updates since, each within min_deviation/2 of it
+        #: the last M excited increments left θ_prod within ``min_deviation``/2 of where they
+        #: began (a span across a sensor jump, or a gain still converging, is not settled)
+        self.product_settled = False
         self.sensor_decided = False
         self.restart()
 
@@ -139,6 +153,14 @@ class FlowGainMonitor:
     def product_fresh(self) -> bool:
         """θ_prod had an excited increment within the last M updates."""
         return self._stale <= self._m
+
+    def decide_sensor(self) -> None:
+        """Attribute the present deviation to the sensor without the pressure test (the caller
+        has independent evidence: a level change with the piston at rest); H_Q evidence can
+        still overturn it."""
+        if not self.flow_fault and not self.sensor_decided:
+            self.sensor_decided = True
+            self._theta_ref = self.theta_prod
 
     @property
     def product_updated(self) -> bool:
@@ -171,12 +193,12 @@ class FlowGainMonitor:
         level offset; increments have none). ``samples``: sensor samples since the previous call
         (the spool taken linear over those not seen), so that both sides of an increment span
         the same time. ``excited`` False (the spool at its stop): the increment is not used."""
-        self._int += self._h * samples * (spool_m + self._prev)
+        self.spool_integral_m += self._h * samples * (spool_m + self._prev)
         self._prev = spool_m
         i = self._i
         y = position_m - self._ys[i]
-        phi = self._int - self._vs[i]
-        self._ys[i], self._vs[i] = position_m, self._int
+        phi = self.spool_integral_m - self._vs[i]
+        self._ys[i], self._vs[i] = position_m, self.spool_integral_m
         self._i = (i + 1) % self._m
         self._n += 1
         self._stale += 1
@@ -185,6 +207,12 @@ class FlowGainMonitor:
             t = self.theta_prod
             t += self._g * (y - t * phi) * phi / (self._c2 + phi * phi)
             self.theta_prod = min(max(t, self._lo), self._hi)
+            if abs(self.theta_prod - self._anchor) < self._half_dev:
+                self._nsettled += 1
+                self.product_settled = self._nsettled >= self._m
+            else:  # moved off: a new run of updates starts here
+                self._anchor, self._nsettled = self.theta_prod, 0
+                self.product_settled = False
         return self.theta_prod
 
     def propagate(self, current_a: float) -> None:
@@ -198,9 +226,13 @@ class FlowGainMonitor:
             r3[0] * s0 + r3[1] * s1 + r3[2] * s2 + r3[3] * s3 + r3[4] * current_a,
         )
 
-    def update(self, current_a: float, pressure_pa: float, theta_l: float, theta_pos: float) -> float:
-        """One sample: current echo (A), measured P_L (Pa), k̂_LOE and the product estimate
-        θ_pos = k_DFT·k_Q; returns k̂_Q (1.0 under H_D)."""
+    def update(
+        self, current_a: float, pressure_pa: float, theta_l: float, theta_pos: float, theta_level: float = 1.0
+    ) -> float:
+        """One sample: current echo (A), measured P_L (Pa), k̂_LOE, the product estimate
+        θ_pos = k_DFT·k_Q and the position bank's level estimate θ_level (the gain its model in
+        use gives the sensor); returns k̂_Q (1.0 under H_D). A decision ends only when neither
+        θ_pos nor θ_level deviates: θ_pos wanders at low excitation, the bank's model stands."""
         self.propagate(current_a)
         if self.flow_fault and theta_pos < self._failed_below:
             # a failed sensor is never a flow-gain loss, also while evidence is held off or
@@ -213,8 +245,9 @@ class FlowGainMonitor:
         if self._stale > self._m:  # θ_pos is stale (no excited increment): nothing to test
             return self.k_q
         if not self.flow_fault and abs(theta_pos - 1.0) < self._min_dev:
-            # no deviation: H_D whatever the evidence; start the window afresh when it appears
-            if self._w > 0.0 or self.sensor_decided:
+            # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
+            # episode is over (the window starts afresh when a deviation appears)
+            if abs(theta_level - 1.0) < self._min_dev and (self._w > 0.0 or self.sensor_decided):
                 self._theta_ref = 1.0
                 self.sensor_decided = False
                 self.restart()
@@ -237,6 +270,12 @@ class FlowGainMonitor:
         self._decide(theta_pos)
         self.k_q = theta_pos if self.flow_fault else 1.0
         return self.k_q
+
+    @property
+    def sensor_favoured(self) -> bool:
+        """The present deviation may be compensated as the sensor's: H_D decided, or the product
+        above 1 + ``min_deviation`` (a flow-gain *loss* cannot raise it)."""
+        return not self.flow_fault and (self.sensor_decided or self.theta_prod > 1.0 + self._min_dev)
 
     @property
     def attributed(self) -> bool:
@@ -264,10 +303,10 @@ class FlowGainMonitor:
         if self.flow_fault:
             self.flow_fault = self.llr > -self._on
         else:
-            self.flow_fault = self.llr > self._on and abs(theta - 1.0) >= self._min_dev
+            self.flow_fault = self.llr > self._on and theta <= 1.0 - self._min_dev
         if self.flow_fault:
             self.sensor_decided = False
-        elif self.llr < -self._on:
+        elif self.llr < -self._on_d:
             self.sensor_decided = True
         if self.attributed and not was:
             self._theta_ref = theta

@@ -65,10 +65,10 @@ class ControlTuning:
     flow_gain_min_deviation: float = field(default=0.05, metadata=rng(0.0, 1.0, lo_open=True))
     flow_gain_min_evidence_s: float = field(default=0.03, metadata=rng(0.0, 10.0))
     flow_gain_excitation: float = field(default=0.1, metadata=rng(0.0, 1.0))
-    #: … a position-model switch made before the test attributed the deviation moves the
-    #: compensation in over this long (s) instead of at once (a flow-gain loss taken for a drift
-    #: for the few samples until the test decides does not jolt the piston)
-    unattributed_switch_ramp_s: float = field(default=0.005, metadata=rng(0.0, 1.0))
+    #: … H_D (the sensor's) is decided only at Λ < −flow_gain_sensor_threshold: a flow-gain loss
+    #: compensated as a drift moves the piston by (1 − k_Q)·x_d, a drift compensated as a
+    #: flow-gain loss costs no more than the plain PI loop, so the sensor needs more evidence
+    flow_gain_sensor_threshold: float = field(default=12.0, metadata=rng(0.0, 1e6, lo_open=True))
     #: mmac do-no-harm monitor (control/monitor.py): a rule must fire this long in a row to fall
     #: back to nominal compensation; the fallback ends after this long without any rule firing (s)
     monitor_confirm_s: float = field(default=0.003, metadata=rng(0.0, 1.0))

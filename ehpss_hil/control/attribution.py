@@ -1,0 +1,119 @@
+"""Whose is a position-channel gain change: the sensor's (compensate it) or the flow gain's?
+
+The position bank fits ``y_s = θ·x̂`` with x̂ integrating the spool at the nominal flow gain, so
+both a sensor drift (k_DFT) and a flow-gain loss (k_Q) move θ. Compensating a flow-gain loss as a
+drift makes the loop track ``k_Q·x_d``; compensating nothing costs what the plain PI loop costs.
+So the position model in use is compensated only once independent evidence has attributed it to
+the sensor; until then the loop feeds the raw sensor back (``LoopBase.position_nominal``).
+The evidence, each enough on its own:
+
+* the load-pressure test decided H_D (:class:`.FlowGainMonitor`), or the increment gain θ_prod
+  is above 1 + ``min_deviation`` (a flow-gain *loss* cannot raise it):
+  :attr:`.FlowGainMonitor.sensor_favoured`;
+* the model changed while the piston was at rest (θ_prod stale: no excited increment) from one
+  that agreed with θ_prod when the motion stopped: a flow gain moves nothing without flow, a
+  sensor gain moves the reading at once;
+* the reading jumped (:class:`.LevelJump`) by a gain ratio ρ, and within :data:`JUMP_HOLD_S`
+  the model moved to ρ times the gain in use before the jump (a model change the jump does not
+  explain, a flow-gain loss beside it, is left to the pressure test). A model so attributed
+  stays attributed while it stays within ``min_deviation``/2 of the gain the jump explained,
+  also inside the band the pressure test cannot resolve.
+
+Every attribution but the last is the pressure test's state (:meth:`.FlowGainMonitor.decide_sensor`),
+which H_Q evidence can still overturn.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .flowgain import FlowGainMonitor
+from .jump import LevelJump
+
+#: after the position reading jumped, a position-model change within this long (s) that the
+#: jump's gain ratio explains is the sensor's
+JUMP_HOLD_S = 0.03
+#: … a model that moved by more than this from the gain in use before the jump (dimensionless;
+#: below the pressure test's band, which a jump does not need)
+JUMP_MIN_CHANGE = 0.01
+
+
+class SensorAttribution:
+    """Per fresh sample (:meth:`update`): may the position model in use be compensated?"""
+
+    __slots__ = (
+        "_failed_below",
+        "_flow",
+        "_gain",
+        "_hold",
+        "_kd_before",
+        "_left",
+        "_level_ref",
+        "_min_dev",
+        "_to",
+        "jump",
+        "jumped_since_guard",
+        "since_guard",
+    )
+
+    def __init__(self, flow: FlowGainMonitor, ts_s: float, failed_below: float) -> None:
+        """``flow``: the load-pressure test and increment regression of this controller;
+        ``ts_s``: sample time (s); ``failed_below``: θ of the failed-sensor model."""
+        self._flow = flow
+        self._min_dev = flow.min_deviation
+        self._failed_below = failed_below
+        self._hold = max(1, round(JUMP_HOLD_S / ts_s))
+        self.jump = LevelJump(flow.increment_window)
+        self.reset()
+
+    def reset(self) -> None:
+        """Nothing attributed, no jump seen."""
+        self.jump.reset()
+        self._level_ref = 1.0  # θ̂_D of the model in use when θ_prod was last fresh
+        self._left = 0  # samples left in which a model change the jump explains is the sensor's
+        self._to = 1.0  # the gain such a model moves to
+        self._kd_before = 1.0  # θ̂_D in use before the last jump
+        self._gain = math.nan  # the model a jump explained, while it is in use
+        #: excited increments of θ_prod taken since the position guard rose (0: not guarded)
+        self.since_guard = 0
+        #: the reading jumped since the position guard rose (False: not guarded)
+        self.jumped_since_guard = False
+
+    def update(self, position_m: float, theta_d: float, guarded: bool, broken: bool, trusted: bool) -> bool:
+        """One fresh sample, after the flow-gain test: the position reading (m), the position
+        model's θ̂_D in use, whether the position guard is up, whether samples were missed and
+        not redone (``broken``), whether the loop trusted the sensor at the last fresh sample.
+        True when θ̂_D is attributed to the sensor."""
+        fl = self._flow
+        if not guarded:
+            self.since_guard = 0
+            self.jumped_since_guard = False
+        elif fl.product_updated:
+            self.since_guard += 1
+        if fl.product_fresh:
+            # the level model agreed with the increments when the motion stopped: a change at
+            # rest is then the reading's; one that does not agree may still be adapting
+            self._level_ref = theta_d if abs(theta_d - fl.theta_prod) < self._min_dev else math.nan
+        elif abs(theta_d - self._level_ref) > self._min_dev and theta_d >= self._failed_below:
+            fl.decide_sensor()  # a model change with the piston at rest (False while NaN)
+        j = self.jump
+        if broken:  # the spool integral does not span the samples missed
+            j.break_chain()
+        elif j.update(position_m, fl.spool_integral_m, fl.theta_prod, fl.product_settled):
+            self.jumped_since_guard = guarded
+            if trusted and math.isfinite(j.ratio):  # a ratio to a gain the loop trusted
+                self._left = self._hold
+                self._to = self._kd_before * j.ratio
+        if self._left > 0:
+            self._left -= 1
+            moved = abs(theta_d - self._kd_before) > JUMP_MIN_CHANGE
+            if moved and abs(theta_d - self._to) < self._min_dev and theta_d >= self._failed_below:
+                fl.decide_sensor()
+                self._gain = theta_d
+                self._left = 0
+        near = abs(theta_d - self._gain) <= 0.5 * self._min_dev  # False while NaN
+        if not near:
+            self._gain = math.nan
+        if self._left == 0:
+            self._kd_before = theta_d
+        return fl.sensor_favoured or near
