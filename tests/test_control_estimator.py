@@ -59,6 +59,22 @@ def test_bank_index_is_corrected_eq36() -> None:
     assert bank.j[0] == 0.0
 
 
+def test_bank_adaptive_models_take_no_evidence_from_an_unexcited_regressor() -> None:
+    """Below the excitation floor (|φ|/S < 0.03) the data say nothing of θ: at rest next to
+    the seed point a level offset of a few µm against a φ of 2 % of S drove a position RIA from
+    0.98 down through the failed-sensor threshold (campaign run 2037). The index still scores
+    every model."""
+    t = ControlTuning()
+    bank = ScalarBank((1.0, 0.5), t, 1e-3, scale=1e-3, gain=0.2, limits=(0.0, 2.5))
+    for _ in range(2000):
+        bank.update(2e-6, 0.02e-3)  # φ at 2 % of S, y biased
+    assert bank.theta[bank.fra] == 1.0 and bank.theta[bank.ria] == 1.0
+    assert bank.mem[1] > 0.0
+    for _ in range(200):
+        bank.update(0.8 * 0.5e-3, 0.5e-3)  # excited: θ = 0.8
+    assert bank.theta[bank.ria] == pytest.approx(0.8, abs=1e-3)
+
+
 def test_noise_floor_is_mean_square_of_best_model() -> None:
     rng = np.random.default_rng(0)
     bank = ScalarBank((1.0, 0.5), ControlTuning(), 1e-3, 1.0, 0.2, (0.05, 1.5))

@@ -76,6 +76,7 @@ class ScalarBank(_IndexBase):
         self.fra_est = Nlms(theta0, gain, c, *limits)
         self.ria_est = Nlms(theta0, gain, c, *limits)
         self.theta = [*self.fixed, theta0, theta0]
+        self._adapt_floor = tuning.excitation_floor
 
     def reset(self) -> None:
         """Estimators to θ0, index memory cleared."""
@@ -85,7 +86,9 @@ class ScalarBank(_IndexBase):
         self.reset_index()
 
     def update(self, y: float, phi: float) -> None:
-        """Score every model on the sample (a priori residuals), then adapt FRA and RIA.
+        """Score every model on the sample (a priori residuals), then adapt FRA and RIA, unless
+        the regressor is below the excitation floor (|φ|/S < ``excitation_floor``: no evidence
+        of θ, only of noise and of offsets the proportional model does not have).
 
         Written out by hand (no per-model calls): this runs twice per cycle in ``mmac``.
         """
@@ -100,6 +103,8 @@ class ScalarBank(_IndexBase):
             mem[i] = m
             jj[i] = a1 * e2 + a2 * m
         self.w = d * self.w + ts
+        if -self._adapt_floor < ps < self._adapt_floor:  # not excited: no evidence of θ
+            return
         fra, ria = self.fra_est, self.ria_est
         k = fra._g * phi / (fra._c + phi * phi)
         lo, hi = fra._lo, fra._hi

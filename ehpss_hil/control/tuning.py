@@ -42,7 +42,8 @@ class ControlTuning:
     fixed_k_dft: tuple[float, ...] = field(default=(1.0, 0.5, 0.0), metadata=rng(0.0, 2.5, length=(1, 3)))
     k_loe_limits: tuple[float, ...] = field(default=(0.05, 1.5), metadata=rng(0.0, 1.5, length=(2, 2)))
     k_dft_limits: tuple[float, ...] = field(default=(0.0, 2.5), metadata=rng(0.0, 2.5, length=(2, 2)))
-    #: channel excitation gate: no switch while |φ| < excitation_floor·S (fraction of S)
+    #: channel excitation gate: no switch and no adaptation while |φ| < excitation_floor·S
+    #: (fraction of S)
     excitation_floor: float = field(default=0.03, metadata=rng(0.0, 1.0))
     #: NLMS regularization c = (nlms_c_fraction·S)² (≥ 1e-4: a vanishing c divides by φ² = 0)
     nlms_c_fraction: float = field(default=0.03, metadata=rng(1e-4, 10.0))
