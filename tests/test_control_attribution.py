@@ -28,14 +28,17 @@ class Rig:
         self.spool = 0.0
         self.rng = np.random.default_rng(3)
 
-    def run(self, n: int, theta_d: float, gain: float = 1.0, spool_m: float = SPOOL_M) -> list[bool]:
+    def run(
+        self, n: int, theta_d: float, gain: float = 1.0, spool_m: float = SPOOL_M, model: int = 0
+    ) -> list[bool]:
         out = []
         for _ in range(n):
             self.x += K_C * 0.5 * (spool_m + self.spool) * TS  # the spool integral, trapezoidal
             self.spool = spool_m
             y = gain * self.x + 5e-7 * self.rng.standard_normal()
             self.flow.product(y, spool_m)
-            out.append(self.att.update(y, theta_d, False, False, True))
+            self.flow.update(0.0, 0.0, 1.0, self.flow.theta_prod, theta_d)  # no pressure evidence
+            out.append(self.att.update(y, theta_d, model, False, False, True))
         return out
 
 
@@ -87,3 +90,16 @@ def test_a_jump_inside_the_pressure_tests_band_is_compensated_while_the_model_st
     r.run(2, 1.0, gain=1.03)
     assert r.run(5, 1.03, gain=1.03) == [True] * 5
     assert r.run(1, 1.06, gain=1.03) == [r.flow.sensor_favoured]  # moved off: the jump no longer speaks
+
+
+def test_a_switch_without_evidence_does_not_inherit_the_last_attribution() -> None:
+    """A drift attributed by its jump (model 3 at 0.8); later, with the piston at rest and the
+    increments stale, the supervisor switches to another model at 0.16 with nothing to show for
+    it (campaign run 1453): not compensated; a switch to a model at the same gain is."""
+    r = Rig()
+    r.run(300, 1.0)
+    r.run(3, 1.0, gain=0.8)
+    assert r.run(5, 0.8, gain=0.8, model=3) == [True] * 5
+    assert r.run(1, 0.8, gain=0.8, model=1) == [True]  # another slot, the same gain
+    assert r.run(3, 0.16, gain=0.8, model=4) == [False] * 3
+    assert r.flow.sensor_decided  # the episode stands; only this model is not attributed

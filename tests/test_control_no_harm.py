@@ -55,6 +55,7 @@ def _run(name: str, mode: str) -> tuple[SimResult, RunMetrics]:
         "kq-ramp-trapezoid",
         "drift-step-plateau",
         "frameloss-kq-sine",
+        "drift-ramp-square",
     ],
 )
 def test_mmac_does_no_harm(name: str) -> None:

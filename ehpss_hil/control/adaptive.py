@@ -1,17 +1,10 @@
-"""The adaptive modes: ``mmac`` (per-channel banks) and ``smac``/``mmac-paper`` (joint model).
+"""The ``mmac`` mode: per-channel banks on the spool LVDT and the position sensor.
 
 ``mmac`` (docs/design.md §5): the spool channel ``y_v = θ_L·v`` (v: commanded spool predicted from the
 current echo) and the position channel ``y_s = θ_D·x̂`` (x̂: model position from the spool LVDT),
 each with fixed models + FRA + RIA, a supervisor and a guard. The spool residual depends on
-k_LOE only and the position residual on k_DFT only, which is what makes them separable.
-
-``mmac-paper``/``smac``: the paper's sensing — the position alone. The regression is over a
-window of M samples, ``y = y_s[k] − y_s[k−M]`` against ``φ = K_c·∫_{k−M}^{k} v dt``, i.e.
-``y = k_LOE·k_DFT·φ``: only the product is identifiable, so a joint (θ_L, θ_D) model cannot tell a
-50 % LOE from a 0.5 drift (docs/design.md §4). ``mmac-paper`` has the fixed pairs nominal, LOE 50 %,
-drift 0.5 plus FRA and RIA, whose adaptive law (the paper's actuator parametrization) adapts θ_L
-with θ_D held (FRA: 1; RIA: the θ_D of the fixed model it was reinitialized to); ``smac`` has one
-adaptive model, θ_L with θ_D = 1. Their x̂ integrates θ̂_L·v (no spool sensor in this sensing).
+k_LOE only and the position residual on k_DFT only, which is what makes them separable. The
+paper's joint-model modes (``smac``, ``mmac-paper``) are in :mod:`.joint`.
 """
 
 from __future__ import annotations
@@ -19,16 +12,15 @@ from __future__ import annotations
 import math
 
 from .attribution import SensorAttribution
-from .bank import JointBank, ScalarBank
-from .base import Measurement, NominalMotion, ValveCommand
-from .controllers import JOINT_SLOT0, POSITION_SLOT0, SMAC_SLOT, SPOOL_SLOT0, LoopBase
-from .estimator import Nlms, per_sample_gain
+from .bank import ScalarBank
+from .base import Measurement, ValveCommand
+from .controllers import POSITION_SLOT0, SPOOL_SLOT0, LoopBase
+from .estimator import per_sample_gain
 from .flowgain import FlowGainMonitor
 from .monitor import HarmMonitor
 from .sampleclock import SampleClock
 from .stillsensor import StillSensor
 from .supervisor import Supervisor
-from .tuning import ControlTuning
 
 #: after samples stepped without their data the flow-gain test takes no evidence for this many
 #: samples (≈ 6 time constants of the slowest valve/cylinder pole, −284 s⁻¹, at 1 kHz)
@@ -40,6 +32,9 @@ SPOOL_STOP_HOLD_S = 0.005
 #: a sensor declared failed whose increment gain θ_prod is this many times the failed-sensor
 #: threshold (0.3 with the default 0.15) follows the spool: it is fed back again
 FOLLOWS_FACTOR = 2.0
+#: a re-base of x̂ larger than this many reference amplitudes at once is not a sensor gain
+#: having changed (x0 = y0/θ̂_D ≈ the piston where the seed was taken, within the motion's range)
+REBASE_LIMIT = 2.0
 #: an adaptive estimate within this of its clip counts as at its limit (dimensionless)
 AT_LIMIT_MARGIN = 0.01
 
@@ -82,6 +77,7 @@ class MmacController(LoopBase):
         self._stop_hold = max(1, round(SPOOL_STOP_HOLD_S / ts))
         self._inv_s_spool = 1.0 / self.scale_spool_m
         self._inv_s_pos = 1.0 / self.scale_pos_m
+        self._rebase_limit_m = REBASE_LIMIT * self.scale_pos_m
         n_l, n_d = len(t.fixed_k_loe) + 2, len(t.fixed_k_dft) + 2
         self.index_slots = tuple(range(SPOOL_SLOT0, SPOOL_SLOT0 + n_l)) + tuple(
             range(POSITION_SLOT0, POSITION_SLOT0 + n_d)
@@ -168,8 +164,9 @@ class MmacController(LoopBase):
             if self._flow_on:
                 self._flow_split(meas, y_v, tl)
                 self._watch(tl)
+                broken = gap and not resync
                 sensor = self.attribution.update(
-                    meas.position_m, self.k_dft_hat, ps.guarded, gap and not resync, self._was_trusted
+                    meas.position_m, self.k_dft_hat, ps.active, ps.guarded, broken, self._was_trusted
                 )
                 self.set_position_nominal(not (sensor or self.flow.flow_fault), self._ramp_n)
         else:
@@ -187,6 +184,10 @@ class MmacController(LoopBase):
         model (θ below ``sensor_failed_below``) leaves it where it is."""
         if self.sensor_alive(theta) and not self.pos_sup.guarded:
             x0 = self._y0 / theta
+            if abs(x0 - self._x0) > self._rebase_limit_m:
+                # a model that would put x̂ this far away at once does not describe the sensor
+                # (a model at 0.16 nothing attributed moved x̂ by 3 mm, campaign run 1453)
+                return
             self.xhat.x += x0 - self._x0
             self._x0 = x0
 
@@ -326,90 +327,3 @@ class MmacController(LoopBase):
     def switch_count(self) -> int:
         """Switches of both channels."""
         return self.spool_sup.switches + self.pos_sup.switches
-
-
-class JointController(LoopBase):
-    """``mmac-paper`` (joint bank + supervisor) or ``smac`` (one joint adaptive model)."""
-
-    def __init__(self, tuning: ControlTuning, reference: NominalMotion | None, mode: str) -> None:
-        super().__init__(tuning, reference)
-        self.mode = mode
-
-    def _build(self) -> None:
-        t, ts = self.tuning, self.ts_s
-        m = t.increment_window
-        self._m = m
-        k_c = self.params.plant.velocity_gain_1_s
-        self._h = 0.5 * ts * k_c
-        scale = self.scale_spool_m * k_c * ts * m
-        self._inv_s = 1.0 / scale
-        g = per_sample_gain(t.nlms_gain_per_ms, ts)
-        if self.mode == "smac":
-            c = (t.nlms_c_fraction * scale) ** 2
-            self.est = Nlms(1.0, g, c, t.k_loe_limits[0], t.k_loe_limits[1])
-            self.index_slots = (SMAC_SLOT,)
-        else:
-            fixed = ((1.0, 1.0), (0.5, 1.0), (1.0, 0.5))
-            self.bank = JointBank(fixed, t, ts, scale, g)
-            self.sup = Supervisor(self.bank, t, ts)
-            self.index_slots = tuple(range(JOINT_SLOT0, JOINT_SLOT0 + 5))
-
-    def _reset_mode(self) -> None:
-        self._ys = [0.0] * self._m
-        self._vs = [0.0] * self._m
-        self._i = 0
-        self._n = 0
-        self._int_v = 0.0
-        self._v_prev = 0.0
-        if self.mode == "smac":
-            self.est.reset()
-        else:
-            self.bank.reset()
-            self.sup.reset()
-
-    def step(self, meas: Measurement) -> ValveCommand:
-        """Windowed increment regression, (bank + supervisor | single model), compensation."""
-        if meas.fresh:
-            self._echo = meas.coil_current_a
-        v = self.valve.step(self._echo)
-        self._int_v += self._h * (v + self._v_prev)
-        self._v_prev = v
-        self.xhat.integrate(self.k_loe_hat * v)
-        i = self._i
-        y = meas.position_m - self._ys[i]
-        phi = self._int_v - self._vs[i]
-        self._ys[i] = meas.position_m
-        self._vs[i] = self._int_v
-        self._i = (i + 1) % self._m
-        self._n += 1
-        if meas.fresh and self._n > self._m:
-            self._adapt(y, phi)
-        return self._close(meas)
-
-    def _adapt(self, y: float, phi: float) -> None:
-        if self.mode == "smac":
-            self.est.update(y, phi)
-            self.k_loe_hat = self.est.theta
-        else:
-            self.bank.update(y, phi)
-            a = self.sup.update(abs(phi) * self._inv_s)
-            self.k_loe_hat, self.k_dft_hat = self.bank.pairs[a]
-
-    def index_values(self) -> list[float]:
-        """J per model (smac: none is computed; reported as 0)."""
-        return [0.0] if self.mode == "smac" else list(self.bank.j)
-
-    def theta_values(self) -> list[float]:
-        """θ_L·θ_D per model."""
-        if self.mode == "smac":
-            return [self.est.theta]
-        return [a * b for a, b in self.bank.pairs]
-
-    def probe(self) -> tuple[int, int, float, float]:
-        """The joint slot is reported for both channels."""
-        s = SMAC_SLOT if self.mode == "smac" else JOINT_SLOT0 + self.sup.active
-        return (s, s, self.k_loe_hat, self.k_dft_hat)
-
-    def switch_count(self) -> int:
-        """Switches of the joint supervisor."""
-        return 0 if self.mode == "smac" else self.sup.switches

@@ -20,7 +20,11 @@ The evidence, each enough on its own:
   also inside the band the pressure test cannot resolve.
 
 Every attribution but the last is the pressure test's state (:meth:`.FlowGainMonitor.decide_sensor`),
-which H_Q evidence can still overturn.
+which H_Q evidence can still overturn. An attribution belongs to the deviation it was made for: a
+switch of the position supervisor to a model whose gain differs by more than ``min_deviation``
+from the one in use, with no evidence on or after it, is a new deviation and is not compensated
+(a model an RIA had walked to 0.16 at rest, switched to long after a drift was attributed, sent
+the piston 3 mm away: campaign run 1453).
 """
 
 from __future__ import annotations
@@ -50,7 +54,10 @@ class SensorAttribution:
         "_left",
         "_level_ref",
         "_min_dev",
+        "_model",
+        "_theta_before",
         "_to",
+        "_unexplained",
         "jump",
         "jumped_since_guard",
         "since_guard",
@@ -74,16 +81,23 @@ class SensorAttribution:
         self._to = 1.0  # the gain such a model moves to
         self._kd_before = 1.0  # θ̂_D in use before the last jump
         self._gain = math.nan  # the model a jump explained, while it is in use
+        self._model = -1  # the position model in use at the last sample
+        self._theta_before = 1.0  # its θ̂_D
+        self._unexplained = False  # the model in use was switched to without evidence since
         #: excited increments of θ_prod taken since the position guard rose (0: not guarded)
         self.since_guard = 0
         #: the reading jumped since the position guard rose (False: not guarded)
         self.jumped_since_guard = False
 
-    def update(self, position_m: float, theta_d: float, guarded: bool, broken: bool, trusted: bool) -> bool:
+    def update(
+        self, position_m: float, theta_d: float, model: int, guarded: bool, broken: bool, trusted: bool
+    ) -> bool:
         """One fresh sample, after the flow-gain test: the position reading (m), the position
-        model's θ̂_D in use, whether the position guard is up, whether samples were missed and
-        not redone (``broken``), whether the loop trusted the sensor at the last fresh sample.
-        True when θ̂_D is attributed to the sensor."""
+        model's θ̂_D in use and its slot (``model``), whether the position guard is up, whether
+        samples were missed and not redone (``broken``), whether the loop trusted the sensor at
+        the last fresh sample.
+        True when θ̂_D is attributed to the sensor: by evidence, or by an attribution that stands
+        for this model (not made unexplained by a switch without evidence)."""
         fl = self._flow
         if not guarded:
             self.since_guard = 0
@@ -116,4 +130,11 @@ class SensorAttribution:
             self._gain = math.nan
         if self._left == 0:
             self._kd_before = theta_d
-        return fl.sensor_favoured or near
+        if model != self._model:  # a switch is a new deviation: the attribution of the last does
+            # not carry over to it, unless the model's gain stays where it was
+            self._unexplained = self._model >= 0 and abs(theta_d - self._theta_before) > self._min_dev
+            self._model = model
+        self._theta_before = theta_d
+        if fl.sensor_current or near or not fl.sensor_decided:
+            self._unexplained = False
+        return (fl.sensor_favoured or near) and not self._unexplained

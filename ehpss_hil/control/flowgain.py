@@ -84,6 +84,7 @@ class FlowGainMonitor:
         "llr",
         "product_settled",
         "s",
+        "sensor_current",
         "sensor_decided",
         "spool_integral_m",
         "theta_prod",
@@ -137,6 +138,9 @@ class FlowGainMonitor:
         #: began (a span across a sensor jump, or a gain still converging, is not settled)
         self.product_settled = False
         self.sensor_decided = False
+        #: H_D decided on this sample (Λ < −``flow_gain_sensor_threshold`` on enough evidence) or
+        #: by :meth:`decide_sensor` since the last :meth:`update`
+        self.sensor_current = False
         self.restart()
 
     @property
@@ -158,9 +162,10 @@ class FlowGainMonitor:
         """Attribute the present deviation to the sensor without the pressure test (the caller
         has independent evidence: a level change with the piston at rest); H_Q evidence can
         still overturn it."""
-        if not self.flow_fault and not self.sensor_decided:
-            self.sensor_decided = True
-            self._theta_ref = self.theta_prod
+        if not self.flow_fault:
+            if not self.sensor_decided:
+                self._theta_ref = self.theta_prod
+            self.sensor_decided = self.sensor_current = True
 
     @property
     def product_updated(self) -> bool:
@@ -234,6 +239,7 @@ class FlowGainMonitor:
         use gives the sensor); returns k̂_Q (1.0 under H_D). A decision ends only when neither
         θ_pos nor θ_level deviates: θ_pos wanders at low excitation, the bank's model stands."""
         self.propagate(current_a)
+        self.sensor_current = False
         if self.flow_fault and theta_pos < self._failed_below:
             # a failed sensor is never a flow-gain loss, also while evidence is held off or
             # stale (k̂_Q = θ_pos ≈ 0 would divide the position by nothing)
@@ -307,6 +313,6 @@ class FlowGainMonitor:
         if self.flow_fault:
             self.sensor_decided = False
         elif self.llr < -self._on_d:
-            self.sensor_decided = True
+            self.sensor_decided = self.sensor_current = True
         if self.attributed and not was:
             self._theta_ref = theta

@@ -11,9 +11,10 @@ from dataclasses import dataclass
 
 from ..errors import ModelError
 from ..physics.params import Params
-from .adaptive import JointController, MmacController
+from .adaptive import MmacController
 from .base import NominalMotion
 from .controllers import LoopBase, NrcController, OracleController
+from .joint import JointController
 from .tuning import ControlTuning
 
 
