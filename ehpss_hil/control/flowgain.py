@@ -23,8 +23,11 @@ model changes (the pressure model changed) or when an attributed deviation moves
 ``min_deviation`` (a new fault; the attribution stands until the new evidence overturns it).
 The statistic is the log-likelihood ratio over an exponentially weighted window,
 ``Λ = (E_D − E_Q)/(2σ̂²)``, ``E_h = Σ w·(P_L − g_h·u)²`` with g_D = k̂_LOE, g_Q = k̂_LOE·θ_pos and
-``σ̂² = min(E_D, E_Q)/Σw``; H_Q is entered when ``Λ > Λ_on`` and left when ``Λ < −Λ_on``; H_D is
-decided when ``Λ < −Λ_on``.
+``σ̂² = min(E_D, E_Q)/Σw``; H_Q (a flow-gain *loss*: θ_pos ≤ 1 − ``min_deviation``) is entered
+when ``Λ > Λ_on`` and left when ``Λ < −Λ_on``; H_D is decided when ``Λ < −Λ_D`` with the larger
+``Λ_D`` (``flow_gain_sensor_threshold``): a flow loss compensated as a drift costs more than a
+drift left to the plain loop. A decision ends only when neither θ_pos nor the position bank's
+level model deviates (control/attribution.py uses it).
 The compensation always uses θ_pos; only its split between the sensor and the flow gain comes
 from the pressure, so the pressure noise never enters the loop directly.
 """
@@ -160,8 +163,8 @@ class FlowGainMonitor:
 
     def decide_sensor(self) -> None:
         """Attribute the present deviation to the sensor without the pressure test (the caller
-        has independent evidence: a level change with the piston at rest); H_Q evidence can
-        still overturn it."""
+        has independent evidence: a jump of the reading, a level change with the piston at
+        rest); H_Q evidence can still overturn it."""
         if not self.flow_fault:
             if not self.sensor_decided:
                 self._theta_ref = self.theta_prod
