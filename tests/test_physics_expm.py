@@ -16,6 +16,17 @@ from ehpss_hil.physics.expm import expm
 from ehpss_hil.physics.model import closed_loop_matrices, plant_matrices, valve_matrices
 
 PARAMS = load_params()
+#: What the plant needs of its ZOH map: a relative error (of the largest entry) far below one
+#: position LSB relative to the DBC's range (0.1 µm over ±0.5 m = 1e-7), with a factor 100 left
+#: for errors that accumulate over the slowest mode's settling. Two Padé implementations on
+#: different numpy/LAPACK builds differ by rounding times the 2^s of s squarings (measured up to
+#: 2.4e-10 at 10 Hz, 2e-13 at 500 Hz, numpy 2.4/scipy 1.17): so the bound is the plant's, not a
+#: build's rounding.
+PLANT_ZOH_REL_ERR = 1e-9
+#: "the same class as scipy": no more than this factor above scipy's own error against the exact
+#: exponential, plus this many units of double rounding (where both are at the rounding floor)
+CLASS_FACTOR = 4.0
+ROUNDING_FLOOR = 64 * float(np.finfo(float).eps)
 #: the fault factors' range (tuning limits: k_LOE in [0.05, 1.5], k_DFT in [0, 2.5]) and flow gains
 K_LOE = (0.05, 0.2, 0.5, 1.0, 1.5)
 K_DFT = (0.0, 0.1, 1.0, 2.5)
@@ -74,24 +85,24 @@ def _exact(a: Matrix) -> Matrix:
 
 
 @pytest.mark.parametrize("rate_hz", [500.0, 1000.0, 2000.0, 5000.0, MAX_RATE_HZ])
-def test_expm_equals_scipy_to_1e_12_at_the_daemon_rates(rate_hz: float) -> None:
+def test_expm_agrees_with_scipy_within_the_plants_need_at_the_daemon_rates(rate_hz: float) -> None:
     for aug in _models(1.0 / rate_hz):
-        assert _rel_err(expm(aug), scipy.linalg.expm(aug)) < 1e-12
+        assert _rel_err(expm(aug), scipy.linalg.expm(aug)) < PLANT_ZOH_REL_ERR
 
 
 @pytest.mark.parametrize("rate_hz", [MIN_RATE_HZ, 50.0, 100.0, 250.0, 1000.0])
 def test_expm_is_as_close_to_exact_as_scipy_at_every_rate(rate_hz: float) -> None:
     """At low rates (Ts up to 0.1 s, ‖A·Ts‖₁ up to 4e7, 30 squarings) scipy itself is up to
     4e-10 off the exact exponential; this one is in the same class (checked on the six models
-    where the two differ most): its worst error is no more than twice scipy's worst, below
-    1e-9, and below 1e-12 from 100 Hz on."""
+    where the two differ most): its worst error is no more than :data:`CLASS_FACTOR` times
+    scipy's worst (or at the rounding floor), and within what the plant needs at every rate."""
     models = _models(1.0 / rate_hz)
     worst = sorted(models, key=lambda a: -_rel_err(expm(a), scipy.linalg.expm(a)))[:6]
     exact = [_exact(a) for a in worst]
     ours = max(_rel_err(expm(a), e) for a, e in zip(worst, exact, strict=True))
     theirs = max(_rel_err(scipy.linalg.expm(a), e) for a, e in zip(worst, exact, strict=True))
-    assert ours <= max(2.0 * theirs, 1e-14), (ours, theirs)
-    assert ours < (1e-12 if rate_hz >= 100.0 else 1e-9), ours
+    assert ours <= max(CLASS_FACTOR * theirs, ROUNDING_FLOOR), (ours, theirs)
+    assert ours < PLANT_ZOH_REL_ERR, ours
 
 
 def test_small_and_structured_matrices_take_every_pade_degree() -> None:
