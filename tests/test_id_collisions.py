@@ -5,6 +5,7 @@ its own frames back (a ring of the frames sent) and on those that never do. Real
 
 from __future__ import annotations
 
+import random
 from collections.abc import Iterator
 from typing import Any
 
@@ -18,6 +19,7 @@ from ehpss_hil.control.base import Controller, ControllerStatus, Measurement, Va
 from ehpss_hil.physics.params import Params, load_params
 from ehpss_hil.runtime.collisions import SentFrames
 from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
+from ehpss_hil.runtime.foreign import SensorStreams
 from ehpss_hil.runtime.frameio import FrameIO, limit_sensor_rate
 from ehpss_hil.runtime.lifecycle import FailsafeReason, State
 from ehpss_hil.scenario import Reference
@@ -239,6 +241,69 @@ def test_a_second_sensor_pos_stream_is_a_collision(rig: Rig) -> None:
     # the rogue's readings that passed the counter check failed the rate check: none was used
     assert rig.loop.codec.counts_by_name["SENSOR_POS"][Verdict.OUT_OF_RANGE] >= 1
     assert rig.loop.meas.position_m == 0.0
+
+
+def test_one_sensor_losing_frames_in_bursts_is_not_a_collision(rig: Rig) -> None:
+    """A starved receiver or a lossy bus: every frame arrives after a gap of 5 to 12 samples,
+    so every frame fails the sequence check (WRONG_SEQUENCE) — the pattern that made a single
+    emulator under load look like two. One sensor delivers no more than one frame per period,
+    so it is no second transmitter (the watchdog may trip on the E2E errors: not ID_COLLISION)."""
+    _active(rig)
+    r = random.Random(3)
+    for _ in range(300):
+        for _ in range(r.randint(4, 11)):  # samples lost on the way: the counter moves on
+            rig.tx.skip("SENSOR_POS")
+            rig.tx.skip("SENSOR_AUX")
+        rig.sensors(0.0)
+        rig.cycle()
+        for _ in range(r.randint(0, 3)):  # periods without a frame
+            rig.cycle()
+    g = rig.loop.guard
+    assert g.sensor.failures >= 150  # the sequence evidence alone would have been a conflict
+    assert g.sensor.conflicts == 0 and g.episodes == 0
+    assert rig.state[1] is not FailsafeReason.ID_COLLISION
+
+
+def test_a_sensor_faster_than_the_loop_is_not_a_collision(rig: Rig) -> None:
+    """Two frames of one sensor per cycle (a sensor at twice the control rate): more frames
+    than periods, but one sequence."""
+    _active(rig)
+    for _ in range(200):
+        rig.sensors(0.0)
+        rig.sensors(0.0)
+        rig.cycle()
+    g = rig.loop.guard
+    assert g.sensor.max_frames > 70 and g.sensor.failures == 0
+    assert g.sensor.conflicts == 0 and rig.state == (State.ACTIVE, FailsafeReason.NONE)
+
+
+def test_sensor_streams_evidence() -> None:
+    """The two kinds of evidence, frame by frame (runtime/foreign.py)."""
+    codec, other = FrameCodec(), FrameCodec()
+    for _ in range(7):
+        other.skip("SENSOR_POS")
+
+    def frame(c: FrameCodec, pos: float) -> bytes:
+        return bytes(c.encode("SENSOR_POS", {"Position": pos, "Spool": 0.0}).data)
+
+    # two senders, one frame each per cycle, half the frames out of sequence: a conflict
+    two = SensorStreams()
+    for k in range(60):
+        two.add(False, frame(codec, k * 1e-6), k)
+        two.add(True, frame(other, 0.05), k)
+    assert two.conflict and two.conflicts == 1
+    # copies are not frames: one sensor that sends every frame five times, many REPEATED
+    dup = SensorStreams()
+    for k in range(200):
+        f = frame(codec, k * 1e-6)
+        for j in range(5):
+            dup.add(j > 0, f, k)
+    assert dup.rate.total == 40 and not dup.conflict
+    # a backlog (frames of periods slept through) is not counted against the rate
+    backlog = SensorStreams()
+    for k in range(200):
+        backlog.add(True, frame(codec, k * 1e-6), 500, countable=k < 10)
+    assert backlog.rate.total == 10 and not backlog.conflict
 
 
 def test_setpoint_only_when_enabled_and_within_limits() -> None:

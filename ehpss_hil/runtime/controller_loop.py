@@ -88,6 +88,7 @@ class ControllerLoop:
         self._stale_in_cycle = 0
         self._rx_now = 0.0  # wall-clock time (s) the frames being drained are aged against
         self._late = False  # this cycle started after its deadline
+        self._backlog = False  # the frames being drained follow skipped periods
         self.life = Lifecycle()
         self.life.to(State.CONFIGURED)
         #: a second transmitter (ID_COLLISION) and the SETPOINT policy (runtime/foreign.py)
@@ -129,6 +130,15 @@ class ControllerLoop:
         self._pos_counter = 0
         self._pos_ts = 0.0
 
+    def _current_frame(self, msg: can.Message) -> bool:
+        """False for a frame that belongs to an earlier period: received before the stale
+        window (where frames are aged), or drained right after skipped periods (a backlog)."""
+        if self.lockstep:
+            return True
+        if self.check_age:
+            return self._rx_now - msg.timestamp <= self.stale_after_s
+        return not self._backlog
+
     def on_frame(self, msg: can.Message) -> Verdict | None:
         """Consume one received frame (IDs other than sensors/SETPOINT are only logged); returns
         its verdict (None for IDs not consumed).
@@ -148,7 +158,9 @@ class ControllerLoop:
             return None
         d = self.codec.classify(msg)
         if fid == self.id_pos:
-            self.guard.sensor.add(d.verdict in _SEQUENCE_VERDICTS)
+            self.guard.sensor.add(
+                d.verdict in _SEQUENCE_VERDICTS, bytes(msg.data), self.cycles, self._current_frame(msg)
+            )
         if not d.verdict.usable or d.values is None:
             if fid != self._id_setpoint:
                 if d.verdict is Verdict.OUT_OF_RANGE:
@@ -301,6 +313,7 @@ class ControllerLoop:
 
         Returns the receive timestamp (wall-clock s) of the SENSOR_POS frame used, or None."""
         self.catch_up(skipped)
+        self._backlog = skipped > 0
         if drain:
             self.drain()
         used = self._pos_ts if self._fresh else None

@@ -1,17 +1,29 @@
 """What the controller does about frames from a transmitter that should not be there.
 
-A second transmitter (issue #16): the controller's own VALVE_CMD received from elsewhere (an ID
-collision, :class:`~.frameio.FrameIO`), the emulator's SENSOR_AUX ``CommandConflict`` (it saw two
-VALVE_CMD sequences and centred the valve: firmware_sim/commanders.py), or a second SENSOR_POS
-stream. The last one is told from a lossy bus by its E2E verdicts: frame loss only ever gives
-OK_SOME_LOST (and one WRONG_SEQUENCE after more than ``max_delta_counter`` lost in a row), while
-a second sender interleaves its counter with the sensor's and half of all SENSOR_POS frames fail
-the sequence check (REPEATED, WRONG_SEQUENCE); :data:`SENSOR_SEQ_LIMIT` of the last
-:data:`SENSOR_SEQ_WINDOW` is a conflict (the reliability suite's peer that duplicates, delays and
-reorders 22 % of its ticks reaches 34 at most). :class:`CollisionGuard` turns that evidence into
-the loop's reaction (``watchdog.on_collision``): fail-safe with reason ID_COLLISION, left only
-with ``auto_recover`` after ``recovery_cycles`` cycles without evidence, or a warning only.
+A second transmitter: the controller's own VALVE_CMD received from elsewhere (an ID collision,
+:class:`~.frameio.FrameIO`), the emulator's SENSOR_AUX ``CommandConflict`` (it saw two VALVE_CMD
+sequences and centred the valve: firmware_sim/commanders.py), or a second SENSOR_POS stream
+(:class:`SensorStreams`). :class:`CollisionGuard` turns that evidence into the loop's reaction
+(``watchdog.on_collision``): fail-safe with reason ID_COLLISION, left only with ``auto_recover``
+after ``recovery_cycles`` cycles without evidence, or a warning only.
 
+A second SENSOR_POS stream needs two kinds of evidence at once, because each alone has an
+innocent cause on a single sensor:
+
+- **sequence failures**: :data:`SENSOR_SEQ_LIMIT` of the last :data:`SENSOR_SEQ_WINDOW` frames
+  REPEATED or WRONG_SEQUENCE. A second sender interleaves its own counter and fails half of all
+  frames; but one sensor does the same when the bus or a starved receiver loses frames in bursts
+  (a gap of more than ``max_delta_counter`` is a WRONG_SEQUENCE, and under load such gaps come
+  one after the other), or when it duplicates and reorders.
+- **more frames than one sensor sends**: a sensor samples on its own clock, one frame per control
+  period, so in any :data:`SENSOR_RATE_WINDOW_CYCLES` periods (skipped ones included) one sensor
+  delivers at most that many distinct frames, plus what a late delivery shifts into the window
+  (:data:`SENSOR_RATE_FACTOR`, :data:`SENSOR_RATE_SLACK`). Copies of one of the last
+  :data:`SENSOR_COPY_MEMORY` frames (byte-identical) are not new frames, and neither are frames
+  received before the stale window (a starved receiver's backlog: sent over the periods it slept
+  through) nor, on buses without receive timestamps, the frames drained right after skipped
+  periods. Two senders deliver about twice the periods; a sensor running faster than the control
+  rate does too, but has no sequence failures.
 :class:`SetpointGate`: SETPOINT overrides x_d only when enabled and within the configured limits.
 """
 
@@ -19,6 +31,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import deque
 
 from ..config import SetpointPolicy, Watchdog
 from .collisions import IdCollisions
@@ -26,9 +39,21 @@ from .collisions import IdCollisions
 log = logging.getLogger("ehpss_hil.controller")
 
 #: SENSOR_POS frames looked back over for a second transmitter, and the sequence failures
-#: (REPEATED, WRONG_SEQUENCE) among them that make one
+#: (REPEATED, WRONG_SEQUENCE) among them that are evidence of one (half of all frames fail with
+#: two senders; the reliability suite's peer that duplicates, delays and reorders 22 % of its
+#: ticks reaches 34 of 100 on an idle host)
 SENSOR_SEQ_WINDOW = 100
 SENSOR_SEQ_LIMIT = 40
+#: control periods over which distinct SENSOR_POS frames are counted against one sensor's rate
+SENSOR_RATE_WINDOW_CYCLES = 40
+#: one sensor delivers at most this many frames per period over the window (late deliveries
+#: shifted into it; two senders deliver 2) …
+SENSOR_RATE_FACTOR = 1.25
+#: … plus this many (a delivery late by a few periods at either end of the window)
+SENSOR_RATE_SLACK = 10
+#: a frame byte-identical to one of this many previous SENSOR_POS frames is a copy (the counter
+#: is 4 bits: a genuine frame repeats the bytes of one 16 frames back only at rest, noise-free)
+SENSOR_COPY_MEMORY = 8
 #: the VALVE_CMD frames (own ID) the controller sends
 COMMAND_FRAME = "VALVE_CMD"
 #: a rejected-SETPOINT warning: the first, then every this many
@@ -36,18 +61,16 @@ SETPOINT_WARN_EVERY = 1000
 
 
 class SequenceWindow:
-    """Sequence failures among the last ``window`` frames of one ID; :attr:`conflict` from
-    ``limit`` of them until a whole window holds none (as firmware_sim/commanders.py)."""
+    """Sequence failures among the last ``window`` frames of one ID (:attr:`evident` from
+    ``limit`` of them, :attr:`quiet` when a whole window holds none)."""
 
-    __slots__ = ("_bad", "_i", "_limit", "_ring", "conflict", "conflicts", "failures")
+    __slots__ = ("_bad", "_i", "_limit", "_ring", "failures")
 
     def __init__(self, window: int = SENSOR_SEQ_WINDOW, limit: int = SENSOR_SEQ_LIMIT) -> None:
         self._ring = bytearray(window)
         self._i = 0
         self._bad = 0
         self._limit = limit
-        self.conflict = False
-        self.conflicts = 0  # conflicts declared
         self.failures = 0  # sequence failures counted
 
     def add(self, failed: bool) -> None:
@@ -57,10 +80,81 @@ class SequenceWindow:
         self._ring[self._i] = v
         self._i = (self._i + 1) % len(self._ring)
         self.failures += v
-        if not self.conflict and self._bad >= self._limit:
+
+    @property
+    def evident(self) -> bool:
+        return self._bad >= self._limit
+
+    @property
+    def quiet(self) -> bool:
+        return self._bad == 0
+
+
+class RateWindow:
+    """Frames counted per control period over the last ``window`` periods (a ring indexed by
+    the loop's cycle number, so skipped periods count as periods with no frame)."""
+
+    __slots__ = ("_counts", "_cycle", "total")
+
+    def __init__(self, window: int = SENSOR_RATE_WINDOW_CYCLES) -> None:
+        self._counts = [0] * window
+        self._cycle = 0  # the newest cycle the ring holds
+        self.total = 0  # frames in the window
+
+    def add(self, cycle: int) -> None:
+        """One frame in the loop's cycle ``cycle`` (never earlier than the previous one)."""
+        n = len(self._counts)
+        if cycle > self._cycle:
+            if cycle - self._cycle >= n:
+                self._counts = [0] * n
+                self.total = 0
+            else:
+                for c in range(self._cycle + 1, cycle + 1):
+                    self.total -= self._counts[c % n]
+                    self._counts[c % n] = 0
+            self._cycle = cycle
+        self._counts[cycle % n] += 1
+        self.total += 1
+
+    def bound(self) -> float:
+        """The most frames one sensor at one frame per period delivers in the window."""
+        return SENSOR_RATE_FACTOR * len(self._counts) + SENSOR_RATE_SLACK
+
+
+class SensorStreams:
+    """A second SENSOR_POS transmitter, from the sequence and the rate evidence together (see
+    the module docstring): :attr:`conflict` while both hold, until a whole sequence window
+    holds no failure."""
+
+    __slots__ = ("_recent", "conflict", "conflicts", "max_frames", "rate", "sequence")
+
+    def __init__(self) -> None:
+        self.sequence = SequenceWindow()
+        self.rate = RateWindow()
+        self._recent: deque[bytes] = deque(maxlen=SENSOR_COPY_MEMORY)
+        self.conflict = False
+        self.conflicts = 0  # conflicts declared
+        #: the most distinct frames seen in one rate window (one sensor: about the window)
+        self.max_frames = 0
+
+    @property
+    def failures(self) -> int:
+        """Sequence failures counted."""
+        return self.sequence.failures
+
+    def add(self, failed: bool, data: bytes, cycle: int, countable: bool = True) -> None:
+        """One SENSOR_POS frame drained in the loop's cycle ``cycle``: ``failed`` when its
+        verdict was REPEATED or WRONG_SEQUENCE; ``countable`` False for a frame that belongs
+        to an earlier period (stale, or a backlog after skipped periods)."""
+        self.sequence.add(failed)
+        if countable and data not in self._recent:
+            self.rate.add(cycle)
+            self.max_frames = max(self.max_frames, self.rate.total)
+        self._recent.append(data)
+        if not self.conflict and self.sequence.evident and self.rate.total > self.rate.bound():
             self.conflict = True
             self.conflicts += 1
-        elif self.conflict and self._bad == 0:
+        elif self.conflict and self.sequence.quiet:
             self.conflict = False
 
 
@@ -73,7 +167,7 @@ class CollisionGuard:
         self._recovery_cycles = wd.recovery_cycles
         self._collisions = collisions
         self._cmd_seen = 0
-        self.sensor = SequenceWindow()
+        self.sensor = SensorStreams()
         self._conflict_flag = False  # CommandConflict in a SENSOR_AUX of this cycle
         #: SENSOR_AUX frames with CommandConflict 1
         self.conflict_frames = 0
@@ -136,6 +230,7 @@ class CollisionGuard:
             "command_conflict_frames": self.conflict_frames,
             "sensor_pos_conflicts": self.sensor.conflicts,
             "sensor_pos_sequence_failures": self.sensor.failures,
+            "sensor_pos_max_frames_per_window": self.sensor.max_frames,
             "last_cause": self.last_cause,
         }
 
