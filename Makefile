@@ -4,15 +4,38 @@ VENV ?= .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-socketcan lint venv clean
+.PHONY: demo test test-socketcan lint venv lock clean
 
-$(STAMP): pyproject.toml
+#: the lock files: exact versions with hashes, resolved by uv for Python 3.11 on Linux x86_64
+#: (CI's platform). dev.lock: the base + every extra make and CI install; base.lock: the daemon
+#: and the emulator alone (a bench PC), the same versions. `make lock` is the only way they move.
+LOCK := requirements/dev.lock
+BASE_LOCK := requirements/base.lock
+EXTRAS := test plot monitor
+UV_VERSION := 0.13.9
+UV_VENV := .venv-uv
+LOCK_PYTHON := 3.11
+
+$(STAMP): pyproject.toml $(LOCK)
 	$(PY) -m venv $(VENV)
-	$(VPY) -m pip install --quiet --upgrade pip
-	$(VPY) -m pip install --quiet -e '.[test,plot,monitor]'
+	$(VPY) -m pip install --quiet --require-hashes --no-deps -r $(LOCK)
+	$(VPY) -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(VPY) -m pip check
 	touch $(STAMP)
 
 venv: $(STAMP)
+
+## refresh the lock files to the newest releases pyproject.toml allows, rebuild .venv from them
+## and run the test suite on them: how a new numpy/scipy/cantools enters (commit the locks only
+## when it is green)
+lock:
+	test -x $(UV_VENV)/bin/uv || { $(PY) -m venv $(UV_VENV) && $(UV_VENV)/bin/pip install --quiet uv==$(UV_VERSION); }
+	$(UV_VENV)/bin/uv pip compile --quiet --upgrade --generate-hashes --python-version $(LOCK_PYTHON) \
+		pyproject.toml requirements/build.in $(addprefix --extra ,$(EXTRAS)) -o $(LOCK)
+	$(UV_VENV)/bin/uv pip compile --quiet --generate-hashes --python-version $(LOCK_PYTHON) \
+		pyproject.toml requirements/build.in -c $(LOCK) -o $(BASE_LOCK)
+	rm -rf $(VENV)
+	$(MAKE) test
 
 ## the main job: emulator + controller, a fault scenario, log, metrics and figures
 demo: $(STAMP)
@@ -33,4 +56,4 @@ test-socketcan: $(STAMP)
 	$(VPY) -m pytest -q -m socketcan tests/
 
 clean:
-	rm -rf $(VENV) out runs .pytest_cache
+	rm -rf $(VENV) $(UV_VENV) out runs .pytest_cache
