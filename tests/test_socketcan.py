@@ -104,3 +104,62 @@ def test_controller_and_emulator_processes_on_vcan0(vcan0: str, tmp_path: Path) 
     assert all(v.usable for v in verdicts)
     summary = json.loads((out / "emulator-summary.json").read_text())
     assert summary["periods"] >= 600
+
+
+VCAN_CTRL_YAML = """\
+bus: {{interface: socketcan, channel: {channel}}}
+mode: nrc
+rate_hz: 100
+reference: {{kind: sine, amplitude_m: 0.0002, omega_rad_s: 5.0}}
+watchdog: {{timeout_cycles: 3, recovery_cycles: 20, auto_recover: true, failsafe: zero}}
+params: {root}/configs/params.yaml
+dbc: {root}/dbc/ehpss.dbc
+"""
+VCAN_SLOW_SCENARIO = """\
+name: vcan-slow
+duration_s: 600
+sample_time_s: 0.01
+seed: 1
+reference: {kind: sine, amplitude_m: 0.0002, omega_rad_s: 5.0}
+"""
+
+
+def test_vcan0_down_for_a_second_is_a_bus_error_and_recovers(vcan0: str, tmp_path: Path) -> None:
+    """vcan0 taken down for 1 s under a running controller (100 Hz: the VM's Python is slow):
+    fail-safe BUS_ERROR (its sends fail with ENETDOWN), ACTIVE again once vcan0 is up
+    (auto_recover), SIGTERM → exit 0 with the counts in its summary."""
+    import subprocess
+    import time
+
+    from _proc import EHPSS_HIL, FIRMWARE_SIM, ROOT, Proc
+
+    ctl_cfg = tmp_path / "controller.yaml"
+    ctl_cfg.write_text(VCAN_CTRL_YAML.format(channel=vcan0, root=ROOT))
+    sc = tmp_path / "slow.yaml"
+    sc.write_text(VCAN_SLOW_SCENARIO)
+    bus = ["--interface", "socketcan", "--channel", vcan0]
+    emu_cfg = str(ROOT / "configs" / "emulator.yaml")
+    emu = Proc([*FIRMWARE_SIM, "-c", emu_cfg, *bus, "--rate", "100", "--scenario", str(sc)])
+    ctl: Proc | None = None
+    try:
+        assert emu.wait_for("realtime on", STARTUP_LIMIT_S), emu.text
+        summary = tmp_path / "ctl.json"
+        ctl = Proc([*EHPSS_HIL, "controller", "-c", str(ctl_cfg), "--summary-json", str(summary)])
+        assert ctl.wait_for("first sensor data: ACTIVE", STARTUP_LIMIT_S), ctl.text + emu.text
+        subprocess.run(["ip", "link", "set", vcan0, "down"], check=True)
+        time.sleep(1.0)
+        subprocess.run(["ip", "link", "set", vcan0, "up"], check=True)
+        assert ctl.wait_for("ACTIVE again", STARTUP_LIMIT_S), ctl.text
+        ctl.terminate()
+        assert ctl.wait() == 0, ctl.text
+        emu.terminate()
+        emu.wait()
+    finally:
+        subprocess.run(["ip", "link", "set", vcan0, "up"], check=False)
+        for p in (ctl, emu):
+            if p is not None and p.p.poll() is None:
+                p.p.kill()
+                p.p.wait()
+    assert "bus error" in ctl.text and "BUS_ERROR" in ctl.text, ctl.text
+    health = json.loads(summary.read_text())["bus_health"]
+    assert health["episodes"] >= 1 and health["tx_errors"] > 0, health

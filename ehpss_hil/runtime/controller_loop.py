@@ -31,6 +31,7 @@ from ..control.base import Controller, Measurement
 from ..control.sampleclock import RESYNC_SAMPLES
 from ..driver import ControllerDriver
 from ..scenario import Reference, ReferenceBlocks
+from .bushealth import BusHealth
 from .foreign import CollisionGuard, SetpointGate
 from .frameio import FrameIO
 from .lifecycle import FailsafeReason, Lifecycle, State
@@ -52,7 +53,11 @@ __all__ = ["CIA408_OWN_FRAMES", "OWN_FRAMES", "ControllerLoop", "LoopOptions"]
 _E2E_VERDICTS = (Verdict.CRC_ERROR, Verdict.REPEATED, Verdict.WRONG_SEQUENCE, Verdict.BAD_DLC)
 _SEQUENCE_VERDICTS = (Verdict.REPEATED, Verdict.WRONG_SEQUENCE)
 #: who put the loop into FAULT, for the log (anything else: the CANopen master's device checks)
-_SOURCE = {None: "watchdog", FailsafeReason.ID_COLLISION: "second transmitter"}
+_SOURCE = {
+    None: "watchdog",
+    FailsafeReason.ID_COLLISION: "second transmitter",
+    FailsafeReason.BUS_ERROR: "bus",
+}
 
 
 class ControllerLoop:
@@ -93,6 +98,8 @@ class ControllerLoop:
         self.life.to(State.CONFIGURED)
         #: a second transmitter (ID_COLLISION) and the SETPOINT policy (runtime/foreign.py)
         self.guard = CollisionGuard(opts.watchdog, io.collisions)
+        #: send failures and error frames under the watchdog's policy (BUS_ERROR)
+        io.health = BusHealth(opts.watchdog)
         self.setpoints = SetpointGate(opts.setpoint)
         self.stats = LoopStats(opts.stats_capacity)
         #: the sensor pair's CAN IDs under this loop's protocol profile
@@ -221,6 +228,8 @@ class ControllerLoop:
         st = self.life.state
         collided = self.guard.update(self.cycles)
         device = self.master.update(self.cycles) if self.master is not None else None
+        if self.io.health.update(self.cycles):  # nothing reaches the valve: before any device
+            device = FailsafeReason.BUS_ERROR
         if st is State.CONFIGURED:
             if self._fresh and (self.master is None or self.master.ready):
                 self.wd.reset()

@@ -35,6 +35,7 @@ from ..codec.ratelimit import RateLimit, position_step_bound_m
 from ..config import BusConfig, CanIds, Cia408Config, DbcMap, LogConfig
 from ..errors import ConfigError, FrameError
 from ..protocol import make_codec
+from .bushealth import BusHealth
 from .collisions import IdCollisions, SentFrames
 
 log = logging.getLogger(__name__)
@@ -142,8 +143,16 @@ class FrameIO:
         self._read = frame_reader(bus, (m for n, m in shapes.items() if n not in own_names))
         self._write = frame_writer(bus, (shapes[n] for n in own_names))
         self.sent: dict[str, int] = {n: 0 for n in own_names}
-        self.tx_errors = 0
+        #: frames that could not be encoded (counted in :attr:`tx_errors`, not a bus error)
+        self.encode_errors = 0
         self.received = 0
+        #: send failures and error frames (the controller loop gives it its watchdog policy)
+        self.health = BusHealth()
+
+    @property
+    def tx_errors(self) -> int:
+        """Frames not sent: encode failures and send failures."""
+        return self.encode_errors + self.health.tx_errors
 
     def send(self, name: str, values: dict[str, Any]) -> can.Message | None:
         """Encode, send and log one frame; returns it, or None when encode/send failed."""
@@ -161,14 +170,16 @@ class FrameIO:
         try:
             return self.codec.encode(name, values, timestamp_s=time.time())
         except FrameError as exc:
-            self._tx_error(name, exc)
+            self.encode_errors += 1
+            if self.encode_errors == 1 or self.encode_errors % 1000 == 0:
+                log.warning("%s not encoded (%d so far): %s", name, self.encode_errors, exc)
             return None
 
     def _emit(self, name: str, msg: can.Message) -> bool:
         try:
             self._write(msg)
         except (can.CanError, OSError) as exc:
-            self._tx_error(name, exc)
+            self.health.tx_failed(name, exc)
             return False
         self.sent[name] = self.sent.get(name, 0) + 1
         if self._echoes is not None:
@@ -176,11 +187,6 @@ class FrameIO:
         if self.logger is not None:
             self.logger.log(msg)
         return True
-
-    def _tx_error(self, name: str, exc: Exception) -> None:
-        self.tx_errors += 1
-        if self.tx_errors == 1 or self.tx_errors % 1000 == 0:
-            log.warning("%s not sent (%d transmit errors): %s", name, self.tx_errors, exc)
 
     def idle(self) -> None:
         """The loop is done with its cycle and about to sleep: the log writer may run now
@@ -191,6 +197,12 @@ class FrameIO:
     def _accept(self, msg: can.Message | None) -> bool:
         """Count and log a received frame; True when it is for the loop (not on an own ID)."""
         if msg is None:
+            return False
+        if msg.is_error_frame:  # the bus's word on its own state, not a frame for anyone
+            self.health.error_frame(msg)
+            self.received += 1
+            if self.logger is not None:
+                self.logger.log(msg)
             return False
         own = msg.arbitration_id in self.own_ids
         if own and self._echoes is not None and self._echoes.take(msg.arbitration_id, msg.data):

@@ -39,6 +39,9 @@ class FailsafeReason(IntEnum):
     EMCY = 8
     #: protocol cia408: a node's heartbeat stopped or shows a state other than OPERATIONAL
     HEARTBEAT_LOST = 9
+    #: the bus: frames not sent for ``timeout_cycles`` cycles (interface down, transmit queue
+    #: full), bus-off, error-passive, or a burst of error frames (runtime/bushealth.py)
+    BUS_ERROR = 10
 
 
 #: CiA 301 heartbeat NMT state for each lifecycle state

@@ -118,6 +118,7 @@ def loop_summary(loop: ControllerLoop) -> dict[str, object]:
         "frames_received": io.received,
         "id_collisions": dict(io.collisions.by_name),
         "second_transmitter": loop.guard.summary(),
+        "bus_health": io.health.summary(),
         "setpoints": {"accepted": loop.setpoints.accepted, "rejected": loop.setpoints.rejected},
         "received_by_verdict": {v.name: n for v, n in loop.codec.counts.items()},
         "stats": loop.stats.summary(),
