@@ -1,6 +1,8 @@
 """``ehpss-hil report DIR_or_LOG [--out DIR]``: metrics, figures and ``report.md`` from a CAN log.
 
-Works from the log alone (its sidecar supplies the reference; ``--scenario`` overrides it).
+Any log python-can reads (candump ``-L``, ``.asc``, ``.blf``, …: the reader ``replay`` uses).
+Works from the log alone (its sidecar supplies the reference; ``--scenario`` overrides it); a
+log that gives no sample is one line and exit 2.
 Metrics are the docs/design.md §10 ones (``ehpss_hil.report.metrics``) when the log has PLANT_TRUTH; the
 report states which metrics a log without ground truth can still give.
 """
@@ -20,7 +22,11 @@ NAME = "report"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``ehpss-hil report``."""
-    p.add_argument("log", type=Path, help="a candump -L log file or a directory holding one")
+    p.add_argument(
+        "log",
+        type=Path,
+        help="a log python-can reads (candump -L .log, .asc, .blf, …) or a directory holding one",
+    )
     p.add_argument("--out", type=Path, default=None, help="output directory (default: <log dir>/report)")
     p.add_argument(
         "--scenario",

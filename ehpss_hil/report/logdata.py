@@ -1,4 +1,5 @@
-"""A candump log turned into the per-sample record a report needs (a :class:`SimResult`).
+"""A CAN log (any format :func:`~ehpss_hil.canlog.read_frames` reads) turned into the
+per-sample record a report needs (a :class:`SimResult`).
 
 Alignment (the controller's view, one row per logged VALVE_CMD):
 
@@ -10,14 +11,17 @@ Alignment (the controller's view, one row per logged VALVE_CMD):
   arrived since the previous command), applied current over [k, k+1) from the SENSOR_AUX echo
   of sample k+1 (the commanded one is :attr:`LogRun.commanded_current_a`), active models and k̂
   from CTRL_STATUS, J per slot from CTRL_INDEX, true gains from PLANT_FAULTS;
-- the timestamps are the host's wall clock: a clock step in the middle of a run (NTP, ``date``)
-  is found on the CycleCount and undone before frames are paired (:mod:`.logclock`), and noted;
+- the timestamps are the host's wall clock: a clock step in the middle of a realtime run (NTP,
+  ``date``) is found where the wall clock disagrees with the CycleCount and undone before frames
+  are paired (:mod:`.logclock`), and noted; a pause in a lockstep run is just a pause;
 - x_d and y_m (ReferenceModel, exact ZOH, from rest at k = 0) come from the run's reference: the
   sidecar's ``scenario`` (a mapping, a YAML path, or a scenario name found in ``scenarios/``),
   or ``config.reference``/``reference`` with ``config.rate_hz``/``rate_hz``, or the caller's.
 
 A log without VALVE_CMD falls back to one row per PLANT_TRUTH frame (k counted from the first);
 without PLANT_TRUTH the tracking-error metrics are unavailable and :attr:`LogRun.notes` says so.
+A log that gives no sample at all is a :class:`~ehpss_hil.canlog.reader.LogError` naming the file
+and why (exit 2).
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..canlog import BadLines, decode_log, read_sidecar
-from ..canlog.reader import FRAME_INDEX, resolve_log
+from ..canlog.reader import FRAME_INDEX, LogError, resolve_log
 from ..codec import FrameCodec, Verdict
 from ..physics.params import Params, load_params
 from ..physics.reference import ReferenceModel
@@ -199,7 +203,7 @@ def load_log_run(
     verdicts = {n: {v.name: c for v, c in per.items() if c} for n, per in codec.counts_by_name.items()}
     notes: list[str] = [bad.text()] if bad.count else []
     info = run_info(side, log.parent, scenario, log)
-    notes += undo_clock_steps(frames, info.ts_s)[1]
+    notes += undo_clock_steps(frames, info.ts_s, info.lockstep)[1]
     for f in frames.values():
         f.pop(FRAME_INDEX, None)
     sc, ref, ts = info.scenario, info.reference, info.ts_s
@@ -210,10 +214,12 @@ def load_log_run(
         ts = _median_period(t_rows) or 1e-3
         notes.append(f"sample time not in the metadata: {ts * 1e3:.4g} ms from the log's timing")
     k, t_rows, i_cmd = _within_truth(frames, k, t_rows, i_cmd, ts, notes)
+    if len(k) == 0:
+        raise LogError(f"{log}: no samples: {_why_empty(frames, verdicts, bad)}")
     prm = params if params is not None else load_params(info.params_path)
     x_d = np.full(len(k), np.nan)
     y_m = np.full(len(k), np.nan)
-    if ref is not None and len(k):
+    if ref is not None:
         base = Path(sc.base_dir) if sc is not None and sc.base_dir else None
         xd_all = ref.sample(np.arange(int(k[-1]) + 1) * ts, base)
         x_d = xd_all[k]
@@ -294,6 +300,20 @@ def _assemble(
         fresh=_fresh(pos["t_s"], t_rows) if len(pos["t_s"]) else np.zeros(len(k), bool),
     )
     return res, has_truth
+
+
+def _why_empty(
+    frames: dict[str, dict[str, np.ndarray]], verdicts: dict[str, dict[str, int]], bad: BadLines
+) -> str:
+    """Why a log gave no sample row, in a few words (for the one-line error)."""
+    if not verdicts:
+        lines = f" ({bad.text()})" if bad.count else ""
+        return f"no frame of the DBC could be read from it{lines}"
+    rows = [n for n in ("VALVE_CMD", "PLANT_TRUTH") if len(frames.get(n, {}).get("t_s", ()))]
+    if rows:
+        return "every controller cycle lies after the emulator's last PLANT_TRUTH frame"
+    seen = ", ".join(f"{n} {sum(c.values())}" for n, c in sorted(verdicts.items()))
+    return f"no usable VALVE_CMD or PLANT_TRUTH frame (frames of the DBC: {seen})"
 
 
 def _mode(st: dict[str, np.ndarray], info: RunInfo) -> str:
