@@ -20,8 +20,8 @@ Alignment (the controller's view, one row per logged VALVE_CMD):
 
 A log without VALVE_CMD falls back to one row per PLANT_TRUTH frame (k counted from the first);
 without PLANT_TRUTH the tracking-error metrics are unavailable and :attr:`LogRun.notes` says so.
-A log that gives no sample at all is a :class:`~ehpss_hil.canlog.reader.LogError` naming the file
-and why (exit 2).
+A log that gives no sample at all says why in :attr:`LogRun.no_samples` (``report`` makes that
+one line and exit 2).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..canlog import BadLines, decode_log, read_sidecar
-from ..canlog.reader import FRAME_INDEX, LogError, resolve_log
+from ..canlog.reader import FRAME_INDEX, resolve_log
 from ..codec import FrameCodec, Verdict
 from ..physics.params import Params, load_params
 from ..physics.reference import ReferenceModel
@@ -65,6 +65,8 @@ class LogRun:
     frames: dict[str, dict[str, np.ndarray]]
     verdicts: dict[str, dict[str, int]]
     notes: list[str] = field(default_factory=list)
+    #: why the log gave no sample row (empty when it gave some)
+    no_samples: str = ""
 
 
 # ---- helpers on decoded arrays ----------------------------------------------------------------
@@ -214,23 +216,23 @@ def load_log_run(
         ts = _median_period(t_rows) or 1e-3
         notes.append(f"sample time not in the metadata: {ts * 1e3:.4g} ms from the log's timing")
     k, t_rows, i_cmd = _within_truth(frames, k, t_rows, i_cmd, ts, notes)
-    if len(k) == 0:
-        raise LogError(f"{log}: no samples: {_why_empty(frames, verdicts, bad)}")
+    empty = _why_empty(frames, verdicts, bad) if len(k) == 0 else ""
     prm = params if params is not None else load_params(info.params_path)
     x_d = np.full(len(k), np.nan)
     y_m = np.full(len(k), np.nan)
-    if ref is not None:
+    if ref is not None and len(k):
         base = Path(sc.base_dir) if sc is not None and sc.base_dir else None
         xd_all = ref.sample(np.arange(int(k[-1]) + 1) * ts, base)
         x_d = xd_all[k]
         y_m = ReferenceModel(prm, ts).simulate(xd_all)[k]
-    else:
+    elif ref is None:
         notes.append(
             "no reference in the metadata (sidecar scenario/config): x_d and y_m "
             "unavailable; pass --scenario to recompute them"
         )
     result, has_truth = _assemble(frames, sc, info, k, t_rows, ts, x_d, y_m, notes)
-    return LogRun(log, result, side, has_truth, ref is not None, sc, i_cmd, frames, verdicts, notes)
+    has_ref = ref is not None
+    return LogRun(log, result, side, has_truth, has_ref, sc, i_cmd, frames, verdicts, notes, empty)
 
 
 def _assemble(
