@@ -112,3 +112,28 @@ def test_load_log_run_notes_the_step(clean_log: Path, tmp_path: Path) -> None:
     assert len(run.notes) == 1 and "+3600.000 s" in run.notes[0]
     m, ref = log_metrics(run).run, log_metrics(load_log_run(clean_log)).run
     assert m is not None and ref is not None and m.rms_error_m == ref.rms_error_m
+
+
+@pytest.mark.parametrize("lockstep", [True, False])
+def test_the_sidecar_decides_whether_a_gap_is_a_pause(
+    clean_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], lockstep: bool
+) -> None:
+    """The same +2 s gap at half the file and −45 s at 0.8: with ``lockstep: true`` in the
+    sidecar (as the controller daemon writes it) the gap is a pause — kept, no note — and only
+    the backward jump is undone (in file order); with ``lockstep: false`` both are clock steps
+    found on the CycleCount. Either way the RMS is the clean log's."""
+    clean, _ = _report(clean_log, tmp_path / "clean", capsys)
+    log = _stepped(clean_log, tmp_path / "g" / "run.log", [(0.5, 2.0), (0.8, -45.0)])
+    side = log.with_name(log.name + ".json")
+    side.write_text(json.dumps({**json.loads(side.read_text()), "lockstep": lockstep}))
+    frames = decode_log(log, FrameCodec(), order=True)
+    steps, notes = undo_clock_steps(frames, 1e-3, lockstep)
+    sizes = [s.step_s for s in steps]
+    if lockstep:
+        assert len(sizes) == 1 and -45.001 < sizes[0] <= -45.0
+        assert len(notes) == 1 and "file order" in notes[0] and "lockstep" in notes[0]
+    else:
+        assert sizes == [2.0, -45.0] and "CycleCount" in notes[0]
+    row, report_notes = _report(log, tmp_path / "rep", capsys)
+    assert row["rms_error_m"] == clean["rms_error_m"]
+    assert len(report_notes) == 1 and ("+2.000 s" in report_notes[0]) is not lockstep

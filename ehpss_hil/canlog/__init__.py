@@ -1,12 +1,26 @@
-"""candump ``-L`` logs: a non-blocking writer with size rotation and a JSON sidecar, and readers.
+"""CAN logs: a non-blocking candump ``-L`` writer with size rotation and a JSON sidecar, and one
+reader for every format python-can reads (:func:`read_frames`: candump ``-L``, ``.asc``,
+``.blf``, …).
 
 Log lines are exactly what ``candump -L`` writes (``(sec.usec) iface ID#DATA``), so python-can's
 :class:`can.io.CanutilsLogReader`, ``canplayer`` and ``cantools decode`` read them; run metadata
-(versions, DBC hash, config/scenario, counts, rotation files) lives in ``<log>.json`` beside it.
+(versions, DBC hash, config/scenario, counts, rotation files, lockstep or realtime) lives in
+``<log>.json`` beside it.
 """
 
 from .lineformat import format_line
-from .reader import BadLines, decode_log, log_files, read_log, read_sidecar
+from .reader import BadLines, decode_log, log_files, read_frames, read_log, read_sidecar
+from .sidecar import lockstep_of
 from .writer import CandumpLogger
 
-__all__ = ["BadLines", "CandumpLogger", "decode_log", "format_line", "log_files", "read_log", "read_sidecar"]
+__all__ = [
+    "BadLines",
+    "CandumpLogger",
+    "decode_log",
+    "format_line",
+    "lockstep_of",
+    "log_files",
+    "read_frames",
+    "read_log",
+    "read_sidecar",
+]

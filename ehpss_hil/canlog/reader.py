@@ -1,9 +1,12 @@
-"""Read candump ``-L`` logs back: frames, DBC-decoded arrays, the sidecar.
+"""Read logs back: frames, DBC-decoded arrays, the sidecar — one path for every format.
 
-Lines are parsed as python-can's :class:`can.io.CanutilsLogReader` parses them (same messages),
-but a line that is not a whole frame line — garbage, or a last line without its newline (a
-process killed while writing, a disk that filled up) — is skipped and counted in
-:class:`BadLines` instead of ending the read with a ValueError.
+:func:`read_frames` is the one reader ``report`` and ``replay`` use: candump ``-L`` files
+(``*.log`` and their rotation sets) are parsed as python-can's
+:class:`can.io.CanutilsLogReader` parses them (same messages), but a line that is not a whole
+frame line — garbage, or a last line without its newline (a process killed while writing, a
+disk that filled up) — is skipped and counted in :class:`BadLines` instead of ending the read
+with a ValueError; every other format python-can reads (``.asc``, ``.blf``, ``.trc``, ``.csv``,
+``.mf4`` with asammdf, …) goes through :func:`can.LogReader`.
 """
 
 from __future__ import annotations
@@ -33,10 +36,14 @@ _LINE = re.compile(
 )
 
 
+#: characters of a bad line shown in :class:`BadLines` (anything but printable ASCII as ``?``)
+_SHOWN_CHARS = 40
+
+
 @dataclass
 class BadLines:
     """Lines of a log that are no frame line: skipped, counted, the first few kept for the
-    message (``file:line: text``)."""
+    message (``file:line: text``, printable ASCII only: a binary file shows as ``?``)."""
 
     count: int = 0
     examples: list[str] = field(default_factory=list)
@@ -45,7 +52,8 @@ class BadLines:
         """Count one bad line (number ``number`` of ``path``)."""
         self.count += 1
         if len(self.examples) < 3:
-            self.examples.append(f"{path.name}:{number}: {line.rstrip()[:60]!r}")
+            shown = "".join(c if " " <= c <= "~" else "?" for c in line.rstrip()[:_SHOWN_CHARS])
+            self.examples.append(f"{path.name}:{number}: {shown!r}")
 
     def text(self) -> str:
         """``2 bad lines skipped (bus.log:7: '(16…')``, or empty when there were none."""
@@ -97,13 +105,24 @@ class LogError(EhpssError, OSError):
     exit_code = 2
 
 
+#: suffixes of the logs python-can's :func:`can.LogReader` reads besides candump ``.log``
+#: (looked for in a directory that holds no ``*.log``)
+OTHER_LOG_SUFFIXES = (".asc", ".blf", ".trc", ".mf4")
+
+
 def resolve_log(path: str | os.PathLike[str]) -> Path:
-    """A log file itself, or the one ``*.log`` file in a directory (the newest if several)."""
+    """A log file itself, or the log in a directory: the newest ``*.log``, else the newest file
+    with one of :data:`OTHER_LOG_SUFFIXES`."""
     p = Path(path)
     if p.is_dir():
         logs = sorted(p.glob("*.log"), key=lambda f: f.stat().st_mtime)
         if not logs:
-            raise LogError(f"{p}: no *.log file in this directory")
+            logs = sorted(
+                (f for f in p.iterdir() if f.suffix.lower() in OTHER_LOG_SUFFIXES and f.is_file()),
+                key=lambda f: f.stat().st_mtime,
+            )
+        if not logs:
+            raise LogError(f"{p}: no *.log (or {', '.join(OTHER_LOG_SUFFIXES)}) file in this directory")
         return logs[-1]
     if not p.exists():
         raise LogError(f"{p}: no such log file")
@@ -155,13 +174,16 @@ def is_candump(path: str | os.PathLike[str]) -> bool:
     return len(parts) > 1 and (parts[-1] == "log" or (parts[-1].isdigit() and "log" in parts))
 
 
-def read_frames(path: str | os.PathLike[str], bad: BadLines | None = None) -> Iterator[can.Message]:
-    """The frames of any log python-can reads: candump ``-L`` files (``*.log``, rotation set
-    included) through :func:`read_log`, every other format (``.asc``, ``.blf``, ``.csv``,
-    ``.trc``, …) through :class:`can.LogReader`. A file python-can cannot read, or whose data
-    its reader rejects, is a :class:`LogError` (one line), never a traceback."""
+def read_frames(
+    path: str | os.PathLike[str], bad: BadLines | None = None, rotated: bool = True
+) -> Iterator[can.Message]:
+    """The frames of any log python-can reads, in file order (timestamps in s): candump ``-L``
+    files (``*.log``; with ``rotated`` the whole rotation set) through :func:`read_log`, every
+    other format (``.asc``, ``.blf``, ``.csv``, ``.trc``, …) through :class:`can.LogReader`. A
+    file python-can cannot read, or whose data its reader rejects, is a :class:`LogError` (one
+    line), never a traceback."""
     if is_candump(path):
-        yield from read_log(path, bad=bad)
+        yield from read_log(path, rotated, bad)
         return
     p = Path(path)
     try:
@@ -193,7 +215,8 @@ def decode_log(
     bad: BadLines | None = None,
     order: bool = False,
 ) -> dict[str, dict[str, np.ndarray]]:
-    """Decode a log with the DBC into per-frame-name arrays, in file order.
+    """Decode a log (any format :func:`read_frames` reads) with the DBC into per-frame-name
+    arrays, in file order.
 
     Each frame name maps to ``{"t_s": timestamps (s), <signal>: physical values (SI), …}``.
     Kept: frames with a good CRC and plausible values, including those a live receiver would
@@ -207,7 +230,7 @@ def decode_log(
     """
     codec = codec if codec is not None else FrameCodec()
     rows: dict[str, list[tuple[float, dict[str, Any]]]] = {}
-    for i, msg in enumerate(read_log(path, rotated, bad)):
+    for i, msg in enumerate(read_frames(path, bad, rotated)):
         d = codec.classify(msg)
         if d.name is None:
             continue

@@ -5,7 +5,9 @@ Keys: ``format``, ``log``, ``iface``, ``versions`` (ehpss-hil, python-can, canto
 is), ``rotation``, ``status`` (open/closed), ``counts`` (written, dropped, discarded_by_rotation, and
 when lines were dropped ``dropped_by_reason``: queue full, after close, disk full, write error),
 ``files`` (oldest first: name, lines, bytes, first/last timestamp), ``error``, plus every key the
-caller passed (``config``, ``scenario``, ``process``, …).
+caller passed (``config``, ``scenario``, ``process``, …). Whether the run was lockstep is in
+``lockstep`` (the controller daemon, ``run.json``) or ``mode`` / ``config.mode`` (firmware-sim:
+``lockstep`` or ``realtime``); :func:`lockstep_of` reads it.
 """
 
 from __future__ import annotations
@@ -77,6 +79,27 @@ def file_sha256(path: str | os.PathLike[str]) -> str | None:
         return hashlib.sha256(Path(path).read_bytes()).hexdigest()
     except OSError:
         return None
+
+
+#: the emulator's ``mode`` values (its sidecar and config): how its clock ran
+_TIMING_MODES = {"lockstep": True, "realtime": False}
+
+
+def lockstep_of(side: dict[str, Any] | None) -> bool | None:
+    """True when a sidecar (or ``run.json``) says its run was lockstep — the wall clock then
+    does not follow the controller's cycles —, False when it says realtime, None when it does
+    not say: ``lockstep`` (a bool: the controller daemon, ``ehpss-hil run``), else ``mode`` or
+    ``config.mode`` when it is ``lockstep``/``realtime`` (firmware-sim)."""
+    if not isinstance(side, dict):
+        return None
+    flag = side.get("lockstep")
+    if isinstance(flag, bool):
+        return flag
+    cfg = side.get("config")
+    for mode in (side.get("mode"), cfg.get("mode") if isinstance(cfg, dict) else None):
+        if isinstance(mode, str) and mode in _TIMING_MODES:
+            return _TIMING_MODES[mode]
+    return None
 
 
 def jsonable(obj: Any) -> Any:

@@ -32,7 +32,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "report": (
         "report",
-        "decode a candump log (+ sidecar) into docs/design.md §10 metrics, PNG figures and report.md",
+        "decode a CAN log (candump -L, .asc, .blf, …; + sidecar) into docs/design.md §10 metrics, "
+        "PNG figures and report.md",
     ),
     "run": ("run", "run a scenario with firmware-sim and the controller as two processes on a real bus"),
     "sim": ("sim", "deterministic lockstep simulation of scenarios with one or more controllers"),

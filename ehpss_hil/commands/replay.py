@@ -101,7 +101,9 @@ class ReplayResult:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``ehpss-hil replay``."""
-    p.add_argument("log", type=Path, help="candump -L log (or its directory)")
+    p.add_argument(
+        "log", type=Path, help="a log python-can reads (candump -L .log, .asc, .blf, …) or its directory"
+    )
     p.add_argument("--mode", default=None, help="controller mode (default: the logged one)")
     p.add_argument(
         "--config",

@@ -1,6 +1,8 @@
 """``ehpss-hil report DIR_or_LOG [--out DIR]``: metrics, figures and ``report.md`` from a CAN log.
 
-Works from the log alone (its sidecar supplies the reference; ``--scenario`` overrides it).
+Any log python-can reads (candump ``-L``, ``.asc``, ``.blf``, …: the reader ``replay`` uses).
+Works from the log alone (its sidecar supplies the reference; ``--scenario`` overrides it); a
+log that gives no sample is one line and exit 2.
 Metrics are the docs/design.md §10 ones (``ehpss_hil.report.metrics``) when the log has PLANT_TRUTH; the
 report states which metrics a log without ground truth can still give.
 """
@@ -11,7 +13,8 @@ import argparse
 import json
 from pathlib import Path
 
-from ..report.logdata import load_log_run, log_metrics
+from ..canlog.reader import LogError
+from ..report.logdata import LogRun, load_log_run, log_metrics
 from ..report.markdown import metrics_row, write_markdown
 from ..scenario import load_scenario
 
@@ -20,7 +23,11 @@ NAME = "report"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``ehpss-hil report``."""
-    p.add_argument("log", type=Path, help="a candump -L log file or a directory holding one")
+    p.add_argument(
+        "log",
+        type=Path,
+        help="a log python-can reads (candump -L .log, .asc, .blf, …) or a directory holding one",
+    )
     p.add_argument("--out", type=Path, default=None, help="output directory (default: <log dir>/report)")
     p.add_argument(
         "--scenario",
@@ -41,14 +48,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _with_samples(run: LogRun) -> LogRun:
+    """``run``, or a :class:`LogError` (exit 2) naming its file when it gave no sample."""
+    if run.no_samples:
+        raise LogError(f"{run.log_path}: no samples: {run.no_samples}")
+    return run
+
+
 def run(args: argparse.Namespace) -> int:
     """Decode, compute, draw, write; prints where everything went."""
     scenario = load_scenario(args.scenario) if args.scenario is not None else None
-    lr = load_log_run(args.log, scenario=scenario)
+    lr = _with_samples(load_log_run(args.log, scenario=scenario))
+    others = [_with_samples(load_log_run(p, scenario=scenario)) for p in args.compare]
     out_dir = args.out if args.out is not None else lr.log_path.parent / "report"
     out_dir.mkdir(parents=True, exist_ok=True)
     m = log_metrics(lr)
-    others = [load_log_run(p, scenario=scenario) for p in args.compare]
     figures: list[Path] = []
     if not args.no_figures:
         from ..report.logfigures import draw_all, fig_compare

@@ -2,17 +2,24 @@
 
 A log's timestamps are the host's wall clock (CLOCK_REALTIME at send or receive): an NTP step or
 a ``date -s`` in the middle of a run moves every later timestamp by the step, and a report that
-pairs frames by timestamp then pairs the wrong ones. The controller's VALVE_CMD ``CycleCount``
-counts its periods whatever the wall clock does (an overrun's skipped periods are counted too),
-so ``t − CycleCount·Ts`` stays within a few periods for a whole run: where it changes by more
-than :data:`CLOCK_STEP_S` between two consecutive commands the clock stepped.
-:func:`undo_clock_steps` finds each step, where in the file it happened (the largest timestamp
-jump between those two commands, in file order) and moves every frame logged after it back by
-the step, so that frames of all names line up again.
+pairs frames by timestamp then pairs the wrong ones. In a realtime run the controller's
+VALVE_CMD ``CycleCount`` counts its periods whatever the wall clock does (an overrun's skipped
+periods are counted too), so ``t − CycleCount·Ts`` stays within a few periods for a whole run:
+where it changes by more than :data:`CLOCK_STEP_S` between two consecutive commands the wall
+clock disagrees with the cycle clock, and that is a clock step — a mere gap in the timestamps is
+not (the counter runs on through a pause). :func:`undo_clock_steps` finds each step, where in
+the file it happened (the largest timestamp jump between those two commands, in file order) and
+moves every frame logged after it back by the step, so that frames of all names line up again.
 
-A log without VALVE_CMD has no counter that spans the whole run: a backward jump of more than
-:data:`CLOCK_STEP_S` (time never runs backwards) is undone there, a forward one only reported
-(it cannot be told from a pause of every sender).
+In a lockstep run the wall clock does not follow the cycles at all (a cycle takes as long as
+the exchange of its frames; a pause of either process stops the counter), so a forward gap is
+just a pause and never a step. A run is lockstep when its metadata says so (the sidecar's
+``lockstep``/``mode``, ``run.json``), or, when the metadata does not say, when the wall time per
+counted cycle is off the sample time by more than :data:`REALTIME_RATE_TOLERANCE` (a candump
+of a lockstep run has no sidecar). There, as in a log without VALVE_CMD, only file order is
+left: a backward jump of more than :data:`CLOCK_STEP_S` (time never runs backwards) is undone;
+a forward one is kept — reported only when there is no VALVE_CMD at all (it cannot be told
+from a pause of every sender).
 """
 
 from __future__ import annotations
@@ -31,6 +38,10 @@ CLOCK_STEP_S = 0.5
 STEP_WINDOW = 16
 #: a step's size is rounded to the log's resolution (candump -L: 1 µs)
 STEP_RESOLUTION_S = 1e-6
+#: a log without lockstep/realtime metadata is taken as realtime when its median wall time per
+#: counted cycle is within this fraction of the sample time (a realtime loop keeps Ts on the
+#: median even with overruns, which are counted; a lockstep run goes as fast as its frames)
+REALTIME_RATE_TOLERANCE = 0.1
 
 Frames = dict[str, dict[str, np.ndarray]]
 
@@ -57,20 +68,26 @@ def unwrap_counter(c: np.ndarray, modulo: int = 65536) -> np.ndarray:
     return np.concatenate(([int(c[0])], int(c[0]) + np.cumsum(d)))
 
 
-def undo_clock_steps(frames: Frames, ts_s: float | None) -> tuple[list[ClockStep], list[str]]:
+def undo_clock_steps(
+    frames: Frames, ts_s: float | None, lockstep: bool | None = None
+) -> tuple[list[ClockStep], list[str]]:
     """Find the clock steps of ``frames`` (decoded with ``order``: each name has
     :data:`FRAME_INDEX`) and move the timestamps after each back by it, in place; returns the
-    steps undone and one-line notes (a step undone, or a forward jump left as it was)."""
+    steps undone and one-line notes. ``lockstep``: what the run's metadata says (None: not
+    said, judged from the timing; see the module docstring)."""
     t_all = _file_order_times(frames)
     if len(t_all) == 0:
         return [], []
     cmd = frames.get("VALVE_CMD")
     notes: list[str] = []
-    if cmd is not None and len(cmd["t_s"]) > 1 and "CycleCount" in cmd:
-        steps = _steps_from_cycle_count(cmd, t_all, ts_s)
+    counted = cmd if cmd is not None and len(cmd["t_s"]) > 1 and "CycleCount" in cmd else None
+    has_counter = counted is not None
+    follows = counted is not None and _clock_follows_cycles(counted, ts_s, lockstep, notes)
+    if counted is not None and follows:
+        steps = _steps_from_cycle_count(counted, t_all, ts_s)
     else:
         steps, jumps = _steps_from_file_order(t_all)
-        if jumps:
+        if jumps and not has_counter:
             notes.append(
                 "log timestamps jump forward by "
                 + ", ".join(j.text() for j in jumps)
@@ -78,14 +95,39 @@ def undo_clock_steps(frames: Frames, ts_s: float | None) -> tuple[list[ClockStep
             )
     if steps:
         _shift(frames, steps)
+        how = (
+            "on the VALVE_CMD CycleCount"
+            if follows
+            else "in file order (time never runs backwards; "
+            + ("a lockstep run's clock does not follow its cycles)" if has_counter else "no VALVE_CMD)")
+        )
         notes.insert(
             0,
             "the log's clock stepped "
             + ", ".join(s.text() for s in steps)
-            + ": timestamps after each step corrected on the VALVE_CMD CycleCount"
-            + ("" if cmd is not None else " (file order: no VALVE_CMD)"),
+            + ": timestamps after each step corrected "
+            + how,
         )
     return steps, notes
+
+
+def _clock_follows_cycles(
+    cmd: dict[str, np.ndarray], ts_s: float | None, lockstep: bool | None, notes: list[str]
+) -> bool:
+    """True when the wall clock of a log should keep the VALVE_CMD cycle clock (realtime): the
+    metadata's word, else the median wall time per counted cycle within
+    :data:`REALTIME_RATE_TOLERANCE` of ``ts_s`` (without ``ts_s``: taken as realtime)."""
+    if lockstep is not None:
+        return not lockstep
+    per = _period(cmd["t_s"], unwrap_counter(cmd["CycleCount"]))
+    if not ts_s or per is None or abs(per / ts_s - 1.0) <= REALTIME_RATE_TOLERANCE:
+        return True
+    notes.append(
+        f"the log's wall clock ran {per / ts_s:.2f} × the cycle clock (median {per * 1e3:.3f} ms "
+        f"per cycle, Ts = {ts_s * 1e3:g} ms) and no metadata says realtime or lockstep: taken as "
+        "a lockstep run, where a gap in the timestamps is a pause"
+    )
+    return False
 
 
 def _file_order_times(frames: Frames) -> np.ndarray:

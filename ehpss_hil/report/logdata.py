@@ -1,4 +1,5 @@
-"""A candump log turned into the per-sample record a report needs (a :class:`SimResult`).
+"""A CAN log (any format :func:`~ehpss_hil.canlog.read_frames` reads) turned into the
+per-sample record a report needs (a :class:`SimResult`).
 
 Alignment (the controller's view, one row per logged VALVE_CMD):
 
@@ -10,14 +11,17 @@ Alignment (the controller's view, one row per logged VALVE_CMD):
   arrived since the previous command), applied current over [k, k+1) from the SENSOR_AUX echo
   of sample k+1 (the commanded one is :attr:`LogRun.commanded_current_a`), active models and k̂
   from CTRL_STATUS, J per slot from CTRL_INDEX, true gains from PLANT_FAULTS;
-- the timestamps are the host's wall clock: a clock step in the middle of a run (NTP, ``date``)
-  is found on the CycleCount and undone before frames are paired (:mod:`.logclock`), and noted;
+- the timestamps are the host's wall clock: a clock step in the middle of a realtime run (NTP,
+  ``date``) is found where the wall clock disagrees with the CycleCount and undone before frames
+  are paired (:mod:`.logclock`), and noted; a pause in a lockstep run is just a pause;
 - x_d and y_m (ReferenceModel, exact ZOH, from rest at k = 0) come from the run's reference: the
   sidecar's ``scenario`` (a mapping, a YAML path, or a scenario name found in ``scenarios/``),
   or ``config.reference``/``reference`` with ``config.rate_hz``/``rate_hz``, or the caller's.
 
 A log without VALVE_CMD falls back to one row per PLANT_TRUTH frame (k counted from the first);
 without PLANT_TRUTH the tracking-error metrics are unavailable and :attr:`LogRun.notes` says so.
+A log that gives no sample at all says why in :attr:`LogRun.no_samples` (``report`` makes that
+one line and exit 2).
 """
 
 from __future__ import annotations
@@ -61,6 +65,8 @@ class LogRun:
     frames: dict[str, dict[str, np.ndarray]]
     verdicts: dict[str, dict[str, int]]
     notes: list[str] = field(default_factory=list)
+    #: why the log gave no sample row (empty when it gave some)
+    no_samples: str = ""
 
 
 # ---- helpers on decoded arrays ----------------------------------------------------------------
@@ -199,7 +205,7 @@ def load_log_run(
     verdicts = {n: {v.name: c for v, c in per.items() if c} for n, per in codec.counts_by_name.items()}
     notes: list[str] = [bad.text()] if bad.count else []
     info = run_info(side, log.parent, scenario, log)
-    notes += undo_clock_steps(frames, info.ts_s)[1]
+    notes += undo_clock_steps(frames, info.ts_s, info.lockstep)[1]
     for f in frames.values():
         f.pop(FRAME_INDEX, None)
     sc, ref, ts = info.scenario, info.reference, info.ts_s
@@ -210,6 +216,7 @@ def load_log_run(
         ts = _median_period(t_rows) or 1e-3
         notes.append(f"sample time not in the metadata: {ts * 1e3:.4g} ms from the log's timing")
     k, t_rows, i_cmd = _within_truth(frames, k, t_rows, i_cmd, ts, notes)
+    empty = _why_empty(frames, verdicts, bad) if len(k) == 0 else ""
     prm = params if params is not None else load_params(info.params_path)
     x_d = np.full(len(k), np.nan)
     y_m = np.full(len(k), np.nan)
@@ -218,13 +225,14 @@ def load_log_run(
         xd_all = ref.sample(np.arange(int(k[-1]) + 1) * ts, base)
         x_d = xd_all[k]
         y_m = ReferenceModel(prm, ts).simulate(xd_all)[k]
-    else:
+    elif ref is None:
         notes.append(
             "no reference in the metadata (sidecar scenario/config): x_d and y_m "
             "unavailable; pass --scenario to recompute them"
         )
     result, has_truth = _assemble(frames, sc, info, k, t_rows, ts, x_d, y_m, notes)
-    return LogRun(log, result, side, has_truth, ref is not None, sc, i_cmd, frames, verdicts, notes)
+    has_ref = ref is not None
+    return LogRun(log, result, side, has_truth, has_ref, sc, i_cmd, frames, verdicts, notes, empty)
 
 
 def _assemble(
@@ -294,6 +302,20 @@ def _assemble(
         fresh=_fresh(pos["t_s"], t_rows) if len(pos["t_s"]) else np.zeros(len(k), bool),
     )
     return res, has_truth
+
+
+def _why_empty(
+    frames: dict[str, dict[str, np.ndarray]], verdicts: dict[str, dict[str, int]], bad: BadLines
+) -> str:
+    """Why a log gave no sample row, in a few words (for the one-line error)."""
+    if not verdicts:
+        lines = f" ({bad.text()})" if bad.count else ""
+        return f"no frame of the DBC could be read from it{lines}"
+    rows = [n for n in ("VALVE_CMD", "PLANT_TRUTH") if len(frames.get(n, {}).get("t_s", ()))]
+    if rows:
+        return "every controller cycle lies after the emulator's last PLANT_TRUTH frame"
+    seen = ", ".join(f"{n} {sum(c.values())}" for n, c in sorted(verdicts.items()))
+    return f"no usable VALVE_CMD or PLANT_TRUTH frame (frames of the DBC: {seen})"
 
 
 def _mode(st: dict[str, np.ndarray], info: RunInfo) -> str:

@@ -4,7 +4,8 @@ Looked up, first hit wins, in: the caller's scenario; the log's sidecar; then, i
 ``ehpss-hil run`` directory (one holding ``run.json``), ``run.json`` and the other logs' sidecars. In each, a
 ``scenario`` (a mapping, a YAML path or a scenario name found in ``scenarios/``) or
 ``scenario_path``, then a ``config`` (a mapping like ``controller.yaml``, or the path of a
-controller/emulator YAML), then top-level ``reference``/``rate_hz``/``mode``/``params``.
+controller/emulator YAML), then top-level ``reference``/``rate_hz``/``mode``/``params``; and
+whether the run was lockstep (:func:`~ehpss_hil.canlog.sidecar.lockstep_of`).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import PROJECT_ROOT
+from ..canlog.sidecar import lockstep_of
 from ..config import (
     ControllerConfig,
     SetpointPolicy,
@@ -38,6 +40,8 @@ class RunInfo:
     tuning: ControlTuning | None = None
     setpoint: SetpointPolicy | None = None
     params_path: str | None = None
+    #: True: a lockstep run (the wall clock does not follow the cycles); None: not recorded
+    lockstep: bool | None = None
     sources: list[str] = field(default_factory=list)
 
 
@@ -88,6 +92,8 @@ def _from_config_file(path: Path, info: RunInfo) -> None:
         if info.scenario is None and e.scenario and Path(e.scenario).is_file():
             info.scenario = load_scenario(e.scenario)
         info.ts_s = info.ts_s or 1.0 / e.rate_hz
+        if info.lockstep is None:
+            info.lockstep = e.mode == "lockstep"
         return
     info.reference = info.reference or c.reference
     info.ts_s = info.ts_s or 1.0 / c.rate_hz
@@ -99,6 +105,8 @@ def _from_config_file(path: Path, info: RunInfo) -> None:
 
 def _from_mapping(side: dict[str, Any], log_dir: Path, info: RunInfo) -> None:
     """Fill what is still missing in ``info`` from one sidecar-like mapping."""
+    if info.lockstep is None:
+        info.lockstep = lockstep_of(side)
     if info.scenario is None:
         info.scenario = scenario_from(side.get("scenario"), log_dir) or scenario_from(
             side.get("scenario_path"), log_dir
