@@ -9,11 +9,13 @@ A screenshot is saved (its path printed). Waits have generous limits only; nothi
 
 from __future__ import annotations
 
+import ast
 import math
 import re
 import shutil
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -60,9 +62,22 @@ WAIT_S = 90.0
 SCREENSHOT = ROOT / "out" / "monitor-browser.png"
 
 
+@dataclass
+class Monitored:
+    """The page's URL and the monitor's process (its output)."""
+
+    url: str
+    monitor: Proc
+
+
 @pytest.fixture
-def bench(tmp_path: Path) -> Iterator[str]:
-    """Emulator + controller in a namespace and the monitor attached; yields the page's URL."""
+def bench(monitored: Monitored) -> str:
+    return monitored.url
+
+
+@pytest.fixture
+def monitored(tmp_path: Path) -> Iterator[Monitored]:
+    """Emulator + controller in a namespace and the monitor attached."""
     cfg = tmp_path / "controller.yaml"
     cfg.write_text(CTL_YAML.format(root=ROOT))
     procs: list[Proc] = []
@@ -93,7 +108,7 @@ def bench(tmp_path: Path) -> Iterator[str]:
             ctl = Proc(ns.prefix() + EHPSS_HIL + ["controller", "-c", str(cfg)])
             procs.append(ctl)
             assert ctl.wait_for("first sensor data: ACTIVE"), ctl.text + emu.text
-            yield url.group(0)
+            yield Monitored(url.group(0), mon)
         finally:
             for p in reversed(procs):
                 p.terminate()
@@ -215,3 +230,81 @@ def test_fault_injected_from_the_page_reconfigures_the_controller(bench: str) ->
         print(f"\nmonitor screenshot: {SCREENSHOT} (page refresh {text('refresh-rate')} Hz)")
     finally:
         driver.quit()  # type: ignore[attr-defined]
+
+
+ATTACK_HTML = """<!doctype html><html><body><pre id="log"></pre><script>
+const log = (t) => { document.getElementById("log").textContent += t + "\\n"; };
+const target = "%(target)s";
+(async () => {
+  for (const headers of [{"Content-Type": "text/plain"}, {}]) {
+    try {
+      await fetch(target + "api/inject", { method: "POST", mode: "no-cors", headers,
+        body: JSON.stringify({ kind: "k_loe", value: 0.3 }) });
+      log("post: sent (opaque)");
+    } catch (e) { log("post: failed " + e); }
+  }
+  try {
+    const r = await fetch(target + "api/config");
+    log("config: read " + (await r.text()).length);
+  } catch (e) { log("config: unreadable"); }
+  const ws = new WebSocket(target.replace("http", "ws") + "ws");
+  ws.onopen = () => log("ws: open");
+  ws.onmessage = () => log("ws: data");
+  ws.onerror = () => log("ws: error");
+  ws.onclose = () => log("ws: closed");
+})();
+</script></body></html>"""
+
+
+def test_a_page_from_another_origin_cannot_inject_or_read(monitored: Monitored) -> None:
+    """A second origin on 127.0.0.1 (another port: what any site the user opens could do with
+    a no-cors request) posts injections to the monitor, tries to read its config and opens its
+    WebSocket: nothing reaches the bus (the true k_LOE the monitor shows stays 1), nothing is
+    read, and the monitor counts the refusals (printed when it stops)."""
+    import http.server
+    import threading
+
+    from selenium.webdriver.common.by import By
+
+    page = ATTACK_HTML % {"target": monitored.url}
+
+    class Attack(http.server.BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            body = page.encode()
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args: object) -> None:
+            pass
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Attack)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    driver = _browser()
+    try:
+        driver.get(f"http://127.0.0.1:{server.server_address[1]}/")  # type: ignore[attr-defined]
+
+        def log() -> str:
+            return str(driver.find_element(By.ID, "log").text)  # type: ignore[attr-defined]
+
+        _until("the attack finished", lambda: "ws: closed" in log() or "ws: error" in log())
+        time.sleep(0.5)
+        got = log()
+        assert got.count("post: sent (opaque)") == 2, got  # the browser sent them …
+        assert "config: unreadable" in got and "ws: open" not in got and "ws: data" not in got, got
+        driver.get(monitored.url)  # type: ignore[attr-defined]
+        _until("the true gains", lambda: "1.000" in driver.find_element(By.ID, "k-true").text)  # type: ignore[attr-defined]
+        time.sleep(1.0)
+        k_true = str(driver.find_element(By.ID, "k-true").text)  # type: ignore[attr-defined]
+        assert k_true.startswith("1.000"), k_true  # … and no injection reached the emulator
+    finally:
+        driver.quit()  # type: ignore[attr-defined]
+        server.shutdown()
+    monitored.monitor.terminate()
+    assert monitored.monitor.wait() == 0
+    refused = re.search(r"monitor: refused (\{.*\})", monitored.monitor.text)
+    assert refused is not None, monitored.monitor.text
+    counts = ast.literal_eval(refused.group(1))  # the monitor prints a dict of str → int
+    assert counts.get("origin", 0) >= 3, counts  # two posts and the WebSocket (config: no CORS)

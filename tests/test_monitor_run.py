@@ -35,8 +35,13 @@ def _free_port() -> int:
 
 
 def _post(url: str, body: dict[str, Any]) -> dict[str, Any]:
+    """POST as a script does: the injection token read from the page's /api/config."""
+    with urllib.request.urlopen(url.rsplit("/api/", 1)[0] + "/api/config", timeout=5.0) as r:
+        token = json.loads(r.read())["token"]
     req = urllib.request.Request(
-        url, data=json.dumps(body).encode(), headers={"Content-Type": "application/json"}
+        url,
+        data=json.dumps(body).encode(),
+        headers={"Content-Type": "application/json", "X-Monitor-Token": token},
     )
     with urllib.request.urlopen(req, timeout=5.0) as r:
         return dict(json.loads(r.read()))

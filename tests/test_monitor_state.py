@@ -167,12 +167,15 @@ def test_inject_sends_one_fault_inject_frame_only_when_allowed() -> None:
 def test_page_endpoints_and_refused_injection() -> None:
     from aiohttp.test_utils import TestClient, TestServer
 
+    from ehpss_hil.monitor.access import AccessPolicy, allowed_hosts
     from ehpss_hil.monitor.server import make_app
 
     lis = _listener(False, f"mon-{uuid.uuid4().hex}")
+    policy = AccessPolicy(hosts=frozenset())
 
     async def go() -> tuple[int, dict[str, Any], int, str, dict[str, Any]]:
-        async with TestClient(TestServer(make_app(lis))) as client:
+        async with TestClient(TestServer(make_app(lis, policy), host="127.0.0.1")) as client:
+            policy.hosts = allowed_hosts("127.0.0.1", client.port or 0)
             r = await client.post("/api/inject", json={"kind": "k_loe", "value": 0.5})
             refused, body = r.status, await r.json()
             page = await client.get("/")

@@ -10,6 +10,7 @@ reference (so x_d and y_m are drawn); ``--netns`` listens inside another network
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -20,6 +21,9 @@ from ..errors import ConfigError, EhpssError
 NAME = "monitor"
 #: the page's default TCP port
 DEFAULT_PORT = 8050
+#: the page server's nice value: CFS gives a nice-10 process about a tenth of a nice-0 one's
+#: share when both want the CPU (a controller at --rt-priority is never preempted by it at all)
+MONITOR_NICE = 10
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -40,6 +44,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--port", type=int, default=DEFAULT_PORT, help="page port (0: any free one)")
     p.add_argument("--host", default="127.0.0.1", help="page address (default 127.0.0.1: this host only)")
+    p.add_argument(
+        "--allow-host",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="a further name the page may be requested by (Host header); repeatable",
+    )
     p.add_argument(
         "--allow-inject",
         action="store_true",
@@ -104,7 +115,15 @@ def run(args: argparse.Namespace) -> int:
             print(
                 f"listening on {where}" + (" (fault injection ON)" if args.allow_inject else ""), flush=True
             )
-            serve(listener, args.host, args.port, args.refresh_hz, title=f"ehpss-hil monitor · {where}")
+            os.nice(MONITOR_NICE)  # the controller's CPU first (docs/monitor.md)
+            serve(
+                listener,
+                args.host,
+                args.port,
+                args.refresh_hz,
+                title=f"ehpss-hil monitor · {where}",
+                extra_hosts=tuple(args.allow_host),
+            )
     finally:
         listener.stop()
     if listener.error is not None:

@@ -5,8 +5,13 @@ Endpoints: ``/`` the page; ``/static/…``; ``/ws`` a WebSocket that sends, ``re
 second, ``{"rows": {column: [values…]}, "status": {…}}`` with the rows added since its last
 message (:class:`~.state.MonitorState`); ``/api/config`` (options, kinds, row fields, the
 process id); ``/api/status`` (one snapshot, for scripts); ``POST /api/inject``
-``{"kind": "k_loe", "value": 0.5}`` → one FAULT_INJECT frame (403 unless the monitor was started
-with ``--allow-inject``).
+``{"kind": "k_loe", "value": 0.5}`` with the header ``X-Monitor-Token`` → one FAULT_INJECT frame
+(403 unless the monitor was started with ``--allow-inject``). Every request passes the checks of
+:mod:`.access` (Host, Origin, token, rates, client count).
+
+Slow readers: each WebSocket has at most one message in flight; a push that finds the previous
+one still being written is dropped (counted) and the next carries the rows since the last one
+sent, so a stalled client costs one message of memory and no CPU beyond its own tick.
 
 The event loop only copies snapshots out of the state and serializes them; decoding happens in
 the listener's thread, so the page's cost does not grow with the bus's frame rate.
@@ -18,6 +23,7 @@ import asyncio
 import json
 import os
 import signal
+import socket
 import time
 from importlib import resources
 from pathlib import Path
@@ -26,6 +32,7 @@ from typing import Any
 from aiohttp import WSMsgType, web
 
 from ..errors import InjectError, ServeError
+from .access import TOKEN_HEADER, AccessPolicy, allowed_hosts, middleware
 from .listener import BusListener
 from .state import ROW_FIELDS
 
@@ -33,15 +40,33 @@ from .state import ROW_FIELDS
 REFRESH_HZ = 20.0
 #: at most this many rows go to a page when it connects (the last 10 s at the default row period)
 INITIAL_ROWS = 1000
+#: the kernel's send buffer and the user-space write buffer of each WebSocket: with the one
+#: message in flight, about what a stalled reader costs the monitor at most
+CLIENT_BUFFER_BYTES = 64 * 1024
+_CLIENT_BUFFER: web.AppKey[int] = web.AppKey("client_buffer", int)
 STATIC_DIR = Path(str(resources.files(__package__) / "static"))
 _LISTENER: web.AppKey[BusListener] = web.AppKey("listener", BusListener)
 _OPTIONS: web.AppKey[dict[str, Any]] = web.AppKey("options", dict)
+_POLICY: web.AppKey[AccessPolicy] = web.AppKey("policy", AccessPolicy)
 
 
-def make_app(listener: BusListener, refresh_hz: float = REFRESH_HZ, title: str = "") -> web.Application:
-    """The aiohttp application of one monitor."""
-    app = web.Application()
+def _policy(request: web.Request) -> AccessPolicy:
+    return request.app[_POLICY]
+
+
+def make_app(
+    listener: BusListener,
+    policy: AccessPolicy,
+    refresh_hz: float = REFRESH_HZ,
+    title: str = "",
+    client_buffer_bytes: int = CLIENT_BUFFER_BYTES,
+) -> web.Application:
+    """The aiohttp application of one monitor (``policy``: its access checks; the hosts are
+    filled in once the port is bound)."""
+    app = web.Application(middlewares=[middleware(_policy)])
     app[_LISTENER] = listener
+    app[_POLICY] = policy
+    app[_CLIENT_BUFFER] = client_buffer_bytes
     app[_OPTIONS] = {
         "allow_inject": listener.allow_inject,
         "kinds": [k for k in listener.kinds if k != "clear"],
@@ -64,7 +89,10 @@ async def _index(request: web.Request) -> web.StreamResponse:
 
 
 async def _config(request: web.Request) -> web.Response:
-    return web.json_response(request.app[_OPTIONS])
+    opts = request.app[_OPTIONS].copy()
+    if opts["allow_inject"]:  # readable by this page only: no CORS headers, Host checked
+        opts["token"] = request.app[_POLICY].token
+    return web.json_response(opts)
 
 
 def _snapshot(listener: BusListener, seq: int) -> tuple[dict[str, Any], int]:
@@ -79,23 +107,41 @@ async def _status(request: web.Request) -> web.Response:
     return web.json_response(snap["status"])
 
 
-async def _websocket(request: web.Request) -> web.WebSocketResponse:
-    ws = web.WebSocketResponse()
+async def _websocket(request: web.Request) -> web.StreamResponse:
+    pol = request.app[_POLICY]
+    if pol.clients >= pol.max_clients:
+        pol.count("clients")
+        return web.json_response({"error": f"at most {pol.max_clients} live clients"}, status=503)
+    limit = request.app[_CLIENT_BUFFER]
+    ws = web.WebSocketResponse(writer_limit=limit)
+    transport = request.transport
+    if transport is not None:  # what a reader that stops reading can hold, kernel and user space
+        transport.set_write_buffer_limits(high=limit)
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, limit)
     await ws.prepare(request)
+    pol.clients += 1
     listener = request.app[_LISTENER]
     period = 1.0 / request.app[_OPTIONS]["refresh_hz"]
 
     async def pump() -> None:
         seq = 0
+        sending: asyncio.Task[None] | None = None
         next_t = time.monotonic()
         while not ws.closed:
-            snap, seq = _snapshot(listener, seq)
-            await ws.send_str(json.dumps(snap, separators=(",", ":")))
+            if sending is None or sending.done():
+                snap, seq = _snapshot(listener, seq)
+                sending = asyncio.create_task(ws.send_str(json.dumps(snap, separators=(",", ":"))))
+            else:  # the previous message is still being written: a slow reader, drop this one
+                pol.count("dropped_pushes")
             next_t += period
             delay = next_t - time.monotonic()
             if delay < 0:  # late (a slow page or host): skip ahead instead of bursting
                 next_t, delay = time.monotonic(), 0.0
             await asyncio.sleep(delay)
+        if sending is not None:
+            sending.cancel()
 
     task = asyncio.create_task(pump())
     try:
@@ -103,6 +149,7 @@ async def _websocket(request: web.Request) -> web.WebSocketResponse:
             if msg.type == WSMsgType.ERROR:
                 break
     finally:
+        pol.clients -= 1
         task.cancel()
         try:
             await task
@@ -115,6 +162,13 @@ async def _inject(request: web.Request) -> web.Response:
     listener = request.app[_LISTENER]
     if not listener.allow_inject:
         return web.json_response({"error": "fault injection is off (--allow-inject)"}, status=403)
+    pol = request.app[_POLICY]
+    if not pol.token_ok(request.headers.get(TOKEN_HEADER)):
+        pol.count("token")
+        return web.json_response({"error": f"missing or wrong {TOKEN_HEADER}"}, status=403)
+    if not pol.inject_rate.take():
+        pol.count("rate")
+        return web.json_response({"error": "too many injections: at most 5 per second"}, status=429)
     try:
         body = await request.json()
         kind, value = str(body["kind"]), float(body["value"])
@@ -128,14 +182,24 @@ async def _inject(request: web.Request) -> web.Response:
 
 
 def serve(
-    listener: BusListener, host: str, port: int, refresh_hz: float = REFRESH_HZ, title: str = ""
+    listener: BusListener,
+    host: str,
+    port: int,
+    refresh_hz: float = REFRESH_HZ,
+    title: str = "",
+    extra_hosts: tuple[str, ...] = (),
 ) -> None:
     """Serve the page until SIGINT/SIGTERM or until the listener's thread ends; prints
-    ``monitor: http://HOST:PORT/`` (the port the system chose when ``port`` is 0)."""
-    asyncio.run(_serve(make_app(listener, refresh_hz, title), listener, host, port))
+    ``monitor: http://HOST:PORT/`` (the port the system chose when ``port`` is 0) and, with
+    injection on, the token scripts need."""
+    policy = AccessPolicy(hosts=frozenset())
+    app = make_app(listener, policy, refresh_hz, title)
+    asyncio.run(_serve(app, listener, host, port, extra_hosts))
 
 
-async def _serve(app: web.Application, listener: BusListener, host: str, port: int) -> None:
+async def _serve(
+    app: web.Application, listener: BusListener, host: str, port: int, extra_hosts: tuple[str, ...]
+) -> None:
     runner = web.AppRunner(app, access_log=None, handle_signals=False)
     await runner.setup()
     site = web.TCPSite(runner, host, port)
@@ -145,7 +209,11 @@ async def _serve(app: web.Application, listener: BusListener, host: str, port: i
         await runner.cleanup()
         raise ServeError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from exc
     bound = runner.addresses[0]
+    policy = app[_POLICY]
+    policy.hosts = allowed_hosts(host, bound[1], extra_hosts)
     print(f"monitor: http://{host}:{bound[1]}/ (Ctrl-C to stop)", flush=True)
+    if listener.allow_inject:
+        print(f"injection token (header {TOKEN_HEADER}): {policy.token}", flush=True)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for s in (signal.SIGINT, signal.SIGTERM):
@@ -157,4 +225,6 @@ async def _serve(app: web.Application, listener: BusListener, host: str, port: i
             except TimeoutError:
                 pass
     finally:
+        if any(policy.refused.values()):
+            print(f"monitor: refused {policy.refused}", flush=True)
         await runner.cleanup()

@@ -2,9 +2,10 @@
 
 What a process sees of its bus failing:
 
-- **its own frames not sent**: python-can raises on a send (``CanOperationError``/``OSError``:
-  ENETDOWN when the interface went down, ENOBUFS when the transmit queue is full, a driver
-  error on other interfaces). A cycle in which a send failed is a failed cycle;
+- **its own frames not sent, or nothing received**: python-can raises on a send or a receive
+  (``CanOperationError``/``OSError``: ENETDOWN when the interface went down, ENOBUFS when the
+  transmit queue is full, a driver error on other interfaces). A cycle in which a send or a
+  receive failed is a failed cycle;
   ``watchdog.timeout_cycles`` failed cycles in a row (as many as the sensor may be silent) are a
   bus error: the valve has been without its command for that long.
 - **error frames** (SocketCAN delivers them: python-can sets ``CAN_RAW_ERR_FILTER`` to every
@@ -95,6 +96,7 @@ class BusHealth:
         self.failed_in_row = 0
         #: counters (JSON-able in :meth:`summary`)
         self.tx_errors = 0
+        self.rx_errors = 0
         self.error_frames: dict[str, int] = {}
         self.episodes = 0
         self.quiet_cycles = 0
@@ -107,6 +109,13 @@ class BusHealth:
         self._cycle_failed = True
         if self.tx_errors == 1 or self.tx_errors % WARN_EVERY == 0:
             log.warning("%s not sent (%d transmit errors): %s", name, self.tx_errors, exc)
+
+    def rx_failed(self, exc: BaseException) -> None:
+        """A receive failed (the interface went down): a failed cycle, as a failed send."""
+        self.rx_errors += 1
+        self._cycle_failed = True
+        if self.rx_errors == 1 or self.rx_errors % WARN_EVERY == 0:
+            log.warning("receive failed (%d receive errors): %s", self.rx_errors, exc)
 
     def error_frame(self, msg: can.Message) -> None:
         """An error frame received."""
@@ -126,7 +135,7 @@ class BusHealth:
             self._minor.popleft()
         causes = []
         if self.failed_in_row >= self._fail_limit:
-            causes.append(f"frames not sent for {self.failed_in_row} cycles")
+            causes.append(f"frames not sent or received for {self.failed_in_row} cycles")
         if self._severe:
             causes.append(f"error frame {self._severe}")
         if len(self._minor) >= ERROR_FRAME_LIMIT:
@@ -153,6 +162,7 @@ class BusHealth:
         return {
             "episodes": self.episodes,
             "tx_errors": self.tx_errors,
+            "rx_errors": self.rx_errors,
             "error_frames": dict(self.error_frames),
             "last_cause": self.last_cause,
         }

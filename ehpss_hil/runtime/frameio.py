@@ -115,6 +115,10 @@ def open_process_logger(
         ) from exc
 
 
+#: after a failed receive, :meth:`FrameIO.recv` waits this long (at most) before returning
+RX_ERROR_PAUSE_S = 0.001
+
+
 class FrameIO:
     """One process's view of the bus: counts sent frames by name, transmit errors and ID
     collisions (frames on the own TX IDs that this process did not send)."""
@@ -218,7 +222,11 @@ class FrameIO:
         """Every frame pending now (non-blocking) but those on own IDs; at most ``limit`` read."""
         read = self._read
         for _ in range(limit):
-            msg = read()
+            try:
+                msg = read()
+            except (can.CanError, OSError) as exc:  # e.g. ENETDOWN: the interface went down
+                self.health.rx_failed(exc)
+                return
             if msg is None:
                 return
             if self._accept(msg):
@@ -229,7 +237,12 @@ class FrameIO:
         deadline = time.monotonic() + timeout_s
         while True:
             left = deadline - time.monotonic()
-            msg = self.bus.recv(max(left, 0.0))
+            try:
+                msg = self.bus.recv(max(left, 0.0))
+            except (can.CanError, OSError) as exc:
+                self.health.rx_failed(exc)
+                time.sleep(max(0.0, min(left, RX_ERROR_PAUSE_S)))  # not a busy loop on a dead bus
+                return None
             if msg is None:
                 return None
             if self._accept(msg):

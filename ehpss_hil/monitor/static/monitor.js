@@ -102,16 +102,21 @@ function showStatus(s) {
 async function inject(kind, value) {
   const out = document.getElementById("inject-result");
   try {
-    const r = await fetch("/api/inject", { method: "POST", headers: { "Content-Type": "application/json" },
+    const r = await fetch("/api/inject", { method: "POST",
+      headers: { "Content-Type": "application/json", "X-Monitor-Token": injectToken },
       body: JSON.stringify({ kind, value: Number(value) }) });
     const j = await r.json();
     out.textContent = j.sent ? `sent: ${j.sent}` : `refused: ${j.error}`;
   } catch (e) { out.textContent = `not sent: ${e}`; }
 }
 
+let injectToken = "";
+
 function setupInject(cfg) {
   if (!cfg.allow_inject) return;
+  injectToken = cfg.token;
   document.getElementById("inject").hidden = false;
+  set("inject-token", cfg.token);
   const sel = document.getElementById("inject-kind");
   sel.innerHTML = cfg.kinds.map((k) => `<option>${k}</option>`).join("");
   for (const b of document.querySelectorAll("#inject .buttons button"))
