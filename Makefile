@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(VPY) -m pip install --quiet --upgrade pip
-	$(VPY) -m pip install --quiet -e '.[test,plot,monitor]'
+	$(VPY) -m pip install --quiet -e '.[test,plot,monitor,campaign]'
 	touch $(STAMP)
 
 venv: $(STAMP)

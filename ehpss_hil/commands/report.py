@@ -11,6 +11,7 @@ import argparse
 import json
 from pathlib import Path
 
+from ..extras import require
 from ..report.logdata import load_log_run, log_metrics
 from ..report.markdown import metrics_row, write_markdown
 from ..scenario import load_scenario
@@ -43,6 +44,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Decode, compute, draw, write; prints where everything went."""
+    if not args.no_figures:
+        require("plot", "the report's figures (or use --no-figures)")
     scenario = load_scenario(args.scenario) if args.scenario is not None else None
     lr = load_log_run(args.log, scenario=scenario)
     out_dir = args.out if args.out is not None else lr.log_path.parent / "report"
