@@ -4,7 +4,11 @@ LSB: the ``cantools.database.conversion`` classes (names, constructors, the fact
 class, the attributes read, and the arithmetic of the methods :mod:`ehpss_hil.codec.layout`
 writes out and :mod:`ehpss_hil.sim.transport` calls), and cantools' bound below its next major.
 
-(python-can's udp_multicast internals: ``tests/test_bus_udp_boundary.py``.)"""
+Also python-can's socketcan constants module, which :func:`ehpss_hil.bus.suppress_own_echoes`
+imports (checked here too on hosts without SocketCAN). python-can's udp_multicast internals:
+``tests/test_bus_udp_boundary.py``; canopen's ``SdoServer`` over the emulated nodes' own object
+store: ``tests/test_cia408_master.py``; ``distributed.comm``'s address parsing:
+``tests/test_campaign.py``."""
 
 from __future__ import annotations
 
@@ -157,3 +161,10 @@ def test_every_message_of_the_shipped_dbcs_gets_the_fast_layout(dbc: Path) -> No
     for msg in db.messages:
         assert all(_conversion(s.conversion) is not None for s in msg.signals), msg.name
         assert BitLayout.of(msg) is not None, msg.name
+
+
+def test_python_can_s_socketcan_constants_are_linux_s() -> None:
+    """``SOL_CAN_RAW`` and ``CAN_RAW_RECV_OWN_MSGS`` of <linux/can/raw.h> (SOL_CAN_BASE + CAN_RAW, 4)."""
+    from can.interfaces.socketcan.constants import CAN_RAW_RECV_OWN_MSGS, SOL_CAN_RAW
+
+    assert (SOL_CAN_RAW, CAN_RAW_RECV_OWN_MSGS) == (101, 4)
