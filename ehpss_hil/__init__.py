@@ -9,6 +9,12 @@ from pathlib import Path
 
 __version__ = "0.1.0"
 
-#: Repository root (holds ``dbc/``, ``configs/``, ``scenarios/``) for a source/editable install.
+#: Repository root (holds ``configs/``, ``scenarios/``, ``campaigns/``) of a source/editable
+#: install; a wheel does not ship these.
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_DBC = PROJECT_ROOT / "dbc" / "ehpss.dbc"
+#: The files the package ships (package data, in the wheel too): ``dbc/`` (ehpss.dbc, the
+#: vendor example), ``eds/`` (the emulated CANopen nodes) and ``params.yaml`` (the default plant
+#: and controller parameters). The repository's ``dbc/``, ``eds/`` and ``configs/params.yaml``
+#: are symbolic links to them.
+DATA_DIR = Path(__file__).resolve().parent / "data"
+DEFAULT_DBC = DATA_DIR / "dbc" / "ehpss.dbc"

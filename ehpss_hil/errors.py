@@ -106,6 +106,13 @@ class ServeError(EhpssError, OSError):
     exit_code = 2
 
 
+class MissingExtraError(EhpssError, ImportError):
+    """A command needs an optional install (an extra: campaign, monitor, plot) that is not
+    there; the message names the ``pip install`` that brings it."""
+
+    exit_code = 2
+
+
 class ProcessFailedError(EhpssError):
     """A child process of ``ehpss-hil run`` ended badly; the exit code is the child's when it
     has a meaning of its own (2 bad config or output, 3 missing interface), else 1."""

@@ -29,7 +29,7 @@ from ehpss_hil.emulation import PlantEmulation, SensorSample
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.runtime.signals import StopFlag
-from ehpss_hil.runtime.stats import LoopStats
+from ehpss_hil.runtime.stats import LoopStats, peak_rss_bytes
 
 from .command_hold import CommandHold
 from .commanders import CommanderCheck
@@ -350,4 +350,5 @@ class EmulatorProcess:
             "inject_rejected": self.inject_rejected,
             "inject_ignored": self.inject_ignored,
             "stats": self.stats.summary(),
+            "max_rss_bytes": peak_rss_bytes(),
         }

@@ -20,8 +20,8 @@ from .. import PROJECT_ROOT
 from ..campaign.executors import run_dask, run_local
 from ..campaign.localcluster import LocalDaskCluster
 from ..campaign.runs import RunTask, execute
-from ..campaign.sampling import plan_runs
 from ..campaign.spec import load_campaign
+from ..extras import EXTRAS, require
 from .common import write_json
 from .control import SPEED_TARGET
 
@@ -69,6 +69,9 @@ def _row(what: str, value: str, target: str, ok: bool | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    require("campaign", "ehpss-hil bench campaign", ("scipy",) if args.no_dask else EXTRAS["campaign"])
+    from ..campaign.sampling import plan_runs
+
     camp = load_campaign(args.file)
     camp = replace(camp, spec=replace(camp.spec, duration_s=BENCH_DURATION_S))
     plans = plan_runs(camp)[: args.runs + 2]

@@ -25,6 +25,7 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
+from ..extras import require
 from ..orchestrate import RunPlan, check_exit_codes, execute
 from .common import write_json
 
@@ -199,6 +200,7 @@ def _print(r: dict[str, Any]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    require("monitor", "ehpss-hil bench monitor")
     with tempfile.TemporaryDirectory(prefix="ehpss-bench-monitor-") as tmp:
         r = _measure(args.seconds, _has_browser() and not args.no_browser, Path(tmp))
     _print(r)

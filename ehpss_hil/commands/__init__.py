@@ -21,6 +21,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "demo",
         "the bench demo: case 3 (drift, then LOE), NRC vs MMAC on two real processes, metrics, figures",
     ),
+    "export-arxml": (
+        "export_arxml",
+        "write the DBC as AUTOSAR 4 ARXML (unique signal names, multiplexed PDUs, E2E DataIDs)",
+    ),
     "log": ("log", "log every frame of a CAN bus to a candump -L file (+ JSON sidecar), rotated by size"),
     "monitor": (
         "monitor",

@@ -9,9 +9,8 @@ import time
 from pathlib import Path
 
 from ..campaign.executors import default_workers
-from ..campaign.session import run_campaign
 from ..campaign.spec import load_campaign
-from ..campaign.summary import format_summary
+from ..extras import EXTRAS, require
 
 NAME = "campaign"
 #: exit code after Ctrl-C (the shell's 128 + SIGINT)
@@ -36,7 +35,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
 
 
+#: what a campaign imports from the ``campaign`` extra: Parquet tables and the QMC samplers;
+#: Dask's client only for ``--scheduler``
+LOCAL_MODULES = ("pyarrow", "scipy")
+
+
 def run(args: argparse.Namespace) -> int:
+    require("campaign", "ehpss-hil campaign", EXTRAS["campaign"] if args.scheduler else LOCAL_MODULES)
+    from ..campaign.session import run_campaign
+    from ..campaign.summary import format_summary
+
     camp = load_campaign(args.file)
     out = Path(args.out) if args.out else Path("runs") / f"campaign-{camp.spec.name}"
     where = (

@@ -17,6 +17,7 @@ from typing import Any
 
 from .. import PROJECT_ROOT
 from ..errors import BusUnavailableError
+from ..extras import require
 from ..orchestrate import RunPlan, check_exit_codes, execute
 from ..report.metrics import compute_metrics
 from ..run_metrics import metrics_from_run
@@ -78,6 +79,7 @@ def _hil(args: argparse.Namespace) -> dict[str, tuple[dict[str, Any], str]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    require("plot", "ehpss-hil demo (its figures)")
     print("== configuration ==")
     for f in [*sorted((PROJECT_ROOT / "configs").glob("*.yaml")), args.scenario]:
         print(f"{f.name}: {check_config.summarize(f)}")

@@ -16,7 +16,8 @@ from pathlib import Path
 
 from ..bus import open_listener_bus
 from ..config import BusConfig, ControllerConfig, load_controller_config
-from ..errors import ConfigError, EhpssError
+from ..errors import ConfigError
+from ..extras import require
 
 NAME = "monitor"
 #: the page's default TCP port
@@ -84,6 +85,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("command line", "--refresh-hz", f"expected 0.5 … 100, got {args.refresh_hz:g}")
     if not 0 <= args.port <= 65535:
         raise ConfigError("command line", "--port", f"expected 0 … 65535, got {args.port}")
+    if not args.tui:
+        require("monitor", "the monitor's web page (or use --tui)")
     cfg = _config(args)
     bus = _bus(args, cfg)
     from ..monitor.build import build_listener
@@ -104,11 +107,7 @@ def run(args: argparse.Namespace) -> int:
 
             run_tui(listener, where, args.duration)
         else:
-            try:
-                from ..monitor.server import serve
-            except ImportError as exc:
-                why = f"the monitor's page needs aiohttp ({exc}): pip install 'ehpss-hil[monitor]'"
-                raise EhpssError(f"{why}, or use --tui") from exc
+            from ..monitor.server import serve
 
             if args.host not in ("127.0.0.1", "localhost", "::1"):
                 print(f"warning: the page is reachable from other hosts on {args.host}", file=sys.stderr)

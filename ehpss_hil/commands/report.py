@@ -14,6 +14,7 @@ import json
 from pathlib import Path
 
 from ..canlog.reader import LogError
+from ..extras import require
 from ..report.logdata import LogRun, load_log_run, log_metrics
 from ..report.markdown import metrics_row, write_markdown
 from ..scenario import load_scenario
@@ -57,6 +58,8 @@ def _with_samples(run: LogRun) -> LogRun:
 
 def run(args: argparse.Namespace) -> int:
     """Decode, compute, draw, write; prints where everything went."""
+    if not args.no_figures:
+        require("plot", "the report's figures (or use --no-figures)")
     scenario = load_scenario(args.scenario) if args.scenario is not None else None
     lr = _with_samples(load_log_run(args.log, scenario=scenario))
     others = [_with_samples(load_log_run(p, scenario=scenario)) for p in args.compare]

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..canlog import read_sidecar
 from ..control.registry import DAEMON_MODES
+from ..extras import require
 from ..orchestrate import CONTROLLER_YAML, EMULATOR_YAML, RunPlan, check_exit_codes, execute
 from ..run_metrics import metrics_from_run
 from ..rundir import RUN_LOGS, record_outputs
@@ -92,6 +93,8 @@ def _sends_truth(emulator_yaml: Path) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.plot:
+        require("plot", "--plot")
     out = args.out or Path("out/runs") / f"{args.scenario.stem}-{args.mode}"
     plan = RunPlan(
         scenario_path=args.scenario,

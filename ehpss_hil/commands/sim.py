@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from ..control.registry import MODES
+from ..extras import require
 from ..report.metrics import RunMetrics
 from ..scenario import Scenario
 from ..sim.jobs import Job, JobOutcome, default_jobs, run_jobs, scenario_paths
@@ -114,6 +115,8 @@ def write_plots(outcomes: list[JobOutcome], base: Path) -> list[Path]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.plot:
+        require("plot", "--plot")
     modes = args.controller or ["mmac"]
     paths = scenario_paths(args.scenarios)
     transport = "frames" if args.protocol else args.transport

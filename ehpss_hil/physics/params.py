@@ -1,4 +1,5 @@
-"""Physical and controller parameters (SI), loaded once from ``configs/params.yaml``."""
+"""Physical and controller parameters (SI), loaded once from a YAML file (default: the shipped
+``ehpss_hil/data/params.yaml``, linked as ``configs/params.yaml`` in the repository)."""
 
 from __future__ import annotations
 
@@ -6,11 +7,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .. import PROJECT_ROOT
+from .. import DATA_DIR
 from ..errors import ConfigError
 from ..schema import build, load_yaml, rng
 
-DEFAULT_PARAMS = PROJECT_ROOT / "configs" / "params.yaml"
+#: the shipped parameters (package data; ``configs/params.yaml`` in the repository links to it)
+DEFAULT_PARAMS = DATA_DIR / "params.yaml"
 #: a plant coefficient or the gains K_f, K_a may differ from the paper's eq 39 value by at most
 #: this factor either way: beyond it the model is no EHPSS of this kind (and far enough beyond,
 #: its exact discretization and the adaptive layer's scales overflow)
@@ -91,6 +93,6 @@ class Params:
 
 
 def load_params(path: str | Path | None = None) -> Params:
-    """Load parameters from YAML (default: the shipped ``configs/params.yaml``)."""
+    """Load parameters from YAML (default: the shipped :data:`DEFAULT_PARAMS`)."""
     p = Path(path) if path is not None else DEFAULT_PARAMS
     return build(Params, load_yaml(p), str(p))

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import EhpssError
+from ..extras import require
 from .annotate import Interval, event_labels, fallback_intervals, runs_of
 from .result import SimResult
 
@@ -48,13 +48,12 @@ class RunView:
 
 
 def _pyplot() -> Any:
-    try:
-        import matplotlib
+    require("plot", "plotting")
+    import matplotlib
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as exc:
-        raise EhpssError("plotting needs matplotlib: pip install 'ehpss-hil[plot]'") from exc
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     return plt
 
 

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import EhpssError
+from ..extras import require
 from .figures import RunView, mark_events, plot_runs, shade
 from .logdata import LogRun
 from .logviews import log_view
@@ -43,21 +43,15 @@ SLOT_NAMES = {
 }
 
 
-class PlotUnavailableError(EhpssError, ImportError):
-    """matplotlib is not installed (it is the optional ``plot`` extra)."""
-
-
 def pyplot() -> Any:
-    """``matplotlib.pyplot`` with the file-only Agg backend, or a clear error."""
-    try:
-        import matplotlib
+    """``matplotlib.pyplot`` with the file-only Agg backend, or a
+    :class:`~ehpss_hil.errors.MissingExtraError` naming the ``plot`` extra."""
+    require("plot", "figures (or use --no-figures)")
+    import matplotlib
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as exc:
-        raise PlotUnavailableError(
-            "figures need matplotlib: pip install 'ehpss-hil[plot]' (or use --no-figures)"
-        ) from exc
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     return plt
 
 

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import logging
-import resource
 import time
 from typing import TYPE_CHECKING
 
@@ -13,6 +12,7 @@ from .deadline import DeadlineTimer, socket_wake
 from .lifecycle import State
 from .phaselock import PhaseLock
 from .signals import StopFlag
+from .stats import peak_rss_bytes
 
 if TYPE_CHECKING:
     from .controller_loop import ControllerLoop
@@ -122,7 +122,7 @@ def loop_summary(loop: ControllerLoop) -> dict[str, object]:
         "setpoints": {"accepted": loop.setpoints.accepted, "rejected": loop.setpoints.rejected},
         "received_by_verdict": {v.name: n for v, n in loop.codec.counts.items()},
         "stats": loop.stats.summary(),
-        "max_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+        "max_rss_bytes": peak_rss_bytes(),
         **({"cia408": loop.master.summary()} if loop.master is not None else {}),
     }
 

@@ -21,6 +21,23 @@ log = logging.getLogger(__name__)
 SERIES = ("compute_s", "lateness_s", "latency_s")
 
 
+def peak_rss_bytes() -> int:
+    """This process's peak resident set size (bytes): ``VmHWM`` of ``/proc/self/status``, the
+    high-water mark of its own address space since its exec. ``getrusage``'s ``ru_maxrss`` is
+    only the fallback (no /proc): Linux carries it across exec, so a process started by a large
+    one (``ehpss-hil run``/``bench``, through vfork + exec) reports its parent's size there."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
 class Ring:
     """A fixed-size ring of float samples (s) with all-time count and max."""
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from ... import PROJECT_ROOT
+from ... import DATA_DIR
 from ...errors import ConfigError
 
-EDS_DIR = PROJECT_ROOT / "eds"
+EDS_DIR = DATA_DIR / "eds"
 VALVE_EDS = EDS_DIR / "ehpss-valve-cia408.eds"
 ENCODER_EDS = EDS_DIR / "ehpss-encoder-cia406.eds"
 
