@@ -57,7 +57,6 @@ def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, 
     sc.write_text(_SCENARIO.format(seconds=seconds, ts=1.0 / rate))
     ctrl_args, emu_args = _VARIANTS[variant]
     d = out / variant
-    before = hostref.cpu_times()
     res = execute(
         RunPlan(
             scenario_path=sc,
@@ -71,7 +70,6 @@ def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, 
             truth=False,
         )
     )
-    steal = hostref.steal_fraction(before, hostref.cpu_times())
     check_exit_codes(res)
     c = json.loads((d / "controller-summary.json").read_text())
     e = json.loads((d / "emulator-summary.json").read_text())
@@ -94,7 +92,7 @@ def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, 
         "skipped_periods": c.get("skipped_periods", 0),
         "emulator_overruns": e["stats"]["overruns"],
         "emulator_lateness_s": e["stats"]["lateness_s"],
-        "host_steal_fraction": steal,
+        "host_steal_fraction": res.host_steal_fraction,
     }
 
 
