@@ -5,6 +5,7 @@ summaries)."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -79,3 +80,30 @@ def metrics_from_run(out_dir: Path, plot: bool = False, written: list[Path] | No
         (out_dir / "metrics.json").unlink(missing_ok=True)
         raise OutputError(f"{out_dir}: cannot write the metrics: {exc.strerror or exc}") from exc
     return row
+
+
+def _um(v: Any) -> str:
+    return "—" if not isinstance(v, int | float) or not math.isfinite(v) else f"{v * 1e6:.2f} µm"
+
+
+def _event(e: dict[str, Any]) -> str:
+    rec = e.get("recovery_s")
+    rec_txt = "never" if rec is None or math.isinf(rec) else f"{rec * 1e3:.0f} ms"
+    return f"{e['t_s']:.2f} s: peak {_um(e.get('peak_error_m'))}, recovery {rec_txt}"
+
+
+def describe(row: dict[str, Any]) -> list[str]:
+    """A metrics row in a few lines of text (the JSON stays in ``metrics.json``)."""
+    lines = [
+        f"{row.get('scenario')} {row.get('controller')}: RMS {_um(row.get('rms_error_m'))}, "
+        f"pre-fault max {_um(row.get('pre_fault_max_m'))}, switches {row.get('switches', '—')}"
+    ]
+    events = row.get("events") or []
+    if events:
+        lines.append("events: " + "; ".join(_event(e) for e in events))
+    rejected = (row.get("extra") or {}).get("rejected_frames") or {}
+    if rejected:
+        lines.append("rejected frames: " + ", ".join(f"{k} {n}" for k, n in rejected.items()))
+    if row.get("unavailable"):
+        lines.append("not in the log: " + ", ".join(map(str, row["unavailable"])))
+    return lines
