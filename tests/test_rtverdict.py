@@ -1,5 +1,6 @@
 """The realtime verdict (``runtime/rtverdict.py``) on exit summaries as the two processes write
-them: thresholds crossed or not → valid, and one reason per threshold crossed."""
+them: thresholds crossed or not → valid, and one reason per threshold crossed; the watchdog
+counters it reads; which scenarios lose frames on purpose; the demo's verdict over its runs."""
 
 from __future__ import annotations
 
@@ -7,9 +8,12 @@ import copy
 from dataclasses import fields
 from typing import Any
 
+from ehpss_hil import PROJECT_ROOT as ROOT
 from ehpss_hil.config import Watchdog
-from ehpss_hil.runtime.rtverdict import LOCKSTEP_REASON, RealtimeThresholds, judge
+from ehpss_hil.run_metrics import loses_frames
+from ehpss_hil.runtime.rtverdict import LOCKSTEP_REASON, RealtimeThresholds, combine, judge
 from ehpss_hil.runtime.watchdog import SensorWatchdog
+from ehpss_hil.scenario import load_scenario
 
 T_S = 1e-3
 
@@ -152,3 +156,22 @@ def test_the_watchdog_counts_trips_by_reason_and_knows_a_silence_after_its_last_
     assert wd.silent_since_trip
     wd.update(True)
     assert not wd.silent_since_trip  # a frame came after it: a trip of the run itself
+
+
+def test_a_scenario_that_drops_frames_on_purpose_is_known_as_such() -> None:
+    """Its watchdog trips are then the scenario's (as offline), not the host's."""
+    sc = ROOT / "scenarios"
+    assert loses_frames(load_scenario(sc / "extra" / "unseen-blackouts.yaml"))  # an event's loss
+    assert loses_frames(load_scenario(sc / "extra" / "unseen-frameloss2pct.yaml"))
+    assert not loses_frames(load_scenario(sc / "case2-drift.yaml"))
+
+
+def test_several_runs_are_valid_only_when_each_is_and_each_reason_names_its_run() -> None:
+    """The demo's verdict over its nrc and mmac runs."""
+    ok = judge(CONTROLLER, EMULATOR, T_S)
+    bad = judge(_with(CONTROLLER, skipped_periods=9), EMULATOR, T_S)
+    assert combine({"nrc": ok, "mmac": ok}).valid
+    v = combine({"nrc": ok, "mmac": bad})
+    assert not v.valid and v.reasons == ["mmac: controller skipped 9 periods (limit 5, 0.001 of its periods)"]
+    lock = judge({}, None, T_S, lockstep=True)
+    assert combine({"nrc": lock, "mmac": lock}).reasons == [LOCKSTEP_REASON]

@@ -24,7 +24,7 @@ from ..errors import BusUnavailableError
 from ..orchestrate import RunPlan, check_exit_codes, execute
 from ..report.metrics import compute_metrics
 from ..run_metrics import metrics_from_run
-from ..runtime.rtverdict import REALTIME_INVALID_EXIT, RealtimeVerdict, end_trip
+from ..runtime.rtverdict import REALTIME_INVALID_EXIT, RealtimeVerdict, combine, end_trip
 from ..scenario import load_scenario
 from ..sim.lockstep import run_scenario
 from . import check_config
@@ -83,13 +83,13 @@ def _hil(args: argparse.Namespace) -> dict[str, tuple[dict[str, Any], str]]:
 
 
 def _verdict(hil: dict[str, tuple[dict[str, Any], str]]) -> RealtimeVerdict:
-    """One verdict for the demo's runs: valid when each is; the reasons prefixed by the mode."""
-    reasons: list[str] = []
-    valid = True
-    for mode, (row, _extra) in hil.items():
-        valid &= bool(row["realtime_valid"])
-        reasons += [r if row["realtime_valid"] else f"{mode}: {r}" for r in row["realtime_reasons"]]
-    return RealtimeVerdict(valid, list(dict.fromkeys(reasons)))
+    """One verdict for the demo's runs (from their metrics rows), the reasons named by mode."""
+    return combine(
+        {
+            mode: RealtimeVerdict(bool(row["realtime_valid"]), row["realtime_reasons"])
+            for mode, (row, _) in hil.items()
+        }
+    )
 
 
 def run(args: argparse.Namespace) -> int:

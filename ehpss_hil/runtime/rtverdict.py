@@ -111,6 +111,14 @@ class RealtimeVerdict:
         return {"realtime_valid": self.valid, "realtime_reasons": list(self.reasons)}
 
 
+def combine(by_run: Mapping[str, RealtimeVerdict]) -> RealtimeVerdict:
+    """One verdict over several runs (e.g. the demo's nrc and mmac): valid when each is; the
+    reasons of the runs that are not valid, each prefixed by the run's name."""
+    valid = all(v.valid for v in by_run.values())
+    reasons = [r if v.valid else f"{name}: {r}" for name, v in by_run.items() for r in v.reasons]
+    return RealtimeVerdict(valid, list(dict.fromkeys(reasons)))
+
+
 def end_trip(controller: Mapping[str, Any]) -> int:
     """1 when the controller's last watchdog trip is the silence after the emulator ended the
     run (a sensor timeout with no sensor frame after it), else 0."""
