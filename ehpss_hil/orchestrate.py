@@ -35,6 +35,7 @@ from .childprocs import last_line, spawn, stop, wait_for_line
 from .config import DEFAULT_MULTICAST_GROUP
 from .errors import BusUnavailableError, OutputError, ProcessFailedError
 from .rundir import prepare_run_dir, record_outputs
+from .runtime.hoststeal import cpu_times, steal_fraction
 from .scenario import Scenario, load_scenario
 from .schema import load_yaml
 
@@ -102,6 +103,9 @@ class RunResult:
     wall_s: float = 0.0
     #: the emulator had not finished the scenario when the finish timeout stopped it (s)
     unfinished_after_s: float | None = None
+    #: the host's steal time over the run (share of the time this VM wanted a CPU; None: not
+    #: measured, e.g. no /proc/stat)
+    host_steal_fraction: float | None = None
 
 
 def multicast_route_reason(group: str = DEFAULT_MULTICAST_GROUP) -> str | None:
@@ -284,6 +288,7 @@ def execute(plan: RunPlan) -> RunResult:
     prefix = netns.prefix() if netns is not None else []
     res = RunResult(out)
     t0 = time.monotonic()
+    ticks0 = cpu_times()
     procs: dict[str, subprocess.Popen[bytes]] = {}
     try:
         if plan.bus_logger:
@@ -320,6 +325,7 @@ def execute(plan: RunPlan) -> RunResult:
         if netns is not None:
             netns.close()
     res.wall_s = time.monotonic() - t0
+    res.host_steal_fraction = steal_fraction(ticks0, cpu_times())
     _write_run_json(plan, sc, cmds, res, netns is not None)
     return res
 
@@ -338,6 +344,7 @@ def _write_run_json(
         "commands": cmds,
         "exit_codes": res.exit_codes,
         "wall_s": round(res.wall_s, 3),
+        "host_steal_fraction": res.host_steal_fraction,
         "started_unix_s": time.time() - res.wall_s,
         "pid": os.getpid(),
     }

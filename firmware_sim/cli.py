@@ -3,6 +3,10 @@
 ``firmware-sim -c configs/emulator.yaml [--interface I --channel C] [--scenario S] [--rate HZ]
 [--mode realtime|lockstep] [--truth] [--log FILE] [--duration S]``
 
+Realtime, a scenario given with ``--scenario`` ends at its duration (a run); the config's own
+``scenario:`` runs until SIGTERM/SIGINT (the stand-in valve's background); ``--duration`` sets
+the length either way. Lockstep ends after the scenario's duration (or ``--duration``).
+
 Exit codes: 0 (normal end, SIGTERM/SIGINT), 1 (lockstep peer stopped answering, other errors),
 2 (bad config: the message names file and key path), 3 (bus unavailable).
 """
@@ -45,7 +49,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--interface", choices=("udp_multicast", "socketcan", "virtual"), help="override bus.interface"
     )
     p.add_argument("--channel", help="override bus.channel (vcan0, a 239.x.y.z group, ...)")
-    p.add_argument("--scenario", type=Path, help="override the scenario file")
+    p.add_argument(
+        "--scenario",
+        type=Path,
+        help="override the scenario file; the run then ends at the scenario's duration "
+        "(without it, realtime runs until SIGTERM)",
+    )
     p.add_argument("--rate", type=float, help="period rate (Hz), overrides rate_hz")
     p.add_argument("--mode", choices=("realtime", "lockstep"), help="override mode")
     p.add_argument("--truth", action="store_true", help="send PLANT_TRUTH/PLANT_FAULTS (bench)")
@@ -53,7 +62,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority 1..99 (0 = none)")
     p.add_argument("--cpu", type=int, help="pin to this CPU")
     p.add_argument("--log", help="candump -L log of every frame sent and received")
-    p.add_argument("--duration", type=float, help="stop after this many seconds of plant time")
+    p.add_argument(
+        "--duration",
+        type=float,
+        help="stop after this many seconds of plant time (default: the --scenario's duration; "
+        "realtime with the config's scenario: until SIGTERM)",
+    )
     p.add_argument(
         "--lockstep-timeout",
         type=float,
@@ -157,6 +171,14 @@ def _sidecar(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenario) 
     }
 
 
+def realtime_periods(args: argparse.Namespace, rate_hz: float, scenario: Scenario) -> int | None:
+    """Periods a realtime run lasts: ``--duration``; else the scenario's when it was given on the
+    command line; None (until SIGTERM) for the config's own scenario."""
+    if args.duration is not None:
+        return round(args.duration * rate_hz)
+    return scenario.n_samples if args.scenario is not None else None
+
+
 def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenario) -> int:
     """``protocol: cia408``: the plant behind an emulated CiA 408 valve and CiA 406 encoder."""
     from ehpss_hil.protocol.cia408.check import check_nodes
@@ -189,7 +211,7 @@ def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenari
             cfg.rate_hz,
             scenario.name,
         )
-        proc.run_realtime(stop, None if args.duration is None else round(args.duration * cfg.rate_hz))
+        proc.run_realtime(stop, realtime_periods(args, cfg.rate_hz, scenario))
     finally:
         restore_handlers(previous)
         io.close()
@@ -256,8 +278,7 @@ def run(args: argparse.Namespace) -> int:
             n = scenario.n_samples if args.duration is None else round(args.duration * cfg.rate_hz)
             ok = proc.run_lockstep(stop, n)
         else:
-            n_rt = None if args.duration is None else round(args.duration * cfg.rate_hz)
-            proc.run_realtime(stop, n_rt)
+            proc.run_realtime(stop, realtime_periods(args, cfg.rate_hz, scenario))
     finally:
         restore_handlers(previous)
         io.close()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from ehpss_hil.bench.hostref import cpu_times, steal_fraction
+from ehpss_hil.runtime.hoststeal import cpu_times, steal_fraction
 
 STAT_A = "cpu  1000 0 200 5000 10 0 30 40 0 0\ncpu0 500 0 100 2500 5 0 15 20 0 0\nintr 1\n"
 STAT_B = "cpu  1300 5 260 5600 10 0 35 140 77 0\ncpu0 650 0 130 2800 5 0 17 70 0 0\nintr 2\n"

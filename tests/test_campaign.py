@@ -282,7 +282,11 @@ def test_the_shipped_campaigns_load() -> None:
 def test_bench_campaign_prints_every_row_and_writes_its_figures(tmp_path: Path) -> None:
     js = tmp_path / "bench.json"
     out = _cli("bench", "campaign", "--runs", "2", "--no-dask", "--json", str(js))
-    assert out.returncode == 0, out.stderr
+    # its targets (speed-up, mmac speed) depend on the host's load: the exit code follows them
+    failed = [line for line in out.stdout.splitlines()[:-1] if line.rstrip().endswith("FAIL")]
+    assert out.returncode == (1 if failed else 0), out.stdout + out.stderr
+    last = out.stdout.splitlines()[-1]
+    assert last.startswith(f"bench campaign: {len(failed)} of") if failed else last.endswith("target(s) PASS")
     assert "speed-up local ×2 / ×1" in out.stdout and "mmac offline speed" in out.stdout
     data = json.loads(js.read_text())
     assert [e["runs"] for e in data["executors"]] == [2, 2]

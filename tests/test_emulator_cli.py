@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 from _proc import CLIENT, FIRMWARE_SIM, ROOT, Proc
+from _scenarios import short_scenario_yaml
 
 from ehpss_hil.bus import af_can_available
 from ehpss_hil.bus.netns import PrivateNetns, netns_unavailable_reason
@@ -46,6 +47,30 @@ def test_sigterm_exits_0_with_counters() -> None:
     finally:
         p.kill()
     assert "frames sent" in p.text and "lateness p50" in p.text
+
+
+def test_realtime_with_a_scenario_ends_at_its_duration(tmp_path: Path) -> None:
+    """``firmware-sim --scenario S`` in realtime (no peer, no ``--duration``) ends by itself after
+    S's 0.3 s of plant time, exit 0, all 300 periods accounted (executed or skipped)."""
+    sc = tmp_path / "short.yaml"
+    sc.write_text(short_scenario_yaml("short", 0.3, "{t_s: 0.1, k_loe: 0.5}"))
+    summary = tmp_path / "emu.json"
+    args = [
+        "--interface",
+        "virtual",
+        "--channel",
+        "ends",
+        "--scenario",
+        str(sc),
+        "--summary-json",
+        str(summary),
+    ]
+    p = Proc([*FIRMWARE_SIM, "-c", EMU_CFG, *args])
+    try:
+        assert p.wait(limit_s=120.0) == 0, p.text
+    finally:
+        p.kill()
+    assert json.loads(summary.read_text())["periods"] == 300
 
 
 @netns

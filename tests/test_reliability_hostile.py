@@ -17,6 +17,7 @@ from ehpss_hil.reliability.hostile import (
 )
 from ehpss_hil.reliability.procs import skip_reason
 from ehpss_hil.reliability.stray import KINDS, stray_trial
+from ehpss_hil.runtime.rtverdict import REALTIME_INVALID_EXIT
 
 SKIP = skip_reason()
 FS_SKIP = tmpfs_unavailable_reason()
@@ -47,7 +48,8 @@ def test_run_never_removes_foreign_files(tmp_path: Path, short_scenario: Path) -
     assert r.refused_exit == 2 and len(r.refused_lines) == 1, r.refused_lines
     assert "--overwrite" in r.refused_lines[0]
     assert r.kept_after_refusal == r.kept_after_run == len(FOREIGN)
-    assert r.overwrite_exit == 0 and r.run_files == 3
+    # 4: the run completed but this (loaded) host did not hold the rate; its files are written
+    assert r.overwrite_exit in (0, REALTIME_INVALID_EXIT) and r.run_files == 3
     assert r.ok
 
 

@@ -22,7 +22,7 @@ from ..campaign.localcluster import LocalDaskCluster
 from ..campaign.runs import RunTask, execute
 from ..campaign.spec import load_campaign
 from ..extras import EXTRAS, require
-from .common import write_json
+from .common import Scorecard, write_json
 from .control import SPEED_TARGET
 
 NAME = "campaign"
@@ -63,15 +63,16 @@ def _figures(name: str, wall: float, recs: list[dict[str, Any]], workers: int) -
     }
 
 
-def _row(what: str, value: str, target: str, ok: bool | None) -> str:
-    verdict = "" if ok is None else ("PASS" if ok else "FAIL")
+def _row(card: Scorecard, what: str, value: str, target: str, ok: bool | None) -> str:
+    verdict = card.mark(ok, f"{what} {value} (target {target})")
     return f"{what:44s} {value:>14s}  {target:>16s}  {verdict}"
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> Scorecard:
     require("campaign", "ehpss-hil bench campaign", ("scipy",) if args.no_dask else EXTRAS["campaign"])
     from ..campaign.sampling import plan_runs
 
+    card = Scorecard()
     camp = load_campaign(args.file)
     camp = replace(camp, spec=replace(camp.spec, duration_s=BENCH_DURATION_S))
     plans = plan_runs(camp)[: args.runs + 2]
@@ -95,17 +96,18 @@ def run(args: argparse.Namespace) -> int:
         f"{len(tasks)} runs of {BENCH_DURATION_S:g} s × {len(camp.spec.modes)} modes per executor; "
         f"{os.cpu_count()} CPUs, load average {load} (other programs slow every figure)"
     )
-    print(_row("", "measured", "target", None))
+    print(_row(card, "", "measured", "target", None))
     for r in results:
-        print(_row(f"{r['executor']}: runs/s", f"{r['runs_per_s']:.2f}", "", None))
-        print(_row(f"{r['executor']}: one run in its worker (s)", f"{r['run_s']:.3f}", "", None))
+        print(_row(card, f"{r['executor']}: runs/s", f"{r['runs_per_s']:.2f}", "", None))
+        print(_row(card, f"{r['executor']}: one run in its worker (s)", f"{r['run_s']:.3f}", "", None))
         dask = r["executor"].startswith("Dask")
         target = f"≤ {DASK_OVERHEAD_TARGET:.0%}" if dask else ""
         ok = r["overhead"] <= DASK_OVERHEAD_TARGET if dask else None
-        print(_row(f"{r['executor']}: overhead", f"{r['overhead']:.1%}", target, ok))
+        print(_row(card, f"{r['executor']}: overhead", f"{r['overhead']:.1%}", target, ok))
     speedup = results[1]["runs_per_s"] / results[0]["runs_per_s"]
     print(
         _row(
+            card,
             f"speed-up local ×{WORKERS} / ×1",
             f"{speedup:.2f}×",
             f"≥ {SPEEDUP_TARGET}×",
@@ -114,18 +116,19 @@ def run(args: argparse.Namespace) -> int:
     )
     if len(results) > 2:
         ratio = results[2]["runs_per_s"] / results[0]["runs_per_s"]
-        print(_row(f"speed-up Dask ×{WORKERS} / local ×1", f"{ratio:.2f}×", "", None))
+        print(_row(card, f"speed-up Dask ×{WORKERS} / local ×1", f"{ratio:.2f}×", "", None))
     worst, med = min(speeds), statistics.median(speeds)
     print(
         _row(
+            card,
             "mmac offline speed, median run (× real time)",
             f"{med:.0f}×",
             f"≥ {SPEED_TARGET:.0f}×",
             med >= SPEED_TARGET,
         )
     )
-    print(_row("mmac offline speed, slowest run (× real time)", f"{worst:.0f}×", "", None))
+    print(_row(card, "mmac offline speed, slowest run (× real time)", f"{worst:.0f}×", "", None))
     write_json(
         args.json, {"executors": results, "speedup": speedup, "mmac_speed": {"min": worst, "median": med}}
     )
-    return 0
+    return card

@@ -16,7 +16,7 @@ from ..control.registry import MODES
 from ..report.metrics import COMPENSATED_RMS_M, NO_HARM_RATIO, NO_HARM_RMS_M, RunMetrics
 from ..scenario import _FAULT_KEYS, load_scenario
 from ..sim.jobs import Job, default_jobs, run_jobs, scenario_paths
-from .common import write_json
+from .common import Scorecard, write_json
 
 NAME = "control"
 HELP = "control quality of nrc/smac/mmac-paper/mmac/oracle against the docs/design.md §11 targets"
@@ -274,12 +274,12 @@ def envelope_kinds(paths: list[Path]) -> dict[str, str]:
     return out
 
 
-def format_verdicts(vs: list[Verdict]) -> str:
-    """The one table: target, measured, limit, PASS/FAIL."""
+def format_verdicts(vs: list[Verdict], card: Scorecard) -> str:
+    """The one table: target, measured, limit, PASS/FAIL (each marked on ``card``)."""
     w = max(len(v.what) for v in vs)
     lines = [f"{'target':{w}s}  {'measured':>28s}  {'limit':30s}  result", "-" * (w + 72)]
     for v in vs:
-        res = "info" if v.ok is None else ("PASS" if v.ok else "FAIL")
+        res = card.mark(v.ok, f"{v.what} {v.measured.strip()} (limit {v.target})") or "info"
         lines.append(f"{v.what:{w}s}  {v.measured:>28s}  {v.target:30s}  {res}")
     return "\n".join(lines)
 
@@ -295,7 +295,8 @@ def _progress() -> Callable[[int, int], None] | None:
     return show
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> Scorecard:
+    card = Scorecard()
     sdir = PROJECT_ROOT / "scenarios"
     env_paths = sorted((sdir / ENVELOPE_DIR).glob("*.yaml"))
     paths = scenario_paths(
@@ -309,7 +310,7 @@ def run(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - t0
     table: Table = {(o.metrics.scenario, o.metrics.controller): o.metrics for o in outcomes}
     vs = verdicts(table, envelope_kinds(env_paths))
-    print(format_verdicts(vs))
+    print(format_verdicts(vs, card))
     simulated = sum(o.metrics.duration_s for o in outcomes)
     print(
         f"\n{len(jobs)} runs, {simulated:.0f} s simulated in {wall:.1f} s wall on "
@@ -319,4 +320,4 @@ def run(args: argparse.Namespace) -> int:
     write_json(
         args.json, {"rows": [o.metrics.to_json() for o in outcomes], "targets": [v.__dict__ for v in vs]}
     )
-    return 0 if all(v.ok is not False for v in vs) else 1
+    return card

@@ -38,7 +38,7 @@ from ..reliability.table import (
     rogue_rows,
     term_rows,
 )
-from .common import finite_json, write_json
+from .common import Scorecard, finite_json, write_json
 
 NAME = "faults"
 HELP = (
@@ -124,7 +124,7 @@ def _hostile_section(q: bool, out: Path, rows: list[Row], s: Summary, raw: dict[
     raw.update(stray=st, foreign_files=fo, disk_full=disk, rogue=rg)
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> Scorecard:
     t0 = time.monotonic()
     rng = random.Random(args.seed)
     rows: list[Row] = []
@@ -166,7 +166,11 @@ def run(args: argparse.Namespace) -> int:
             }
         ),
     )
-    return 0 if s.ok else 1
+    card = Scorecard()
+    for r in rows:  # the table's PASS/FAIL, then the summary line's
+        card.mark(r.ok, f"{r.fault}: {r.case}")
+    card.mark(s.ok, "summary: " + ", ".join(s.failed or ["crashes or data lost"]))
+    return card
 
 
 def _jsonable(v: Any) -> Any:

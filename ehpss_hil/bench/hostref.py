@@ -8,8 +8,7 @@ the software or the host is to blame: the ``mmac`` control step plus one VALVE_C
 work of a cycle that every deployment has), on a recorded fault-free measurement sequence, once
 per period with a ``select()`` sleep between (as in the daemon), and back to back.
 
-And the hypervisor's share: the *steal* time of ``/proc/stat`` (CPU time the host gave to
-someone else while this VM had work), over a run, as a share of the time the VM wanted a CPU.
+The hypervisor's share (steal time over a run) is :mod:`ehpss_hil.runtime.hoststeal`.
 """
 
 from __future__ import annotations
@@ -17,7 +16,6 @@ from __future__ import annotations
 import math
 import select
 import time
-from pathlib import Path
 from typing import Any
 
 from ..codec import FrameCodec
@@ -64,36 +62,3 @@ def measure(rate_hz: float, periods: int = 3000) -> dict[str, Any]:
     for k in range(500 + periods, 500 + 2 * periods):
         hot.add(work(k))
     return {"after_sleep_s": slept.summary(), "back_to_back_s": hot.summary()}
-
-
-def cpu_times(stat: str | None = None) -> tuple[int, ...] | None:
-    """The aggregate ``cpu`` line of ``/proc/stat`` (or of ``stat``, its text) as ticks: user,
-    nice, system, idle, iowait, irq, softirq, steal, …; None where there is none or no steal
-    column (not Linux, or a kernel before 2.6.11)."""
-    try:
-        text = Path("/proc/stat").read_text() if stat is None else stat
-    except OSError:
-        return None
-    for line in text.splitlines():
-        parts = line.split()
-        if parts and parts[0] == "cpu":
-            try:
-                ticks = tuple(int(x) for x in parts[1:])
-            except ValueError:
-                return None
-            return ticks if len(ticks) >= 8 else None
-    return None
-
-
-def steal_fraction(before: tuple[int, ...] | None, after: tuple[int, ...] | None) -> float | None:
-    """Steal ticks between two :func:`cpu_times` readings as a share of the time this VM wanted
-    a CPU: steal / (busy + steal), busy being user, nice, system, irq and softirq (idle and
-    iowait left out; guest time is already inside user/nice). None without both readings or
-    without any busy time."""
-    if before is None or after is None:
-        return None
-    user, nice, system, _idle, _iowait, irq, softirq, steal = (
-        a - b for a, b in zip(after[:8], before[:8], strict=True)
-    )
-    wanted = user + nice + system + irq + softirq + steal
-    return steal / wanted if wanted > 0 else None

@@ -8,8 +8,9 @@ and prints the controller's cycle compute time (with ``wake_on_sensor``, as in b
 sensor pair's receive/classify happens while waiting and is not in it; it is in the latency),
 wake-up lateness and sensor→command latency (p50/p99/p99.9/max), the overrun ratio, rejected
 frames and peak RSS beside docs/design.md §11's targets. Figures come from each process's own
-preallocated statistics (``--summary-json``). Then the host's share (:mod:`.hostref`): the
-control step + VALVE_CMD encode alone, after a sleep and back to back.
+preallocated statistics (``--summary-json``); each variant's first line is its realtime verdict
+(:mod:`ehpss_hil.runtime.rtverdict`: did the host hold the rate). Then the host's share
+(:mod:`.hostref`): the control step + VALVE_CMD encode alone, after a sleep and back to back.
 """
 
 from __future__ import annotations
@@ -21,8 +22,9 @@ from pathlib import Path
 from typing import Any
 
 from ..orchestrate import RunPlan, check_exit_codes, execute
+from ..runtime.rtverdict import RealtimeVerdict, end_trip, judge
 from . import hostref
-from .common import write_json
+from .common import Scorecard, write_json
 
 NAME = "loop"
 HELP = "real-time loop of controller + emulator on the embedded bus: latency, jitter, overruns, RSS"
@@ -61,7 +63,6 @@ def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, 
     sc.write_text(_SCENARIO.format(seconds=seconds, ts=1.0 / rate))
     ctrl_args, emu_args = _VARIANTS[variant]
     d = out / variant
-    before = hostref.cpu_times()
     res = execute(
         RunPlan(
             scenario_path=sc,
@@ -75,11 +76,11 @@ def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, 
             truth=False,
         )
     )
-    steal = hostref.steal_fraction(before, hostref.cpu_times())
     check_exit_codes(res)
     c = json.loads((d / "controller-summary.json").read_text())
     e = json.loads((d / "emulator-summary.json").read_text())
     st = c["stats"]
+    verdict = judge(c, e, 1.0 / rate, steal_fraction=res.host_steal_fraction)
     rejected = sum(n for v, n in c["received_by_verdict"].items() if v not in ("OK", "OK_SOME_LOST"))
     return {
         "variant": variant,
@@ -92,14 +93,15 @@ def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, 
         "overruns": st["overruns"],
         "overrun_ratio": st["overruns"] / max(c["cycles"], 1),
         "rejected_frames": rejected,
-        "watchdog_trips": c["watchdog_trips"],
+        "watchdog_trips": c["watchdog_trips"] - end_trip(c),
+        **verdict.to_json(),
         "controller_max_rss_bytes": c.get("max_rss_bytes"),
         "emulator_max_rss_bytes": e.get("max_rss_bytes"),
         "woken_by_sensor": c.get("woken_by_sensor", 0),
         "skipped_periods": c.get("skipped_periods", 0),
         "emulator_overruns": e["stats"]["overruns"],
         "emulator_lateness_s": e["stats"]["lateness_s"],
-        "host_steal_fraction": steal,
+        "host_steal_fraction": res.host_steal_fraction,
     }
 
 
@@ -119,20 +121,22 @@ def _print_host(ref: dict[str, Any]) -> None:
         )
 
 
-def _rss_row(variant: str, who: str, peak: int | None) -> str:
+def _rss_row(variant: str, who: str, peak: int | None, card: Scorecard) -> str:
     """The PASS/FAIL row of one process's peak RSS (its own VmHWM) against :data:`RSS_TARGET_BYTES`."""
     if peak is None:
         return f"{variant:<7} {who} peak RSS: not reported"
-    verdict = "PASS" if peak <= RSS_TARGET_BYTES else "FAIL"
+    verdict = card.mark(peak <= RSS_TARGET_BYTES, f"{variant} {who} peak RSS {peak / 2**20:.1f} MiB")
     return (
         f"{variant:<7} {who + ' peak RSS':<28} {peak / 2**20:8.1f} MiB = {peak / 1e6:.1f} MB  "
         f"≤ {RSS_TARGET_BYTES / 1e6:.0f} MB {verdict}"
     )
 
 
-def _print(rows: list[dict[str, Any]]) -> None:
+def _print(rows: list[dict[str, Any]], card: Scorecard) -> None:
     print(f"{'variant':<7} {'figure':<28} {'p50 µs':>8} {'p99 µs':>8} {'p99.9 µs':>8} {'max µs':>8}  target")
     for r in rows:
+        v = RealtimeVerdict(r["realtime_valid"], r["realtime_reasons"])
+        print(f"{r['variant']:<7} {v.line()}")
         ov_target = 1e-4 if r["rate_hz"] <= 1000 else 1e-3
         lines = [
             ("controller compute", r["compute_s"], "p99 ≤ 100 µs", r["compute_s"]["p99"] <= 1e-4),
@@ -146,19 +150,20 @@ def _print(rows: list[dict[str, Any]]) -> None:
             ("emulator wake-up lateness", r["emulator_lateness_s"], "", None),
         ]
         for label, d, target, ok in lines:
-            verdict = "" if ok is None else ("PASS" if ok else "FAIL")
+            verdict = card.mark(ok, f"{r['variant']} {label} p99 {d['p99'] * 1e6:.0f} µs ({target})")
             print(f"{r['variant']:<7} {label:<28} {_us(d)}  {target} {verdict}")
+        ov = r["overrun_ratio"]
+        ov_verdict = card.mark(ov <= ov_target, f"{r['variant']} overruns {ov:.2e} (≤ {ov_target:g})")
         print(
             f"{r['variant']:<7} overruns {r['overruns']} / {r['cycles']} cycles = "
-            f"{r['overrun_ratio']:.2e} (target ≤ {ov_target:g}: "
-            f"{'PASS' if r['overrun_ratio'] <= ov_target else 'FAIL'}), skipped periods "
+            f"{ov:.2e} (target ≤ {ov_target:g}: {ov_verdict}), skipped periods "
             f"{r['skipped_periods']}, cycles started by the sensor pair {r['woken_by_sensor']}; "
             f"emulator overruns "
             f"{r['emulator_overruns']}; rejected frames {r['rejected_frames']}; watchdog trips "
-            f"{r['watchdog_trips']} (incl. the one at the end)"
+            f"{r['watchdog_trips']} (not counting the one when the emulator ended the run)"
         )
         for who in ("controller", "emulator"):
-            print(_rss_row(r["variant"], who, r[f"{who}_max_rss_bytes"]))
+            print(_rss_row(r["variant"], who, r[f"{who}_max_rss_bytes"], card))
         steal = r.get("host_steal_fraction")
         if steal is not None:
             print(
@@ -167,7 +172,7 @@ def _print(rows: list[dict[str, Any]]) -> None:
             )
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> Scorecard:
     rows = []
     with tempfile.TemporaryDirectory(prefix="ehpss-bench-loop-") as tmp:
         out = args.out or Path(tmp)
@@ -179,7 +184,8 @@ def run(args: argparse.Namespace) -> int:
             rows.append(_measure(v, args.rate, args.seconds, out))
     print("timing the controller's own work on this host (no bus) ...", flush=True)
     host = hostref.measure(args.rate)
-    _print(rows)
+    card = Scorecard()
+    _print(rows, card)
     _print_host(host)
     write_json(args.json, {"variants": rows, "host": host})
-    return 0
+    return card

@@ -27,7 +27,7 @@ from typing import Any
 
 from ..extras import require
 from ..orchestrate import RunPlan, check_exit_codes, execute
-from .common import write_json
+from .common import Scorecard, write_json
 
 NAME = "monitor"
 HELP = "live monitor beside a 1 kHz run: page refresh rate and the monitor's CPU use"
@@ -174,35 +174,38 @@ def _measure(seconds: float, browser: bool, tmp: Path) -> dict[str, Any]:
     }
 
 
-def _print(r: dict[str, Any]) -> None:
-    def verdict(ok: bool) -> str:
-        return "PASS" if ok else "FAIL"
+def _print(r: dict[str, Any], card: Scorecard) -> None:
+    def verdict(ok: bool, what: str) -> str:
+        return card.mark(ok, what)
 
     print(f"bus: {r['bus_frames_per_s']:.0f} frames/s, load {r['bus_load'] * 100:.1f} % of 1 Mbit/s")
     ws = r["ws_pushes_per_s"]
+    ws_verdict = verdict(ws >= REFRESH_TARGET_HZ, f"WebSocket pushes {ws:.1f} Hz")
     print(
         f"WebSocket pushes           {ws:6.1f} Hz (longest gap {r['ws_gap_max_s'] * 1e3:.0f} ms)"
-        f"   target ≥ {REFRESH_TARGET_HZ:g} Hz {verdict(ws >= REFRESH_TARGET_HZ)}"
+        f"   target ≥ {REFRESH_TARGET_HZ:g} Hz {ws_verdict}"
     )
     if r["page_refresh_hz"] is not None:
         pr = r["page_refresh_hz"]
+        pr_verdict = verdict(pr >= REFRESH_TARGET_HZ, f"page refresh {pr:.1f} Hz")
         print(
             f"page refresh (Chromium)    {pr:6.1f} Hz median, {r['page_refresh_min_hz']:.1f} Hz lowest 1-s"
-            f" window   target ≥ {REFRESH_TARGET_HZ:g} Hz {verdict(pr >= REFRESH_TARGET_HZ)}"
+            f" window   target ≥ {REFRESH_TARGET_HZ:g} Hz {pr_verdict}"
         )
     else:
         print("page refresh (Chromium)    not measured (no chromium/chromedriver/selenium, or --no-browser)")
     cpu = r["cpu_share_of_one_core"]
     print(
         f"monitor CPU                {cpu * 100:6.1f} % of one core over {r['seconds']:.1f} s"
-        f"   target ≤ {CPU_TARGET * 100:g} % {verdict(cpu <= CPU_TARGET)}"
+        f"   target ≤ {CPU_TARGET * 100:g} % {verdict(cpu <= CPU_TARGET, f'monitor CPU {cpu * 100:.1f} %')}"
     )
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> Scorecard:
     require("monitor", "ehpss-hil bench monitor")
     with tempfile.TemporaryDirectory(prefix="ehpss-bench-monitor-") as tmp:
         r = _measure(args.seconds, _has_browser() and not args.no_browser, Path(tmp))
-    _print(r)
+    card = Scorecard()
+    _print(r, card)
     write_json(args.json, r)
-    return 0
+    return card

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from ..reliability.procs import READY, Child, Trial, skip_reason
-from .common import finite_json, write_json
+from .common import Scorecard, finite_json, write_json
 
 NAME = "soak"
 HELP = "long run of both processes at 1 kHz: RSS and counters at start and end"
@@ -110,8 +110,7 @@ def _soak(out: Path, seconds: float, warmup: float, interval: float) -> dict[str
     }
 
 
-def _print(r: dict[str, Any]) -> bool:
-    ok = all(v == 0 for v in r["exits"].values())
+def _print(r: dict[str, Any], card: Scorecard) -> None:
     print(
         f"{'process':<10} {'when':<6} {'t s':>6} {'VmRSS MiB':>10} {'VmHWM MiB':>10} "
         f"{'threads':>7} {'CPU s':>8} {'vol cs':>9} {'invol cs':>9}"
@@ -125,13 +124,13 @@ def _print(r: dict[str, Any]) -> bool:
             )
         growth = ss[-1]["VmRSS"] - ss[0]["VmRSS"]
         peak = max(s["VmRSS"] for s in ss)
-        verdict = growth <= GROWTH_LIMIT_KB and (name != "controller" or peak * 1024 <= RSS_LIMIT_B)
-        ok &= verdict
+        ok = growth <= GROWTH_LIMIT_KB and (name != "controller" or peak * 1024 <= RSS_LIMIT_B)
+        verdict = card.mark(ok, f"{name} RSS growth {growth / 1024:+.2f} MiB, peak {peak / 1024:.2f} MiB")
         print(
             f"{name:<10} RSS growth start→end {growth / 1024:+.2f} MiB (≤ "
             f"{GROWTH_LIMIT_KB / 1024:g} MiB), peak {peak / 1024:.2f} MiB"
             f"{' (controller ≤ 100 MB)' if name == 'controller' else ''}: "
-            f"{'PASS' if verdict else 'FAIL'}"
+            f"{verdict}"
         )
     cc = r["controller_counters"]
     for when, c in (("first", cc[0]), ("last", cc[-1])) if cc else ():
@@ -155,11 +154,11 @@ def _print(r: dict[str, Any]) -> bool:
             n for v, n in s.get("received_by_verdict", {}).items() if v not in ("OK", "OK_SOME_LOST")
         )
         print(f"{name} at the end: {figures}")
-    print(f"exit codes {r['exits']}: {'PASS' if ok else 'FAIL'}")
-    return ok
+    exits = r["exits"]
+    print(f"exit codes {exits}: {card.mark(all(v == 0 for v in exits.values()), f'exit codes {exits}')}")
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> Scorecard:
     why = skip_reason()
     if why is not None:
         raise SystemExit(f"bench soak: {why}")
@@ -167,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
         out = args.out or Path(tmp)
         print(f"soak: controller + emulator at 1 kHz for {args.seconds:g} s ...", flush=True)
         r = _soak(out, args.seconds, args.warmup, args.interval)
-    ok = _print(r)
+    card = Scorecard()
+    _print(r, card)
     write_json(args.json, finite_json(r))
-    return 0 if ok else 1
+    return card

@@ -5,9 +5,14 @@ imports only the module of the command asked for (``ehpss-hil --help`` imports n
 
 from __future__ import annotations
 
+from ..bench import BENCHES
+
 #: subcommand → (module in this package, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "bench": ("bench", "benchmarks: codec, control, loop, faults, soak (print figures beside their targets)"),
+    "bench": (
+        "bench",
+        f"benchmarks: {', '.join(BENCHES)} (figures beside their targets; exit 1 when a target fails)",
+    ),
     "campaign": (
         "campaign",
         "Monte-Carlo fault campaign (sampled faults × nrc/mmac/oracle) on local cores or a Dask cluster",

@@ -5,6 +5,10 @@ as two real processes on the embedded bus (plus a bus logger), once with NRC and
 then the metrics side by side, next to the deterministic offline simulation of the same
 scenario, and where the logs and figures are. Where this host can neither make a private
 network namespace nor route multicast, it says so and shows the offline simulation only.
+
+The result starts with the realtime verdict of the two-process runs
+(:mod:`ehpss_hil.runtime.rtverdict`) and, when the host did not hold the rate, what to do about
+it; exit 4 then (the figures shown are not the controller's), else 0.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from ..extras import require
 from ..orchestrate import RunPlan, check_exit_codes, execute
 from ..report.metrics import compute_metrics
 from ..run_metrics import metrics_from_run
+from ..runtime.rtverdict import REALTIME_INVALID_EXIT, RealtimeVerdict, combine, end_trip
 from ..scenario import load_scenario
 from ..sim.lockstep import run_scenario
 from . import check_config
@@ -69,13 +74,23 @@ def _hil(args: argparse.Namespace) -> dict[str, tuple[dict[str, Any], str]]:
         check_exit_codes(res)
         row = metrics_from_run(d, plot=(mode == "mmac"))
         summ = json.loads((d / "controller-summary.json").read_text())
+        trips = int(summ.get("watchdog_trips", 0)) - end_trip(summ)
         extra = (
-            f"watchdog trips {summ.get('watchdog_trips')} (incl. the emulator's stop at "
-            f"the end), overruns {summ.get('stats', {}).get('overruns')}, skipped periods "
-            f"{summ.get('skipped_periods', 0)}"
+            f"watchdog trips {trips}, overruns {summ.get('stats', {}).get('overruns')}, "
+            f"skipped periods {summ.get('skipped_periods', 0)}"
         )
         out[mode] = (row, extra)
     return out
+
+
+def _verdict(hil: dict[str, tuple[dict[str, Any], str]]) -> RealtimeVerdict:
+    """One verdict for the demo's runs (from their metrics rows), the reasons named by mode."""
+    return combine(
+        {
+            mode: RealtimeVerdict(bool(row["realtime_valid"]), row["realtime_reasons"])
+            for mode, (row, _) in hil.items()
+        }
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -91,6 +106,9 @@ def run(args: argparse.Namespace) -> int:
     except BusUnavailableError as exc:
         print(f"two-process run not possible here: {exc}\n(showing the offline simulation only)")
     kind = "lockstep" if args.lockstep else "real time"
+    verdict = _verdict(hil) if hil else None
+    if verdict is not None:
+        print(f"\n{verdict.line()}")
     print(
         f"\n{'run':<22} {'mode':<6} {'RMS µm':>9} {'pre µm':>9} {'switches':>8}  "
         f"{'peaks µm':<16} {'recov ms':<12}"
@@ -108,4 +126,4 @@ def run(args: argparse.Namespace) -> int:
         )
         print(f"report + figures: {args.out}/mmac/report/report.md, {args.out}/mmac/report/figures/")
         print(f"replay: ehpss-hil replay {args.out}/mmac/controller.log")
-    return 0
+    return 0 if verdict is None or verdict.valid else REALTIME_INVALID_EXIT

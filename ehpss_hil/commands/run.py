@@ -1,9 +1,14 @@
-"""``ehpss-hil run SCENARIO``: emulator + controller + bus logger as real processes on one bus."""
+"""``ehpss-hil run SCENARIO``: emulator + controller + bus logger as real processes on one bus.
+
+Prints the realtime verdict first (:mod:`ehpss_hil.runtime.rtverdict`), then a short summary of
+the metrics; the JSON is in the run directory. Exit 0; 4 when the processes ended cleanly but
+the host did not hold the rate (``realtime_valid`` false: the figures are not the
+controller's); 1 a process failed; 2 bad input or output; 3 missing interface.
+"""
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -11,8 +16,9 @@ from ..canlog import read_sidecar
 from ..control.registry import DAEMON_MODES
 from ..extras import require
 from ..orchestrate import CONTROLLER_YAML, EMULATOR_YAML, RunPlan, check_exit_codes, execute
-from ..run_metrics import metrics_from_run
+from ..run_metrics import describe, metrics_from_run
 from ..rundir import RUN_LOGS, record_outputs
+from ..runtime.rtverdict import REALTIME_INVALID_EXIT, RealtimeVerdict
 from ..schema import load_yaml
 
 NAME = "run"
@@ -20,7 +26,13 @@ NAME = "run"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", type=Path, help="scenario YAML (scenarios/case2-drift.yaml, ...)")
-    p.add_argument("--mode", default="mmac", choices=DAEMON_MODES)
+    p.add_argument(
+        "--mode",
+        default="mmac",
+        choices=DAEMON_MODES,
+        help="the controller's control law: nrc (the paper's PI), smac (one adaptive model), "
+        "mmac-paper (the paper's joint bank), mmac (per-channel banks; default)",
+    )
     p.add_argument(
         "--interface", choices=("udp_multicast", "socketcan"), help="override the configs' bus.interface"
     )
@@ -120,11 +132,13 @@ def run(args: argparse.Namespace) -> int:
         row = metrics_from_run(out, plot=args.plot, written=written)
     finally:
         record_outputs(out, written)
-    print(json.dumps(row, indent=1))
+    verdict = RealtimeVerdict(bool(row["realtime_valid"]), list(row["realtime_reasons"]))
+    print(verdict.line())
+    print("\n".join(describe(row)))
     for log in RUN_LOGS:
         counts = (read_sidecar(out / log) or {}).get("counts") or {}
         if counts.get("dropped"):
             why = ", ".join(f"{k} {n}" for k, n in (counts.get("dropped_by_reason") or {}).items())
             print(f"warning: {log}: {counts['dropped']} lines not written ({why})", file=sys.stderr)
     print(f"run directory: {out} (bus.log, metrics.json, run.json)")
-    return 0
+    return 0 if verdict.valid else REALTIME_INVALID_EXIT

@@ -23,6 +23,7 @@ from types import TracebackType
 from typing import Any
 
 from .. import PROJECT_ROOT
+from ..runtime.rtverdict import REALTIME_INVALID_EXIT
 from .procs import PY, Trial
 
 FOREIGN = ("app.log.1", "syslog.log", "catalog.logbook", "notes.out")
@@ -91,7 +92,7 @@ class ForeignResult:
             self.refused_exit == 2
             and len(self.refused_lines) == 1
             and self.kept_after_refusal == self.kept_after_run == len(FOREIGN)
-            and self.overwrite_exit == 0
+            and self.overwrite_exit in (0, REALTIME_INVALID_EXIT)  # completed; 4: host too busy
             and self.run_files > 0
         )
 

@@ -296,7 +296,7 @@ def hostile_rows(
                 f"refused: exit {foreign.refused_exit}, kept "
                 f"{foreign.kept_after_refusal}/4; --overwrite: exit "
                 f"{foreign.overwrite_exit}, kept {foreign.kept_after_run}/4",
-                "exit 2 + one line, then exit 0; all 4 kept",
+                "exit 2 + one line, then exit 0 (4: realtime not valid); all 4 kept",
                 foreign.ok,
             )
         )

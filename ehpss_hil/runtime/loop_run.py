@@ -110,6 +110,8 @@ def loop_summary(loop: ControllerLoop) -> dict[str, object]:
         "state": loop.life.state.name,
         "failsafe_reason": loop.life.reason.name,
         "watchdog_trips": loop.wd.trips,
+        "watchdog_trips_by_reason": dict(loop.wd.trips_by_reason),
+        "watchdog_trip_at_end": loop.wd.silent_since_trip,
         "failsafe_cycles": loop.failsafe_cycles,
         "saturations": loop.saturations,
         "nominal_fallbacks": _fallbacks(loop),

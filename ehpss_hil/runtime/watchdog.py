@@ -68,6 +68,10 @@ class SensorWatchdog:
         self._streak_implausible = 0
         self.trips = 0
         self.overrun_trips = 0
+        #: trips per FailsafeReason name (count)
+        self.trips_by_reason: dict[str, int] = {}
+        #: a fresh cycle came after the last trip (False: no sensor frame since it)
+        self.fresh_since_trip = True
         self.lateness = LateWindow(self.cfg.starvation_window_cycles)
 
     @property
@@ -108,6 +112,14 @@ class SensorWatchdog:
         self.reason = reason
         self.trips += 1
         self.overrun_trips += reason is FailsafeReason.LOOP_OVERRUN
+        self.trips_by_reason[reason.name] = self.trips_by_reason.get(reason.name, 0) + 1
+        self.fresh_since_trip = False
+
+    @property
+    def silent_since_trip(self) -> bool:
+        """Tripped on a sensor timeout and no sensor frame since: at the end of a run, the
+        silence after the emulator stopped (not a trip of the run itself)."""
+        return self.tripped and self.reason is FailsafeReason.SENSOR_TIMEOUT and not self.fresh_since_trip
 
     def update(self, fresh: bool, e2e_errors: int = 0, implausible: int = 0, late: bool = False) -> bool:
         """Account one cycle; ``e2e_errors``/``implausible`` = sensor frames rejected this cycle
@@ -117,6 +129,7 @@ class SensorWatchdog:
         if fresh:
             self.stale_cycles = 0
             self.fresh_cycles += 1
+            self.fresh_since_trip = True
             self.e2e_errors = 0
             self._streak_e2e = 0
             self._streak_implausible = 0
