@@ -48,6 +48,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--transport frames), e.g. configs/controller-vendor.yaml",
     )
     p.add_argument(
+        "--params",
+        metavar="PARAMS.yaml",
+        default="",
+        help="the controller's model params (its models and y_m; default configs/params.yaml); "
+        "the emulated plant stays configs/params.yaml under each scenario's plant: section",
+    )
+    p.add_argument(
         "--jobs",
         "-j",
         type=int,
@@ -121,13 +128,18 @@ def run(args: argparse.Namespace) -> int:
         from ..sim.lockstep import config_codec
 
         config_codec(args.protocol)  # a bad config or map: exit 2 before any run
+    params = plant = None
+    if args.params:
+        from ..physics.params import load_params
+
+        params, plant = load_params(args.params), load_params().plant  # bad file: exit 2
     jobs = [
         Job(p, m, transport, keep_result=bool(args.plot), protocol_config=args.protocol)
         for p in paths
         for m in modes
     ]
     t0 = time.perf_counter()
-    outcomes = run_jobs(jobs, args.jobs)
+    outcomes = run_jobs(jobs, args.jobs, params, plant_params=plant)
     wall = time.perf_counter() - t0
     rows = [o.metrics for o in outcomes]
     print(format_table(rows))

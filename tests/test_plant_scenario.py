@@ -1,0 +1,97 @@
+"""A scenario's ``plant:`` section: the emulated plant's own parameters (plant ≠ model)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ehpss_hil.emulation import PlantEmulation
+from ehpss_hil.errors import ConfigError
+from ehpss_hil.physics.hydraulics import NonlinearPlant
+from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.plant import LinearPlant
+from ehpss_hil.physics.plantspec import PlantSpec
+from ehpss_hil.report.metrics import compute_metrics
+from ehpss_hil.scenario import Scenario, load_scenario
+from ehpss_hil.sim.lockstep import run_scenario
+
+PARAMS = load_params()
+NOMINAL_FLOW_GAIN = PARAMS.plant.flow_gain_1_s3
+
+BASE = """\
+name: p
+duration_s: 1.0
+reference: {kind: sine, amplitude_m: 0.001, omega_rad_s: 5.0}
+"""
+
+
+def _load(tmp_path: Path, text: str) -> Scenario:
+    p = tmp_path / "s.yaml"
+    p.write_text(text)
+    return load_scenario(p)
+
+
+def test_plant_section_builds_the_emulated_plant_only(tmp_path: Path) -> None:
+    sc = _load(tmp_path, BASE + f"plant: {{flow_gain_1_s3: {1.1 * NOMINAL_FLOW_GAIN!r}}}\n")
+    emu = PlantEmulation(PARAMS, sc)
+    assert isinstance(emu.plant, LinearPlant)
+    assert emu.plant.plant_params.flow_gain_1_s3 == pytest.approx(1.1 * NOMINAL_FLOW_GAIN)
+    assert emu.plant.plant_params.load_mass_kg == PARAMS.plant.load_mass_kg
+    assert emu.params is PARAMS  # the controller's params are untouched
+
+
+@pytest.mark.parametrize("mode", ["nrc", "oracle"])
+def test_flow_gain_off_the_model_moves_rms_and_keeps_the_models(tmp_path: Path, mode: str) -> None:
+    sc = _load(tmp_path, BASE)
+    off = replace(sc, plant=PlantSpec(flow_gain_1_s3=1.1 * NOMINAL_FLOW_GAIN))
+    a, b = run_scenario(sc, mode, PARAMS), run_scenario(off, mode, PARAMS)
+    np.testing.assert_array_equal(a.y_m_m, b.y_m_m)  # y_m: the controller's params
+    ra, rb = compute_metrics(a).rms_error_m, compute_metrics(b).rms_error_m
+    assert abs(rb - ra) > 0.05 * ra, (ra, rb)
+    # a faster plant (K_c 10 % up) leads y_m: x − y_m changes sign against the nominal's lag
+    assert not np.allclose(a.x_true_m, b.x_true_m)
+
+
+def test_plant_params_argument_is_the_base_of_the_section(tmp_path: Path) -> None:
+    sc = _load(tmp_path, BASE + "plant: {load_mass_kg: 25.0}\n")
+    other = replace(PARAMS.plant, flow_gain_1_s3=2.0 * NOMINAL_FLOW_GAIN)
+    emu = PlantEmulation(PARAMS, sc, other)
+    assert isinstance(emu.plant, LinearPlant)
+    assert emu.plant.plant_params.flow_gain_1_s3 == 2.0 * NOMINAL_FLOW_GAIN
+    assert emu.plant.plant_params.load_mass_kg == 25.0
+
+
+def test_nonlinear_model_selected(tmp_path: Path) -> None:
+    sc = _load(tmp_path, BASE + "plant: {model: nonlinear, area_ratio: 0.6, supply_pressure_pa: 2.0e7}\n")
+    emu = PlantEmulation(PARAMS, sc)
+    assert isinstance(emu.plant, NonlinearPlant)
+    assert emu.plant.hp.area_b_m2 == pytest.approx(0.6 * PARAMS.plant.piston_area_m2)
+    assert emu.plant.hp.supply_pressure_pa == 2.0e7
+
+
+@pytest.mark.parametrize(
+    "section,key_path,reason",
+    [
+        ("{flow_gain: 1.0e8}", "plant.flow_gain", "unknown key"),
+        ("{flow_gain_1_s3: -1.0}", "plant.flow_gain_1_s3", "expected a value >"),
+        ("{area_ratio: 0.5}", "plant.area_ratio", "needs model: nonlinear"),
+        ("{model: nonlinear, area_ratio: 1.5}", "plant.area_ratio", "<= 1.0"),
+        ("{model: quadratic}", "plant.model", "one of"),
+        (
+            "{model: nonlinear, supply_pressure_pa: 1.0e6, return_pressure_pa: 2.0e6}",
+            "plant.return_pressure_pa",
+            "below supply",
+        ),
+        ("{model: nonlinear, spool_overlap_m: 0.01}", "plant.spool_overlap_m", "below the spool stroke"),
+        ("{spool_stroke_m: 0.02}", "plant.spool_stroke_m", "<= 0.01"),
+        ("[1, 2]", "plant", "expected a mapping"),
+    ],
+)
+def test_bad_plant_section_names_key_path(tmp_path: Path, section: str, key_path: str, reason: str) -> None:
+    with pytest.raises(ConfigError) as exc:
+        _load(tmp_path, BASE + f"plant: {section}\n")
+    assert exc.value.key_path == key_path
+    assert reason in exc.value.reason
