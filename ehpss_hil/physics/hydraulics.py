@@ -49,8 +49,10 @@ FRICTION_VELOCITY_M_S = 1e-3
 LAND_LEAK_SHARE = 0.5
 #: the orifice law turns laminar below this fraction of P_S − P_T (keeps √Δp differentiable)
 ORIFICE_LAMINAR_FRACTION = 0.01
-#: longest integration sub-step (s): ω_h·h ≤ 0.6 at the centre, about 4 % frequency warping
-SUBSTEP_MAX_S = 1.0e-4
+#: longest integration sub-step (s): 8 per 1 ms sample, ω_h·h = 0.7 at the centre, where the
+#: trapezoidal rule puts the hydraulic mode 3.8 % low ((2/h)·atan(ω_h·h/2)); the error is
+#: O(h²): small-signal load pressure within 7.5 % RMS of the exact lumped plant, position 0.1 %
+SUBSTEP_MAX_S = 1.25e-4
 
 
 @dataclass(frozen=True)
