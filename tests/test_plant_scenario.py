@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.errors import ConfigError
 from ehpss_hil.physics.hydraulics import NonlinearPlant
@@ -95,3 +99,34 @@ def test_bad_plant_section_names_key_path(tmp_path: Path, section: str, key_path
         _load(tmp_path, BASE + f"plant: {section}\n")
     assert exc.value.key_path == key_path
     assert reason in exc.value.reason
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "ehpss_hil.cli", *args], capture_output=True, text=True, check=False
+    )
+
+
+def test_sim_params_sets_the_controllers_model_only(tmp_path: Path) -> None:
+    """``sim --params FILE``: the controller (its models, y_m) uses FILE, the plant stays
+    configs/params.yaml (a model 10 % off a nominal plant moves the RMS); a missing FILE is
+    one line and exit 2."""
+    sc = tmp_path / "s.yaml"
+    sc.write_text(BASE.replace("duration_s: 1.0", "duration_s: 0.5"))
+    text = (PROJECT_ROOT / "configs" / "params.yaml").read_text()
+    off = tmp_path / "params.yaml"
+    off.write_text(text.replace("flow_gain_1_s3: 1.031e8", "flow_gain_1_s3: 1.1341e8"))
+    assert off.read_text() != text
+    rows: list[float] = []
+    for extra in ([], ["--params", str(off)]):
+        out = tmp_path / f"r{len(rows)}.json"
+        res = _cli("sim", str(sc), "-C", "oracle", "-j", "1", "--json", str(out), *extra)
+        assert res.returncode == 0, res.stderr
+        rows.append(json.loads(out.read_text())[0]["rms_error_m"])
+    direct = compute_metrics(
+        run_scenario(load_scenario(sc), "oracle", load_params(off), plant_params=PARAMS.plant)
+    )
+    assert rows[1] == pytest.approx(direct.rms_error_m, rel=1e-9)
+    assert abs(rows[1] - rows[0]) > 0.05 * rows[0]
+    bad = _cli("sim", str(sc), "-C", "nrc", "-j", "1", "--params", str(tmp_path / "missing.yaml"))
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1

@@ -211,96 +211,98 @@ class NonlinearPlant:
         applied (limited) current (A)."""
         lim = self.faults.current_limit_a
         u = min(max(current_a, -lim), lim)
+        self._hydraulics(self._spool_path(u))
+        return u
+
+    def _spool_path(self, u: float) -> list[float]:
+        """Step the valve over the sample's sub-steps (exact ZOH each, the actual spool stopped
+        inelastically at the stroke); returns the mean actual spool of each sub-step (m)."""
         (v0, v1, vb), (x0, x1, xb) = self._valve
         k_loe = self.faults.k_loe
         stop = self.hp.spool_stroke_m / k_loe
         vv, xv = self._vv, self._xv
+        path = []
         for _ in range(self.substeps):
             xs0 = xv
             vv, xv = v0 * vv + v1 * xv + vb * u, x0 * vv + x1 * xv + xb * u
             if xv > stop or xv < -stop:
                 xv, vv = (stop if xv > 0.0 else -stop), 0.0
-            self._hydraulic_substep(0.5 * k_loe * (xs0 + xv))
+            path.append(0.5 * k_loe * (xs0 + xv))
         self._vv, self._xv = vv, xv
-        return u
+        return path
 
-    def _flows(self, xs: float, pa: float, pb: float) -> tuple[float, float, float, float]:
-        """Valve flows into A and B (m³/s) and their conductances −∂Q_A/∂P_A, −∂Q_B/∂P_B
-        (m³/(s·Pa)) for actual spool ``xs`` (m), orifices plus the laminar land leaks."""
-        hp = self.hp
-        ps, pt, lam = hp.supply_pressure_pa, hp.return_pressure_pa, self._p_lam
-        cl = hp.land_leak_m3_s_pa
-        qa = cl * (ps + pt - 2.0 * pa)
-        qb = cl * (ps + pt - 2.0 * pb)
-        ga = gb = 2.0 * cl
-        lap = hp.spool_overlap_m
-        if xs > lap:
-            kx = self._kv * (xs - lap)
-            d, s = _orifice(ps - pa, lam)
-            qa += kx * d
-            ga += kx * s
-            d, s = _orifice(pb - pt, lam)
-            qb -= kx * d
-            gb += kx * s
-        elif xs < -lap:
-            kx = self._kv * (-lap - xs)  # > 0: the opening towards the other lands
-            d, s = _orifice(pa - pt, lam)
-            qa -= kx * d
-            ga += kx * s
-            d, s = _orifice(ps - pb, lam)
-            qb += kx * d
-            gb += kx * s
-        return qa, qb, ga, gb
-
-    def _hydraulic_substep(self, xs: float) -> None:
-        """One linearly implicit trapezoidal step of ``(P_A, P_B, x, ẋ)`` over h with the
-        actual spool ``xs`` (m) held; then the end stops."""
-        hp, h = self.hp, self._h
-        pa, pb, x, v = self._pa, self._pb, self._x, self._v
-        aa, ab, m, beta, c_i = (
-            hp.area_a_m2,
-            hp.area_b_m2,
-            hp.mass_kg,
-            hp.bulk_modulus_pa,
-            hp.internal_leak_m3_s_pa,
+    def _hydraulics(self, spools: list[float]) -> None:
+        """Linearly implicit trapezoidal sub-steps of ``(P_A, P_B, x, ẋ)``, one per actual spool
+        in ``spools`` (m, held over the sub-step), then the end stops. Each solves
+        ``(I − h/2·J)·Δ = h·f`` with the analytic Jacobian J: Δx = h·ẋ + h/2·Δẋ eliminated, then
+        (ΔP_A, ΔP_B) in terms of Δẋ (2×2), then Δẋ (scalar). Locals only: the simulator's hot path."""
+        hp, h, kv, lam = self.hp, self._h, self._kv, self._p_lam
+        ps, pt, lap, cl2 = (
+            hp.supply_pressure_pa,
+            hp.return_pressure_pa,
+            hp.spool_overlap_m,
+            2.0 * hp.land_leak_m3_s_pa,
         )
-        ea = beta / (aa * (hp.chamber_length_m + x))
-        eb = beta / (ab * (hp.chamber_length_m - x))
-        qa, qb, ga, gb = self._flows(xs, pa, pb)
-        qi = c_i * (pa - pb)
-        th = 0.5 * h
-        fc, vs = hp.coulomb_friction_n, hp.friction_velocity_m_s
-        if fc > 0.0:
-            tv = math.tanh(v / vs)
-            friction, dfric = (
-                hp.viscous_friction_n_s_m * v + fc * tv,
-                hp.viscous_friction_n_s_m + fc * (1.0 - tv * tv) / vs,
+        aa, ab, m, ci = hp.area_a_m2, hp.area_b_m2, hp.mass_kg, hp.internal_leak_m3_s_pa
+        ba, bb, length = hp.bulk_modulus_pa / aa, hp.bulk_modulus_pa / ab, hp.chamber_length_m
+        bv, fc, vs, ks, fext = (
+            hp.viscous_friction_n_s_m,
+            hp.coulomb_friction_n,
+            hp.friction_velocity_m_s,
+            hp.spring_n_m,
+            hp.external_force_n,
+        )
+        stroke, th, pst = hp.piston_stroke_m, 0.5 * h, ps + pt
+        cv0 = 1.0 + th * th * ks / m
+        pa, pb, x, v = self._pa, self._pb, self._x, self._v
+        acc, sqrt = 0.0, math.sqrt
+        for xs in spools:
+            ea, eb = ba / (length + x), bb / (length - x)  # β_e/V_A, β_e/V_B
+            qa, qb = 0.5 * cl2 * (pst - 2.0 * pa), 0.5 * cl2 * (pst - 2.0 * pb)  # land leaks
+            ga = gb = cl2
+            if xs > lap:  # P → A, B → T (√ inline when turbulent: the hot path)
+                kx = kv * (xs - lap)
+                dp = ps - pa
+                d, sl = (r := sqrt(dp), 0.5 / r) if dp > lam else _orifice(dp, lam)
+                qa, ga = qa + kx * d, ga + kx * sl
+                dp = pb - pt
+                d, sl = (r := sqrt(dp), 0.5 / r) if dp > lam else _orifice(dp, lam)
+                qb, gb = qb - kx * d, gb + kx * sl
+            elif xs < -lap:  # A → T, P → B
+                kx = kv * (-lap - xs)
+                dp = pa - pt
+                d, sl = (r := sqrt(dp), 0.5 / r) if dp > lam else _orifice(dp, lam)
+                qa, ga = qa - kx * d, ga + kx * sl
+                dp = ps - pb
+                d, sl = (r := sqrt(dp), 0.5 / r) if dp > lam else _orifice(dp, lam)
+                qb, gb = qb + kx * d, gb + kx * sl
+            qi = ci * (pa - pb)
+            if fc > 0.0:
+                tv = math.tanh(v / vs)
+                friction, dfric = bv * v + fc * tv, bv + fc * (1.0 - tv * tv) / vs
+            else:
+                friction, dfric = bv * v, bv
+            acc = (aa * pa - ab * pb - friction - ks * x - fext) / m
+            r1, r2 = h * ea * (qa - aa * v - qi), h * eb * (qb + ab * v + qi)
+            m11, m12 = 1.0 + th * ea * (ga + ci), -th * ea * ci
+            m21, m22 = -th * eb * ci, 1.0 + th * eb * (gb + ci)
+            s1, s2 = -th * ea * aa, th * eb * ab
+            inv = 1.0 / (m11 * m22 - m12 * m21)
+            pa0, qa_v = (m22 * r1 - m12 * r2) * inv, (m22 * s1 - m12 * s2) * inv
+            pb0, qb_v = (m11 * r2 - m21 * r1) * inv, (m11 * s2 - m21 * s1) * inv
+            ca, cb = -th * aa / m, th * ab / m
+            dv = (h * acc - th * h * ks * v / m - ca * pa0 - cb * pb0) / (
+                cv0 + th * dfric / m + ca * qa_v + cb * qb_v
             )
-        else:
-            friction, dfric = hp.viscous_friction_n_s_m * v, hp.viscous_friction_n_s_m
-        k_s = hp.spring_n_m
-        acc = (aa * pa - ab * pb - friction - k_s * x - hp.external_force_n) / m
-        # (I − θhJ)·Δ = h·f, with Δx = h·v + θh·Δv eliminated, then (ΔP_A, ΔP_B) in terms of Δv
-        r1, r2 = h * ea * (qa - aa * v - qi), h * eb * (qb + ab * v + qi)
-        m11, m12 = 1.0 + th * ea * (ga + c_i), -th * ea * c_i
-        m21, m22 = -th * eb * c_i, 1.0 + th * eb * (gb + c_i)
-        s1, s2 = -th * ea * aa, th * eb * ab
-        det = m11 * m22 - m12 * m21
-        pa0, qa_v = (m22 * r1 - m12 * r2) / det, (m22 * s1 - m12 * s2) / det
-        pb0, qb_v = (m11 * r2 - m21 * r1) / det, (m11 * s2 - m21 * s1) / det
-        ca, cb = -th * aa / m, th * ab / m
-        cv = 1.0 + th * dfric / m + th * th * k_s / m
-        dv = (h * acc - th * h * k_s * v / m - ca * pa0 - cb * pb0) / (cv + ca * qa_v + cb * qb_v)
-        self._pa = pa + pa0 + qa_v * dv
-        self._pb = pb + pb0 + qb_v * dv
-        x += h * v + th * dv
-        v += dv
-        stroke = hp.piston_stroke_m
-        if x > stroke:
-            x, v = stroke, min(v, 0.0)
-        elif x < -stroke:
-            x, v = -stroke, max(v, 0.0)
-        self._x, self._v, self._acc = x, v, acc
+            pa += pa0 + qa_v * dv
+            pb += pb0 + qb_v * dv
+            x += h * v + th * dv
+            v += dv
+            if x > stroke:
+                x, v = stroke, min(v, 0.0)
+            elif x < -stroke:
+                x, v = -stroke, max(v, 0.0)
+        self._pa, self._pb, self._x, self._v, self._acc = pa, pb, x, v, acc
 
 
 def _orifice(dp: float, lam: float) -> tuple[float, float]:
