@@ -169,6 +169,7 @@ def _summarize_campaign(path: Path, data: Any) -> str:
     return (
         f"campaign {c.spec.name}: {len(plans)} runs of {c.duration_s:g} s ({c.spec.sampler}), "
         f"{lo}-{hi} of {', '.join(kinds)}, modes {', '.join(c.spec.modes)}"
+        + (f", model error on {', '.join(me.ranges())}" if (me := c.spec.model_error) is not None else "")
     )
 
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 from ..errors import ConfigError
-from ..schema import rng
+from ..schema import build, rng
 from .params import PlantParams
 
 #: the lumped keys of params.yaml's ``plant:`` section
@@ -96,6 +96,13 @@ class PlantSpec:
     def is_nominal(self) -> bool:
         """True when the section changes nothing (linear model, no override)."""
         return self == PlantSpec()
+
+    def validated(self) -> PlantSpec:
+        """This section checked like a file's (ranges included: a section built in code, such
+        as a campaign's sampled plant, gets no range check otherwise); ConfigError naming the
+        key."""
+        data = {f.name: v for f in dataclasses.fields(self) if (v := getattr(self, f.name)) is not None}
+        return build(PlantSpec, data)
 
     def describe(self) -> str:
         """``linear``, or ``nonlinear, flow_gain_1_s3 1.134e+08, area_ratio 0.6`` (keys set)."""
