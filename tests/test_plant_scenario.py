@@ -130,3 +130,17 @@ def test_sim_params_sets_the_controllers_model_only(tmp_path: Path) -> None:
     assert abs(rows[1] - rows[0]) > 0.05 * rows[0]
     bad = _cli("sim", str(sc), "-C", "nrc", "-j", "1", "--params", str(tmp_path / "missing.yaml"))
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+
+
+def test_sim_says_whether_plant_equals_model() -> None:
+    from ehpss_hil.commands.sim import plant_line
+
+    nominal = str(PROJECT_ROOT / "scenarios" / "fault-free.yaml")
+    rod = str(PROJECT_ROOT / "scenarios" / "plant" / "nonlinear-single-rod.yaml")
+    assert plant_line([nominal], "", False).startswith("plant = model")
+    line = plant_line([nominal, rod], "", False)
+    assert (
+        line.startswith("plant ≠ model") and "plant-nonlinear-single-rod: nonlinear, area_ratio 0.6" in line
+    )
+    assert "fault-free" not in line
+    assert plant_line([nominal], "mine.yaml", True).startswith("plant ≠ model (controller params mine.yaml")
