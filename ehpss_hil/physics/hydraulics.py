@@ -165,7 +165,6 @@ class NonlinearPlant:
         p0 = self.hp.rest_pressure_pa
         self._vv, self._xv = 0.0, 0.0
         self._pa, self._pb, self._x, self._v = p0, p0, 0.0, 0.0
-        self._acc = 0.0
         self.set_faults(FaultState())
 
     def set_faults(self, faults: FaultState) -> None:
@@ -252,14 +251,17 @@ class NonlinearPlant:
             hp.spring_n_m,
             hp.external_force_n,
         )
-        stroke, th, pst = hp.piston_stroke_m, 0.5 * h, ps + pt
-        cv0 = 1.0 + th * th * ks / m
+        stroke, th, cl = hp.piston_stroke_m, 0.5 * h, 0.5 * cl2
+        leak0 = cl * (ps + pt)  # land leaks into a chamber at zero pressure (m³/s)
+        # per-sample constants of the v row: Δẋ's own coefficient and those of ΔP_A, ΔP_B
+        cv0, cvf, ca, cb = 1.0 + th * th * ks / m, th / m, -th * aa / m, th * ab / m
+        hm, hks = h / m, th * h * ks / m
         pa, pb, x, v = self._pa, self._pb, self._x, self._v
-        acc, sqrt = 0.0, math.sqrt
+        sqrt = math.sqrt
         for xs in spools:
-            ea, eb = ba / (length + x), bb / (length - x)  # β_e/V_A, β_e/V_B
-            qa, qb = 0.5 * cl2 * (pst - 2.0 * pa), 0.5 * cl2 * (pst - 2.0 * pb)  # land leaks
-            ga = gb = cl2
+            hea, heb = h * ba / (length + x), h * bb / (length - x)  # h·β_e/V_A, h·β_e/V_B
+            tea, teb = 0.5 * hea, 0.5 * heb
+            qa, qb, ga, gb = leak0 - cl2 * pa, leak0 - cl2 * pb, cl2, cl2
             if xs > lap:  # P → A, B → T (√ inline when turbulent: the hot path)
                 kx = kv * (xs - lap)
                 dp = ps - pa
@@ -282,18 +284,15 @@ class NonlinearPlant:
                 friction, dfric = bv * v + fc * tv, bv + fc * (1.0 - tv * tv) / vs
             else:
                 friction, dfric = bv * v, bv
-            acc = (aa * pa - ab * pb - friction - ks * x - fext) / m
-            r1, r2 = h * ea * (qa - aa * v - qi), h * eb * (qb + ab * v + qi)
-            m11, m12 = 1.0 + th * ea * (ga + ci), -th * ea * ci
-            m21, m22 = -th * eb * ci, 1.0 + th * eb * (gb + ci)
-            s1, s2 = -th * ea * aa, th * eb * ab
+            r1, r2 = hea * (qa - aa * v - qi), heb * (qb + ab * v + qi)
+            m11, m12 = 1.0 + tea * (ga + ci), -tea * ci
+            m21, m22 = -teb * ci, 1.0 + teb * (gb + ci)
+            s1, s2 = -tea * aa, teb * ab
             inv = 1.0 / (m11 * m22 - m12 * m21)
             pa0, qa_v = (m22 * r1 - m12 * r2) * inv, (m22 * s1 - m12 * s2) * inv
             pb0, qb_v = (m11 * r2 - m21 * r1) * inv, (m11 * s2 - m21 * s1) * inv
-            ca, cb = -th * aa / m, th * ab / m
-            dv = (h * acc - th * h * ks * v / m - ca * pa0 - cb * pb0) / (
-                cv0 + th * dfric / m + ca * qa_v + cb * qb_v
-            )
+            force = aa * pa - ab * pb - friction - ks * x - fext  # m·ẍ (N)
+            dv = (hm * force - hks * v - ca * pa0 - cb * pb0) / (cv0 + cvf * dfric + ca * qa_v + cb * qb_v)
             pa += pa0 + qa_v * dv
             pb += pb0 + qb_v * dv
             x += h * v + th * dv
@@ -302,7 +301,7 @@ class NonlinearPlant:
                 x, v = stroke, min(v, 0.0)
             elif x < -stroke:
                 x, v = -stroke, max(v, 0.0)
-        self._pa, self._pb, self._x, self._v, self._acc = pa, pb, x, v, acc
+        self._pa, self._pb, self._x, self._v = pa, pb, x, v
 
 
 def _orifice(dp: float, lam: float) -> tuple[float, float]:
