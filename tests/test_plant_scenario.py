@@ -87,7 +87,17 @@ def test_nonlinear_model_selected(tmp_path: Path) -> None:
         (
             "{model: nonlinear, supply_pressure_pa: 1.0e6, return_pressure_pa: 2.0e6}",
             "plant.return_pressure_pa",
-            "below supply",
+            "below the supply",
+        ),
+        (
+            "{model: nonlinear, return_pressure_pa: 9.0e6, supply_pressure_pa: 1.0e5}",
+            "plant.return_pressure_pa",
+            "below the supply",
+        ),
+        (
+            "{model: nonlinear, supply_pressure_pa: 1.0e5, return_pressure_pa: 1.0e5}",
+            "plant.return_pressure_pa",
+            "below the supply",
         ),
         ("{model: nonlinear, spool_overlap_m: 0.01}", "plant.spool_overlap_m", "below the spool stroke"),
         ("{spool_stroke_m: 0.02}", "plant.spool_stroke_m", "<= 0.01"),
@@ -144,3 +154,47 @@ def test_sim_says_whether_plant_equals_model() -> None:
     )
     assert "fault-free" not in line
     assert plant_line([nominal], "mine.yaml", True).startswith("plant ≠ model (controller params mine.yaml")
+
+
+def test_check_config_builds_the_plant(tmp_path: Path) -> None:
+    """A plant the schema accepts but whose mapping fails (B_v/m above the damping): check-config
+    builds it, one line naming the key, exit 2; a good one is summarized with its plant."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(BASE + "plant: {model: nonlinear, viscous_friction_n_s_m: 1.0e6}\n")
+    res = _cli("check-config", str(bad))
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
+    assert "plant.viscous_friction_n_s_m" in res.stderr and "cylinder_damping" in res.stderr
+    good = tmp_path / "good.yaml"
+    good.write_text(BASE + "plant: {model: nonlinear, area_ratio: 0.6}\n")
+    res = _cli("check-config", str(good))
+    assert res.returncode == 0, res.stderr
+    assert "plant nonlinear, area_ratio 0.6" in res.stdout
+
+
+def test_a_bad_plant_in_a_worker_process_is_one_line_exit_2(tmp_path: Path) -> None:
+    """The error crosses the process pool (ConfigError pickles with its fields) and names the
+    file: no hang, no traceback."""
+    import pickle
+
+    err = pickle.loads(pickle.dumps(ConfigError("f.yaml", "plant.area_ratio", "bad")))
+    assert (err.source, err.key_path, err.reason, str(err)) == (
+        "f.yaml",
+        "plant.area_ratio",
+        "bad",
+        "f.yaml: plant.area_ratio: bad",
+    )
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(BASE + "plant: {model: nonlinear, viscous_friction_n_s_m: 1.0e6}\n")
+    good = PROJECT_ROOT / "scenarios" / "fault-free.yaml"
+    res = subprocess.run(
+        [sys.executable, "-m", "ehpss_hil.cli", "sim", str(bad), str(good), "-C", "nrc", "-j", "2"],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=120,  # a hang guard only
+    )
+    assert res.returncode == 2
+    assert res.stderr.strip().splitlines() == [
+        f"ehpss-hil sim: error: {bad}: plant.viscous_friction_n_s_m: B_v/m must stay below "
+        "cylinder_damping (2576 1/s)"
+    ]

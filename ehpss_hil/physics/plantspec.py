@@ -73,11 +73,13 @@ class PlantSpec:
             for key in NONLINEAR_KEYS:
                 if getattr(self, key) is not None:
                     raise ConfigError("", key, "a key of the nonlinear plant: needs model: nonlinear")
-        ps, pt = self.supply_pressure_pa, self.return_pressure_pa
-        if ps is not None and pt is not None and pt >= ps:
-            raise ConfigError(
-                "", "return_pressure_pa", f"must be below supply_pressure_pa ({pt:g} >= {ps:g})"
-            )
+        from .hydraulics import RETURN_PRESSURE_PA, SUPPLY_PRESSURE_PA  # (it imports this module)
+
+        ps = SUPPLY_PRESSURE_PA if self.supply_pressure_pa is None else self.supply_pressure_pa
+        pt = RETURN_PRESSURE_PA if self.return_pressure_pa is None else self.return_pressure_pa
+        if pt >= ps:
+            key = "return_pressure_pa" if self.return_pressure_pa is not None else "supply_pressure_pa"
+            raise ConfigError("", key, f"the return pressure must be below the supply ({pt:g} >= {ps:g} Pa)")
         stroke, lap = self.spool_stroke_m, self.spool_overlap_m
         if lap is not None and lap >= (stroke if stroke is not None else PlantParams().spool_stroke_m):
             raise ConfigError("", "spool_overlap_m", "must be below the spool stroke")

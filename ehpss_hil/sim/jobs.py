@@ -10,6 +10,7 @@ from pathlib import Path
 
 from ..blas import limit_blas_threads
 from ..control.tuning import ControlTuning
+from ..errors import ConfigError
 from ..physics.params import Params, PlantParams, load_params
 from ..report.metrics import RunMetrics, compute_metrics
 from ..report.result import SimResult
@@ -52,7 +53,12 @@ def _init(params: Params | None, tuning: ControlTuning | None, plant: PlantParam
 
 def _run(job: Job) -> JobOutcome:
     sc = job.scenario if isinstance(job.scenario, Scenario) else load_scenario(job.scenario)
-    res = run_scenario(sc, job.mode, _PARAMS, _TUNING, job.transport, job.protocol_config, _PLANT)
+    try:
+        res = run_scenario(sc, job.mode, _PARAMS, _TUNING, job.transport, job.protocol_config, _PLANT)
+    except ConfigError as exc:  # e.g. a plant section whose mapping fails: name the file
+        if exc.source or isinstance(job.scenario, Scenario):
+            raise
+        raise ConfigError(job.scenario, exc.key_path, exc.reason) from exc
     return JobOutcome(job, compute_metrics(res), res if job.keep_result else None)
 
 
