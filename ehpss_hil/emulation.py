@@ -16,8 +16,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .physics.faults import FaultState
-from .physics.params import Params
-from .physics.plant import PlantStepper
+from .physics.params import Params, PlantParams
+from .physics.plant import Plant, make_plant
 from .scenario import FrameLoss, Scenario
 
 _BLOCK = 4096
@@ -62,13 +62,19 @@ class _Stream:
 
 
 class PlantEmulation:
-    """Plant + sensors + the scenario's fault schedule, advanced one sample at a time."""
+    """Plant + sensors + the scenario's fault schedule, advanced one sample at a time.
 
-    def __init__(self, params: Params, scenario: Scenario) -> None:
+    The plant is the scenario's (``plant:`` section, :func:`~.physics.plant.make_plant`) over
+    ``plant_params``, the emulator's params.yaml plant (default: ``params.plant``); ``params``
+    also gives the PI gains that scale a disturbance entering at the valve.
+    """
+
+    def __init__(self, params: Params, scenario: Scenario, plant_params: PlantParams | None = None) -> None:
         self.params = params
         self.scenario = scenario
         self.ts_s = scenario.sample_time_s
-        self.plant = PlantStepper(params, self.ts_s)
+        base = plant_params if plant_params is not None else params.plant
+        self.plant: Plant = make_plant(scenario.plant, base, self.ts_s)
         self._timeline = scenario.fault_timeline()
         g = params.controller
         self._valve_dist_gain_a_per_m = g.k_f * g.k_a * g.k_p

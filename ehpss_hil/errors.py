@@ -64,6 +64,11 @@ class ConfigError(EhpssError, ValueError):
         key = key_path if key_path else "<top level>"
         super().__init__(one_line(f"{where}{key}: {reason}"))
 
+    def __reduce__(self) -> tuple[type[ConfigError], tuple[str, str, str]]:
+        """Pickled with its three fields: a worker process's error reaches the parent intact
+        (the default pickling calls ``__init__`` with the message alone and fails there)."""
+        return (type(self), (self.source, self.key_path, self.reason))
+
 
 class FrameError(EhpssError, ValueError):
     """A CAN frame cannot be encoded or decoded (malformed, unknown, implausible)."""

@@ -22,6 +22,7 @@ from .limits import (
     MIN_REFERENCE_SCALE,
 )
 from .physics.faults import FaultState
+from .physics.plantspec import PlantSpec
 from .schema import build, load_yaml, rng
 from .trajectory import ReferenceTable, load_reference_table
 
@@ -254,6 +255,8 @@ class Scenario:
     disturbance: Disturbance = field(default_factory=lambda: Disturbance(kind="none"))
     events: tuple[Event, ...] = ()
     description: str = ""
+    #: the emulated plant's own parameters (plant ≠ model; the controller keeps its params)
+    plant: PlantSpec = field(default_factory=PlantSpec)
     #: directory of the file it came from (for relative trajectory paths); not a YAML key
     base_dir: str = field(default="", metadata={"internal": True})
 

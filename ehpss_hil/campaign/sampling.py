@@ -8,7 +8,8 @@ scenario seed is a hash of (content hash, index). Workers receive finished scena
 table cannot depend on which worker ran what, or in which order.
 
 Dimensions of a point: the number of faults; per fault slot its kind, magnitude, onset, whether
-it ramps and the ramp's duration; the reference's kind, amplitude and frequency; the noise scale.
+it ramps and the ramp's duration; per plant key of ``model_error`` its relative error; the
+reference's kind, amplitude and frequency; the noise scale.
 """
 
 from __future__ import annotations
@@ -22,6 +23,9 @@ from typing import Any
 import numpy as np
 from scipy.stats import qmc
 
+from ..errors import ConfigError
+from ..physics.params import load_params
+from ..physics.plantspec import PlantSpec
 from ..scenario import Event, Noise, Reference, Scenario
 from .scenario_file import scenario_data
 from .spec import FAULT_KINDS, RAMPABLE, Campaign, canonical_json
@@ -66,6 +70,8 @@ class RunPlan:
     noise_scale: float
     scenario: Scenario
     run_hash: str
+    #: the emulated plant's relative error per sampled key (``model_error``), in key order
+    model_error: tuple[tuple[str, float], ...] = ()
 
     @property
     def fault_class(self) -> str:
@@ -92,6 +98,8 @@ class RunPlan:
         row["reference_omega_rad_s"] = ref.omega_rad_s
         row["noise_scale"] = self.noise_scale
         row["seed"] = self.scenario.seed
+        for key, rel in self.model_error:
+            row[f"model_error.{key}"] = rel
         return row
 
 
@@ -191,9 +199,31 @@ def run_seed(content_hash: str, index: int) -> int:
     return int(hashlib.sha256(f"{content_hash}:{index}".encode()).hexdigest()[:8], 16)
 
 
+def _model_ranges(camp: Campaign) -> dict[str, tuple[float, float]]:
+    me = camp.spec.model_error
+    return me.ranges() if me is not None else {}
+
+
 def dimensions(camp: Campaign) -> int:
     """Dimensions of a point (see the module docstring)."""
-    return 1 + _SLOT_DIMS * camp.spec.faults.count[1] + _TAIL_DIMS
+    return 1 + _SLOT_DIMS * camp.spec.faults.count[1] + len(_model_ranges(camp)) + _TAIL_DIMS
+
+
+def _plant(camp: Campaign, u: np.ndarray, index: int) -> tuple[PlantSpec, tuple[tuple[str, float], ...]]:
+    """The run's plant: the base scenario's, each ``model_error`` key moved by its relative
+    error drawn from ``u`` (one coordinate per key), and the error per key."""
+    me = camp.spec.model_error
+    if me is None:
+        return camp.base.plant, ()
+    base = camp.base.plant.plant_params(load_params().plant)
+    errors = tuple((k, _lerp(r, float(x))) for (k, r), x in zip(me.ranges().items(), u, strict=True))
+    values = {k: getattr(base, k) * (1.0 + e) for k, e in errors}
+    model = me.model or camp.base.plant.model
+    try:
+        plant = replace(camp.base.plant, model=model, **values).validated()
+    except ConfigError as exc:
+        raise ConfigError(camp.source, f"model_error.{exc.key_path}", f"run {index}: {exc.reason}") from exc
+    return plant, errors
 
 
 def plan_runs(camp: Campaign) -> list[RunPlan]:
@@ -202,8 +232,11 @@ def plan_runs(camp: Campaign) -> list[RunPlan]:
     pts = unit_points(spec.sampler, spec.samples, dimensions(camp), _sampler_seed(camp.content_hash))
     duration = camp.duration_s
     plans = []
+    first_model_dim = 1 + _SLOT_DIMS * spec.faults.count[1]
+    n_model = len(_model_ranges(camp))
     for i, p in enumerate(pts):
         faults = _faults(camp, p)
+        plant, model_error = _plant(camp, p[first_model_dim : first_model_dim + n_model], i)
         tail = p[-_TAIL_DIMS:]
         k = _lerp(spec.noise_scale, float(tail[3]))
         sc = replace(
@@ -216,10 +249,11 @@ def plan_runs(camp: Campaign) -> list[RunPlan]:
             reference=_reference(camp, tail[:3]),
             noise=_scaled(camp.base.noise, k),
             events=fault_events(faults, duration),
+            plant=plant,
         )
         key = {"scenario": scenario_data(sc), "modes": list(spec.modes), "transport": spec.transport}
         digest = hashlib.sha256(canonical_json(key).encode()).hexdigest()
-        plans.append(RunPlan(i, faults, k, sc, digest))
+        plans.append(RunPlan(i, faults, k, sc, digest, model_error))
     return plans
 
 

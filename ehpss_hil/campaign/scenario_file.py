@@ -32,8 +32,12 @@ def _data(obj: Any) -> Any:
 
 
 def scenario_data(sc: Scenario) -> dict[str, Any]:
-    """``sc`` as the YAML mapping of a scenario file (internal fields and unset values left out)."""
+    """``sc`` as the YAML mapping of a scenario file (internal fields and unset values left out;
+    the plant section only when it changes the plant, so a run's hash is the same as before
+    scenarios had one)."""
     data: dict[str, Any] = _data(sc)
+    if sc.plant.is_nominal:
+        del data["plant"]
     return data
 
 

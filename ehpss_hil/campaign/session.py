@@ -23,7 +23,14 @@ from .progress import Progress
 from .runs import RunTask
 from .sampling import RunPlan, plan_runs
 from .spec import Campaign
-from .summary import ClassSummary, summarize, summary_json, summary_markdown, write_worst
+from .summary import (
+    ClassSummary,
+    model_error_section,
+    summarize,
+    summary_json,
+    summary_markdown,
+    write_worst,
+)
 from .table import build_rows, to_table, write_table
 
 SUMMARY_NAME = "summary.md"
@@ -133,9 +140,16 @@ def finish(
         f"- {len(rows)} runs of {camp.duration_s:g} s, sampler {spec.sampler}, modes {', '.join(spec.modes)}",
         "- table: `results.parquet` (one row per run; columns `<mode>.<metric>`)",
     ]
+    sections: list[str] = []
+    if spec.model_error is not None:
+        ranges = spec.model_error.ranges()
+        text = ", ".join(f"{k} {100 * lo:+g} … {100 * hi:+g} %" for k, (lo, hi) in ranges.items())
+        model = spec.model_error.model or camp.base.plant.model
+        header.append(f"- model error (plant ≠ model, columns `model_error.<key>`): {model} plant, {text}")
+        sections = model_error_section(rows, ranges)
     path = out / SUMMARY_NAME
     try:
-        path.write_text(summary_markdown(spec.name, header, outcome.summaries, figs, out))
+        path.write_text(summary_markdown(spec.name, header, outcome.summaries, figs, out, sections))
         write_json_atomic(out / SUMMARY_JSON_NAME, summary_json(outcome.summaries))
     except OSError as exc:
         raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc

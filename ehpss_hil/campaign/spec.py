@@ -21,6 +21,7 @@ from typing import Any, Literal
 from ..control.registry import MODES
 from ..errors import ConfigError
 from ..limits import MAX_CAMPAIGN_RUNS, MAX_FAULTS_PER_RUN, MAX_REFERENCE_M
+from ..physics.plantspec import LUMPED_KEYS
 from ..scenario import Scenario, load_scenario
 from ..schema import build, load_yaml, rng
 
@@ -147,6 +148,39 @@ class ReferenceDist:
         _ordered(self, "amplitude_m", "omega_rad_s")
 
 
+#: a sampled plant key stays within ±this relative error of the base plant's value
+MAX_RELATIVE_MODEL_ERROR = 0.9
+
+
+def _relative(doc: str) -> dict[str, Any]:
+    return _pair(-MAX_RELATIVE_MODEL_ERROR, MAX_RELATIVE_MODEL_ERROR, doc)
+
+
+@dataclass(frozen=True)
+class ModelError:
+    """Plant ≠ model in every run: the emulated plant's keys drawn uniformly as relative errors
+    ``[low, high]`` around the base scenario's plant (``[-0.2, 0.2]``: ±20 %), and optionally its
+    ``model``; the controller keeps configs/params.yaml (docs/campaigns.md)."""
+
+    model: Literal["linear", "nonlinear"] | None = None
+    cylinder_damping_1_s: tuple[float, ...] | None = field(default=None, metadata=_relative("relative"))
+    hydraulic_stiffness_1_s2: tuple[float, ...] | None = field(default=None, metadata=_relative("relative"))
+    flow_gain_1_s3: tuple[float, ...] | None = field(default=None, metadata=_relative("relative"))
+    valve_damping_1_s: tuple[float, ...] | None = field(default=None, metadata=_relative("relative"))
+    valve_stiffness_1_s2: tuple[float, ...] | None = field(default=None, metadata=_relative("relative"))
+    valve_gain_m_per_a_s2: tuple[float, ...] | None = field(default=None, metadata=_relative("relative"))
+    load_mass_kg: tuple[float, ...] | None = field(default=None, metadata=_relative("relative"))
+    piston_area_m2: tuple[float, ...] | None = field(default=None, metadata=_relative("relative"))
+    spool_stroke_m: tuple[float, ...] | None = field(default=None, metadata=_relative("relative"))
+
+    def __post_init__(self) -> None:
+        _ordered(self, *self.ranges())
+
+    def ranges(self) -> dict[str, tuple[float, float]]:
+        """The relative range of each plant key drawn, in params.yaml's key order."""
+        return {k: (r[0], r[1]) for k in LUMPED_KEYS if (r := getattr(self, k)) is not None}
+
+
 @dataclass(frozen=True)
 class CampaignSpec:
     """A campaign file. ``base`` is a scenario file (relative to the campaign file); its events
@@ -165,6 +199,8 @@ class CampaignSpec:
     faults: FaultPlan = field(default_factory=FaultPlan)
     reference: ReferenceDist | None = None
     noise_scale: tuple[float, ...] = field(default=(1.0, 1.0), metadata=_pair(0.0, 100.0, "factor"))
+    #: the emulated plant's error against the controller's model, drawn per run
+    model_error: ModelError | None = None
     description: str = ""
 
     def __post_init__(self) -> None:

@@ -113,6 +113,36 @@ def summary_json(summaries: Sequence[ClassSummary]) -> dict[str, Any]:
     }
 
 
+def model_error_section(rows: Sequence[dict[str, Any]], ranges: dict[str, tuple[float, float]]) -> list[str]:
+    """summary.md's "Model error" lines: per sampled plant key its range and, for the runs whose
+    |relative error| is at most the median and for those above it, the shares compensated and
+    with harm (%)."""
+    md = [
+        "## Model error",
+        "",
+        "The emulated plant's keys were drawn per run as relative errors around the base plant;",
+        "the controller kept configs/params.yaml (plant ≠ model in every run).",
+        "",
+        "| plant key | range % | runs | small error: comp % / harm % | large error: comp % / harm % |",
+        "|---|---|---:|---|---|",
+    ]
+    for key, (lo, hi) in ranges.items():
+        errs = sorted(abs(r[f"model_error.{key}"]) for r in rows)
+        median = errs[(len(errs) - 1) // 2] if errs else 0.0
+        halves = (
+            [r for r in rows if abs(r[f"model_error.{key}"]) <= median],
+            [r for r in rows if abs(r[f"model_error.{key}"]) > median],
+        )
+        cells = []
+        for part in halves:
+            n = len(part)
+            comp = sum(is_compensated(r["mmac.rms_error_m"], r["oracle.rms_error_m"]) for r in part)
+            harm = sum(is_harm(r["mmac.rms_error_m"], r["nrc.rms_error_m"]) for r in part)
+            cells.append(f"{100 * comp / n:.1f} / {100 * harm / n:.1f} ({n})" if n else "–")
+        md.append(f"| {key} | {100 * lo:+g} … {100 * hi:+g} | {len(rows)} | {cells[0]} | {cells[1]} |")
+    return [*md, ""]
+
+
 def _um(x: float) -> str:
     return f"{x * 1e6:.1f}"
 
@@ -135,9 +165,15 @@ def format_summary(summaries: Sequence[ClassSummary]) -> str:
 
 
 def summary_markdown(
-    title: str, header: Sequence[str], summaries: Sequence[ClassSummary], figures: Sequence[Path], out: Path
+    title: str,
+    header: Sequence[str],
+    summaries: Sequence[ClassSummary],
+    figures: Sequence[Path],
+    out: Path,
+    sections: Sequence[str] = (),
 ) -> str:
-    """summary.md: the campaign, the per-class table, the worst five per class, the figures."""
+    """summary.md: the campaign, the per-class table, ``sections`` (lines, e.g. the model error),
+    the worst five per class, the figures."""
     md = [f"# Campaign {title}", "", *header, ""]
     md += [
         f"compensated: mmac RMS ≤ oracle RMS + {_um(COMPENSATED_RMS_M)} µm; harm: mmac RMS > "
@@ -156,8 +192,8 @@ def summary_markdown(
         md.append(
             f"| {cs.fault_class} | {cs.runs} | {cs.compensated_pct:.1f} | {cs.harm_pct:.1f} | {worst} |"
         )
+    md += ["", *sections]
     md += [
-        "",
         "## Worst five per class",
         "",
         "mmac − oracle RMS, largest first; rerun one with `ehpss-hil sim FILE -C nrc -C mmac -C oracle`.",

@@ -115,6 +115,7 @@ def _summarize(path: Path) -> str:
             f"scenario {s.name}: {s.duration_s:g} s at {1 / s.sample_time_s:g} Hz, "
             f"{s.reference.kind} {s.reference.amplitude_m * 1e3:g} mm, {len(s.events)} events, "
             f"loss {_loss_text(s)}, delay {s.transport_delay_samples}"
+            + ("" if s.plant.is_nominal else f", plant {s.plant.describe()}")
         )
     if kind == "campaign":
         return _summarize_campaign(path, data)
@@ -168,6 +169,7 @@ def _summarize_campaign(path: Path, data: Any) -> str:
     return (
         f"campaign {c.spec.name}: {len(plans)} runs of {c.duration_s:g} s ({c.spec.sampler}), "
         f"{lo}-{hi} of {', '.join(kinds)}, modes {', '.join(c.spec.modes)}"
+        + (f", model error on {', '.join(me.ranges())}" if (me := c.spec.model_error) is not None else "")
     )
 
 

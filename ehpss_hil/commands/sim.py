@@ -49,6 +49,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--transport frames), e.g. configs/controller-vendor.yaml",
     )
     p.add_argument(
+        "--params",
+        metavar="PARAMS.yaml",
+        default="",
+        help="the controller's model params (its models and y_m; default configs/params.yaml); "
+        "the emulated plant stays configs/params.yaml under each scenario's plant: section",
+    )
+    p.add_argument(
         "--jobs",
         "-j",
         type=int,
@@ -92,6 +99,21 @@ def speed_line(rows: list[RunMetrics], wall_s: float, processes: int) -> str:
     return text
 
 
+def plant_line(paths: list[str], params_file: str, model_differs: bool) -> str:
+    """Which plant the runs drove against which model: ``plant = model`` (a best case) unless a
+    scenario's ``plant:`` section or ``--params`` (``model_differs``) made them differ."""
+    from ..scenario import load_scenario
+
+    model = f"controller params {params_file or 'configs/params.yaml'}"
+    own = {(sc := load_scenario(p)).name: sc.plant.describe() for p in paths}
+    own = {name: text for name, text in own.items() if text != "linear"}
+    if not own and not model_differs:
+        return f"plant = model ({model}; a best case)"
+    shown = "; ".join(f"{name}: {text}" for name, text in own.items())
+    rest = "plant configs/params.yaml" + (" under each scenario's plant: section" if own else "")
+    return f"plant ≠ model ({model}, {rest}){': ' + shown if shown else ''}"
+
+
 def plot_name(base: Path, many: bool, scenario: str) -> Path:
     """Where ``--plot base`` writes the figure of ``scenario``: ``base`` itself for one scenario,
     ``base-<scenario>.png`` (same suffix) when several are drawn."""
@@ -124,16 +146,22 @@ def run(args: argparse.Namespace) -> int:
         from ..sim.lockstep import config_codec
 
         config_codec(args.protocol)  # a bad config or map: exit 2 before any run
+    params = plant = None
+    if args.params:
+        from ..physics.params import load_params
+
+        params, plant = load_params(args.params), load_params().plant  # bad file: exit 2
     jobs = [
         Job(p, m, transport, keep_result=bool(args.plot), protocol_config=args.protocol)
         for p in paths
         for m in modes
     ]
     t0 = time.perf_counter()
-    outcomes = run_jobs(jobs, args.jobs)
+    outcomes = run_jobs(jobs, args.jobs, params, plant_params=plant)
     wall = time.perf_counter() - t0
     rows = [o.metrics for o in outcomes]
     print(format_table(rows))
+    print(plant_line(paths, args.params, params is not None and params.plant != plant))
     print(speed_line(rows, wall, min(args.jobs, len(jobs))))
     if args.json:
         Path(args.json).write_text(json.dumps([m.to_json() for m in rows], indent=2) + "\n")

@@ -1,20 +1,60 @@
-"""The EHPSS plant stepped at a fixed sample time with exact ZOH (one implementation, used by the
-emulator process and the lockstep simulator alike)."""
+"""The emulated plant behind one :class:`Plant` protocol, stepped at a fixed sample time.
+
+:class:`LinearPlant` is the paper's eq 39 plant with exact ZOH; the nonlinear valve-controlled
+cylinder lives in :mod:`.hydraulics`. :func:`make_plant` builds the one a scenario's ``plant:``
+section asks for. The emulation (:mod:`ehpss_hil.emulation`), and through it the emulator process,
+the lockstep simulator and the CiA 408 node, only ever see the protocol.
+"""
 
 from __future__ import annotations
 
 import typing
 from collections.abc import Hashable
+from typing import Protocol
 
 import numpy as np
 
 from .discretize import Matrix, ZohCache
 from .faults import FaultState
 from .model import ACC, POS, SPOOL, SPOOL_VEL, load_pressure_pa, plant_matrices
-from .params import Params
+from .params import Params, PlantParams
+from .plantspec import PlantSpec
 
 
-class PlantStepper:
+class Plant(Protocol):
+    """What the emulation needs of a plant: one sample per :meth:`step` with the coil current
+    held (A), the faults in force, and what the sensors measure (SI)."""
+
+    ts_s: float
+    faults: FaultState
+
+    def reset(self) -> None:
+        """Back to rest at the origin (valve centred, piston centred), fault-free."""
+
+    def set_faults(self, faults: FaultState) -> None:
+        """Apply new fault values from the next sample on."""
+
+    def step(self, current_a: float) -> float:
+        """Advance one sample with ``current_a`` held; returns the applied (limited) current (A)."""
+
+    @property
+    def position_m(self) -> float:
+        """True piston position x (m)."""
+
+    @property
+    def spool_actual_m(self) -> float:
+        """Actual spool displacement (m): what the spool LVDT measures."""
+
+    @property
+    def spool_commanded_m(self) -> float:
+        """Spool displacement the valve dynamics produce from the current, before k_LOE (m)."""
+
+    @property
+    def load_pressure_pa(self) -> float:
+        """Load pressure (Pa): what the pressure sensor measures."""
+
+
+class LinearPlant:
     """Plant state ``[ẍ, ẋ, x, ẋ_v, x_v]`` advanced by one sample per :meth:`step`.
 
     The input current is held constant over the sample (ZOH). The ZOH map is cached by
@@ -22,8 +62,8 @@ class PlantStepper:
     out on Python floats (about half the cost of a numpy matvec of this size).
     """
 
-    def __init__(self, params: Params, ts_s: float) -> None:
-        self.params = params
+    def __init__(self, plant: PlantParams, ts_s: float) -> None:
+        self.plant_params = plant
         self.ts_s = ts_s
         self._zoh = ZohCache(self._continuous, ts_s)
         #: the piston [ẍ, ẋ, x] driven by a held spool x_v, for samples the spool spends on its stop
@@ -33,8 +73,8 @@ class PlantStepper:
         self._rows_stop: tuple[tuple[float, ...], ...] = ()
         self._key: Hashable = None
         self.faults = FaultState()
-        self._stroke_m = params.plant.spool_stroke_m
-        self._p_per_acc = load_pressure_pa(params.plant, 1.0)
+        self._stroke_m = plant.spool_stroke_m
+        self._p_per_acc = load_pressure_pa(plant, 1.0)
         self._select(self.faults)
 
     @property
@@ -44,7 +84,7 @@ class PlantStepper:
 
     def _continuous(self, key: Hashable) -> tuple[Matrix, Matrix]:
         k_loe, k_q = typing.cast(tuple[float, float], key)
-        return plant_matrices(self.params.plant, k_loe, k_q)
+        return plant_matrices(self.plant_params, k_loe, k_q)
 
     def _continuous_piston(self, key: Hashable) -> tuple[Matrix, Matrix]:
         a, _ = self._continuous(key)
@@ -122,3 +162,22 @@ class PlantStepper:
     def load_pressure_pa(self) -> float:
         """Load pressure P_L = m·ẍ/A_h (Pa)."""
         return self._p_per_acc * self._s[ACC]
+
+
+class PlantStepper(LinearPlant):
+    """The linear plant of a full :class:`Params` (the name tools and tests used before
+    :class:`Plant`; new code builds :class:`LinearPlant` from ``params.plant``)."""
+
+    def __init__(self, params: Params, ts_s: float) -> None:
+        super().__init__(params.plant, ts_s)
+
+
+def make_plant(spec: PlantSpec, base: PlantParams, ts_s: float) -> Plant:
+    """The plant a scenario's ``plant:`` section asks for: ``base`` (the emulator's params.yaml
+    plant) with the section's lumped keys, linear or nonlinear (:mod:`.hydraulics`)."""
+    plant = spec.plant_params(base)
+    if spec.model == "nonlinear":
+        from .hydraulics import NonlinearPlant, derive
+
+        return NonlinearPlant(derive(plant, spec), plant, ts_s)
+    return LinearPlant(plant, ts_s)

@@ -10,7 +10,8 @@ from pathlib import Path
 
 from ..blas import limit_blas_threads
 from ..control.tuning import ControlTuning
-from ..physics.params import Params, load_params
+from ..errors import ConfigError
+from ..physics.params import Params, PlantParams, load_params
 from ..report.metrics import RunMetrics, compute_metrics
 from ..report.result import SimResult
 from ..scenario import Scenario, load_scenario
@@ -40,17 +41,24 @@ class JobOutcome:
 
 _PARAMS: Params | None = None
 _TUNING: ControlTuning | None = None
+_PLANT: PlantParams | None = None
 
 
-def _init(params: Params | None, tuning: ControlTuning | None) -> None:
-    global _PARAMS, _TUNING
+def _init(params: Params | None, tuning: ControlTuning | None, plant: PlantParams | None = None) -> None:
+    global _PARAMS, _TUNING, _PLANT
     _PARAMS = params if params is not None else load_params()
     _TUNING = tuning
+    _PLANT = plant
 
 
 def _run(job: Job) -> JobOutcome:
     sc = job.scenario if isinstance(job.scenario, Scenario) else load_scenario(job.scenario)
-    res = run_scenario(sc, job.mode, _PARAMS, _TUNING, job.transport, job.protocol_config)
+    try:
+        res = run_scenario(sc, job.mode, _PARAMS, _TUNING, job.transport, job.protocol_config, _PLANT)
+    except ConfigError as exc:  # e.g. a plant section whose mapping fails: name the file
+        if exc.source or isinstance(job.scenario, Scenario):
+            raise
+        raise ConfigError(job.scenario, exc.key_path, exc.reason) from exc
     return JobOutcome(job, compute_metrics(res), res if job.keep_result else None)
 
 
@@ -65,8 +73,12 @@ def run_jobs(
     params: Params | None = None,
     tuning: ControlTuning | None = None,
     progress: Callable[[int, int], None] | None = None,
+    plant_params: PlantParams | None = None,
 ) -> list[JobOutcome]:
     """Run every job (on ``n_jobs`` processes; 1 = in this process); outcomes in job order.
+
+    ``params``: the controller's (default: configs/params.yaml); ``plant_params``: the emulated
+    plant's base under each scenario's ``plant:`` section (default: ``params.plant``).
 
     ``progress(done, total)`` is called after each finished run.
     """
@@ -74,14 +86,14 @@ def run_jobs(
     limit_blas_threads(1)  # before forking: no spinning BLAS pool to inherit
     out: list[JobOutcome] = []
     if n == 1:
-        _init(params, tuning)
+        _init(params, tuning, plant_params)
         for i, job in enumerate(jobs):
             out.append(_run(job))
             if progress:
                 progress(i + 1, len(jobs))
         return out
     ctx = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
-    with ctx.Pool(n, initializer=_init, initargs=(params, tuning)) as pool:
+    with ctx.Pool(n, initializer=_init, initargs=(params, tuning, plant_params)) as pool:
         for i, o in enumerate(pool.imap(_run, jobs, chunksize=1)):
             out.append(o)
             if progress:

@@ -28,7 +28,7 @@ from ..driver import ControllerDriver
 from ..emulation import PlantEmulation
 from ..errors import ConfigError
 from ..physics.faults import FaultState
-from ..physics.params import Params, load_params
+from ..physics.params import Params, PlantParams, load_params
 from ..physics.reference import ReferenceModel
 from ..protocol.cia408.codec import Cia408Codec
 from ..report.result import N_SLOTS, SimResult
@@ -91,8 +91,12 @@ def run_scenario(
     tuning: ControlTuning | None = None,
     transport: str = "quantize",
     protocol_config: str = "",
+    plant_params: PlantParams | None = None,
 ) -> SimResult:
     """Simulate ``scenario`` with controller ``mode``; returns every per-sample array.
+    ``params`` are the controller's (its models and y_m); the emulated plant is the scenario's
+    ``plant:`` section over ``plant_params`` (default: ``params.plant``, plant = model unless
+    the scenario says otherwise).
     ``protocol_config``: a controller config whose protocol profile the frames transport speaks
     on both sides (the emulator impersonating the mapped electronics); its tuning is the one
     used when ``tuning`` is None (cia408 needs mmac without its flow-gain test)."""
@@ -104,7 +108,7 @@ def run_scenario(
         tuning = load_controller_config(protocol_config).tuning
     ts = scenario.sample_time_s
     ctrl = make_controller(mode, prm, ts, tuning, scenario.reference)
-    emu = PlantEmulation(prm, scenario)
+    emu = PlantEmulation(prm, scenario, plant_params)
     tr = _transport(transport, protocol_config)
     x_d = scenario.reference_samples()
     y_m = reference_output(prm, ts, x_d)

@@ -1,0 +1,118 @@
+"""A scenario's ``plant:`` section: the emulated plant's own parameters (plant ≠ model).
+
+Every key of ``params.yaml``'s ``plant:`` section may be given here as an absolute SI value; it
+replaces that value for the emulated plant only (the controller, its models and y_m keep the
+controller's params). ``model: nonlinear`` selects the valve-controlled single-rod cylinder of
+:mod:`.hydraulics`, whose own keys are listed in :class:`PlantSpec` (each with its unit); they are
+refused with ``model: linear``. Ranges are the same as in ``params.yaml`` (one home: the
+metadata of :class:`~.params.PlantParams`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal
+
+from ..errors import ConfigError
+from ..schema import build, rng
+from .params import PlantParams
+
+#: the lumped keys of params.yaml's ``plant:`` section
+LUMPED_KEYS = tuple(f.name for f in dataclasses.fields(PlantParams))
+
+
+def _same_range(name: str) -> dict[str, Any]:
+    """The range metadata of ``PlantParams.<name>`` (one home for it)."""
+    return dict(next(f for f in dataclasses.fields(PlantParams) if f.name == name).metadata)
+
+
+@dataclass(frozen=True)
+class PlantSpec:
+    """The emulated plant's parameters: overrides of params.yaml's plant keys (None: keep the
+    base value) and the nonlinear model's keys (None: the default of :mod:`.hydraulics`, derived
+    so that the nonlinear plant linearises to the lumped one; see docs/physics.md)."""
+
+    model: Literal["linear", "nonlinear"] = "linear"
+    cylinder_damping_1_s: float | None = field(default=None, metadata=_same_range("cylinder_damping_1_s"))
+    hydraulic_stiffness_1_s2: float | None = field(
+        default=None, metadata=_same_range("hydraulic_stiffness_1_s2")
+    )
+    flow_gain_1_s3: float | None = field(default=None, metadata=_same_range("flow_gain_1_s3"))
+    valve_damping_1_s: float | None = field(default=None, metadata=_same_range("valve_damping_1_s"))
+    valve_stiffness_1_s2: float | None = field(default=None, metadata=_same_range("valve_stiffness_1_s2"))
+    valve_gain_m_per_a_s2: float | None = field(default=None, metadata=_same_range("valve_gain_m_per_a_s2"))
+    load_mass_kg: float | None = field(default=None, metadata=_same_range("load_mass_kg"))
+    piston_area_m2: float | None = field(default=None, metadata=_same_range("piston_area_m2"))
+    spool_stroke_m: float | None = field(default=None, metadata=_same_range("spool_stroke_m"))
+    #: supply pressure P_S (Pa)
+    supply_pressure_pa: float | None = field(default=None, metadata=rng(1e5, 1e8))
+    #: return (tank) pressure P_T (Pa), below the supply
+    return_pressure_pa: float | None = field(default=None, metadata=rng(0.0, 1e7))
+    #: rod-side over cap-side piston area A_B/A_A (1 = double rod)
+    area_ratio: float | None = field(default=None, metadata=rng(0.1, 1.0))
+    #: Coulomb friction force F_c (N), smoothed as F_c·tanh(v/friction_velocity_m_s)
+    coulomb_friction_n: float | None = field(default=None, metadata=rng(0.0, 1e5))
+    #: velocity scale of the Coulomb friction's tanh (m/s)
+    friction_velocity_m_s: float | None = field(default=None, metadata=rng(1e-6, 1.0))
+    #: viscous friction B_v (N·s/m); the leakage is derived so the damping stays cylinder_damping
+    viscous_friction_n_s_m: float | None = field(default=None, metadata=rng(0.0, 1e6))
+    #: spool overlap u (m): the spool opens no orifice within ±u (a dead band); < the stroke
+    spool_overlap_m: float | None = field(default=None, metadata=rng(0.0, 0.01))
+    #: constant external force F_ext opposing extension (N)
+    external_force_n: float | None = field(default=None, metadata=rng(-1e6, 1e6))
+    #: load spring k (N/m) pulling the piston to x = 0
+    spring_n_m: float | None = field(default=None, metadata=rng(0.0, 1e9))
+    #: piston end stops at ±piston_stroke_m from the centre (m)
+    piston_stroke_m: float | None = field(default=None, metadata=rng(0.0, 0.5, lo_open=True))
+    #: oil beyond an end stop (chamber dead volume + hose) as a length of the bore (m)
+    dead_length_m: float | None = field(default=None, metadata=rng(0.0, 1.0, lo_open=True))
+
+    def __post_init__(self) -> None:
+        if self.model == "linear":
+            for key in NONLINEAR_KEYS:
+                if getattr(self, key) is not None:
+                    raise ConfigError("", key, "a key of the nonlinear plant: needs model: nonlinear")
+        from .hydraulics import RETURN_PRESSURE_PA, SUPPLY_PRESSURE_PA  # (it imports this module)
+
+        ps = SUPPLY_PRESSURE_PA if self.supply_pressure_pa is None else self.supply_pressure_pa
+        pt = RETURN_PRESSURE_PA if self.return_pressure_pa is None else self.return_pressure_pa
+        if pt >= ps:
+            key = "return_pressure_pa" if self.return_pressure_pa is not None else "supply_pressure_pa"
+            raise ConfigError("", key, f"the return pressure must be below the supply ({pt:g} >= {ps:g} Pa)")
+        stroke, lap = self.spool_stroke_m, self.spool_overlap_m
+        if lap is not None and lap >= (stroke if stroke is not None else PlantParams().spool_stroke_m):
+            raise ConfigError("", "spool_overlap_m", "must be below the spool stroke")
+
+    @property
+    def lumped_overrides(self) -> dict[str, float]:
+        """The params.yaml keys this section sets (absolute SI values)."""
+        return {k: v for k in LUMPED_KEYS if (v := getattr(self, k)) is not None}
+
+    def plant_params(self, base: PlantParams) -> PlantParams:
+        """``base`` (the emulator's params.yaml plant) with this section's lumped keys."""
+        over = self.lumped_overrides
+        return replace(base, **over) if over else base
+
+    @property
+    def is_nominal(self) -> bool:
+        """True when the section changes nothing (linear model, no override)."""
+        return self == PlantSpec()
+
+    def validated(self) -> PlantSpec:
+        """This section checked like a file's (ranges included: a section built in code, such
+        as a campaign's sampled plant, gets no range check otherwise); ConfigError naming the
+        key."""
+        data = {f.name: v for f in dataclasses.fields(self) if (v := getattr(self, f.name)) is not None}
+        return build(PlantSpec, data)
+
+    def describe(self) -> str:
+        """``linear``, or ``nonlinear, flow_gain_1_s3 1.134e+08, area_ratio 0.6`` (keys set)."""
+        keys = [f"{k} {v:g}" for k in (*LUMPED_KEYS, *NONLINEAR_KEYS) if (v := getattr(self, k)) is not None]
+        return ", ".join([self.model, *keys])
+
+
+#: the keys only the nonlinear plant reads
+NONLINEAR_KEYS = tuple(
+    f.name for f in dataclasses.fields(PlantSpec) if f.name != "model" and f.name not in LUMPED_KEYS
+)
