@@ -19,7 +19,8 @@ def test_bench_plant_writes_a_row_per_plant(tmp_path: Path) -> None:
         text=True,
         check=False,
     )
-    assert res.returncode == 0, res.stderr
+    # the speed rows are targets (PASS/FAIL): a loaded host may miss them, and then the exit is 1
+    assert res.returncode == (1 if " FAIL " in res.stdout else 0), res.stdout + res.stderr
     rows = {r["plant"]: r for r in json.loads(out.read_text())["rows"]}
     assert list(rows) == ["linear", "nonlinear", "nonlinear+friction+overlap"]
     assert all(r["plant_us_per_sample"] > 0 and r["nrc.real_time"] > 0 for r in rows.values())

@@ -6,4 +6,14 @@ that it names exactly the modules here that define a benchmark.
 """
 
 #: every ``ehpss-hil bench`` sub-command, each the module ``ehpss_hil/bench/<name>.py``
-BENCHES: tuple[str, ...] = ("bus", "campaign", "codec", "control", "faults", "loop", "monitor", "soak")
+BENCHES: tuple[str, ...] = (
+    "bus",
+    "campaign",
+    "codec",
+    "control",
+    "faults",
+    "loop",
+    "monitor",
+    "plant",
+    "soak",
+)

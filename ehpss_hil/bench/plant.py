@@ -17,7 +17,7 @@ from ..physics.plant import Plant, make_plant
 from ..physics.plantspec import PlantSpec
 from ..report.metrics import compute_metrics
 from ..scenario import Reference, Scenario
-from .common import write_json
+from .common import Scorecard, write_json
 
 NAME = "plant"
 HELP = "plant micro-benchmark (µs per sample) and simulator speed with the linear and nonlinear plant"
@@ -68,12 +68,13 @@ def sim_speed(spec: PlantSpec, mode: str, duration_s: float) -> tuple[float, flo
     return max(m.speed for m in runs), runs[0].rms_error_m * 1e6
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> Scorecard:
     limit_blas_threads(1)
+    card = Scorecard()
     modes = args.controller or ["nrc", "mmac"]
     base = load_params().plant
     rows = []
-    print(f"{'plant':28s} {'µs/sample':>10s}" + "".join(f" {m + ' ×RT':>11s} {'RMS µm':>8s}" for m in modes))
+    print(f"{'plant':28s} {'µs/sample':>10s}" + "".join(f" {m + ' ×RT':>16s} {'RMS µm':>8s}" for m in modes))
     for name, spec in PLANTS.items():
         us = plant_us(make_plant(spec, base, 1e-3), args.samples)
         row: dict[str, object] = {"plant": name, "plant_us_per_sample": us}
@@ -81,9 +82,10 @@ def run(args: argparse.Namespace) -> int:
         for m in modes:
             speed, rms = sim_speed(spec, m, args.duration)
             row[f"{m}.real_time"], row[f"{m}.rms_um"] = speed, rms
-            line += f" {speed:10.0f}× {rms:8.2f}"
+            verdict = card.mark(speed >= TARGET_REAL_TIME, f"{name} {m} sim speed {speed:.0f}× real time")
+            line += f" {speed:10.0f}× {verdict:4s} {rms:8.2f}"
         rows.append(row)
         print(line)
     print(f"target: the simulator ≥ {TARGET_REAL_TIME:g}× real time per core (1 kHz: ≤ 20 µs per sample)")
     write_json(args.json, {"rows": rows, "target_real_time": TARGET_REAL_TIME})
-    return 0
+    return card
