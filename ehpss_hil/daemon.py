@@ -53,6 +53,8 @@ class DaemonArgs:
     rt_priority: int | None = None
     cpu: int | None = None
     log: str | None = None
+    #: replace a file at ``log`` that is no log of ours (``--overwrite``)
+    overwrite_log: bool = False
     duration_s: float | None = None
     lockstep: bool = False
     summary_json: Path | None = None
@@ -180,6 +182,7 @@ def run_daemon(a: DaemonArgs) -> int:
                 "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
                 "lockstep": a.lockstep,
             },
+            overwrite=a.overwrite_log,
         )
     except BaseException:
         bus.shutdown()

@@ -53,6 +53,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority 1..99 (0 = none)")
     p.add_argument("--cpu", type=int, help="pin to this CPU")
     p.add_argument("--log", help="candump -L log of every frame sent and received")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a file at the --log path that is no log of ours (and its numbered files)",
+    )
     p.add_argument("--duration", type=float, help="stop after this many seconds of plant time")
     p.add_argument(
         "--lockstep-timeout",
@@ -170,7 +175,7 @@ def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenari
     logging.getLogger("canopen").setLevel(logging.WARNING)  # its SDO server logs every transfer
     bus = open_bus(cfg.bus)
     logger = open_process_logger(
-        args.log, cfg.log, cfg.bus, bus, str(args.config), _sidecar(args, cfg, scenario)
+        args.log, cfg.log, cfg.bus, bus, str(args.config), _sidecar(args, cfg, scenario), args.overwrite
     )
     io = RawFrameIO(bus, logger)
     valve, encoder = build_nodes(cfg.nodes, valve_od, encoder_od, io, params.plant.spool_stroke_m)
@@ -217,6 +222,7 @@ def run(args: argparse.Namespace) -> int:
             bus,
             str(args.config),
             sidecar=_sidecar(args, cfg, scenario),
+            overwrite=args.overwrite,
         )
     except BaseException:
         bus.shutdown()
