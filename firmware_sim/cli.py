@@ -211,7 +211,14 @@ def run(args: argparse.Namespace) -> int:
     if scenario.device_faults():
         log.warning("device_fault events are read with protocol cia408 only; ignored (%s)", cfg.protocol)
     params = load_params(cfg.params or None)
-    codec = process_codec(cfg.dbc, cfg.ids, str(args.config), cfg.protocol, cfg.dbc_map)
+    codec = process_codec(
+        cfg.dbc,
+        cfg.ids,
+        str(args.config),
+        cfg.protocol,
+        cfg.dbc_map,
+        stroke_current_a=params.plant.stroke_current_a,
+    )
     emu = PlantEmulation(params, scenario)
     bus = open_bus(cfg.bus)
     try:  # until the run's own shutdown takes over: the bus (and the log) closed on any error

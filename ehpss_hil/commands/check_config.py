@@ -67,7 +67,10 @@ def _prepare_controller(path: Path, c: ControllerConfig) -> None:
     from ..runtime.frameio import process_codec
 
     params = load_params(c.params or None)
-    process_codec(c.dbc, c.ids, str(path), c.protocol, c.dbc_map, c.nodes, params.plant.spool_stroke_m)
+    plant = params.plant
+    process_codec(
+        c.dbc, c.ids, str(path), c.protocol, c.dbc_map, c.nodes, plant.spool_stroke_m, plant.stroke_current_a
+    )
     loop_options(c)
     default_factory(c.mode, params, 1.0 / c.rate_hz, c)
 
@@ -82,7 +85,9 @@ def _prepare_emulator(path: Path, e: EmulatorConfig) -> None:
 
         check_nodes(e.nodes, str(path))
     else:
-        process_codec(e.dbc, e.ids, str(path), e.protocol, e.dbc_map)
+        process_codec(
+            e.dbc, e.ids, str(path), e.protocol, e.dbc_map, stroke_current_a=params.plant.stroke_current_a
+        )
     if e.scenario:
         _prepare_scenario(load_scenario(e.scenario), params)
 

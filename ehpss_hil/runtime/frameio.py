@@ -86,11 +86,13 @@ def process_codec(
     dbc_map: DbcMap | None = None,
     cia408: Cia408Config | None = None,
     spool_stroke_m: float = 0.0,
+    stroke_current_a: float = 0.0,
 ) -> FrameCodec:
     """The frame codec of a process config (:func:`ehpss_hil.protocol.make_codec`): its DBC
     (empty: the shipped one), ID layout and protocol profile; a bad DBC, map or ID layout is a
-    :class:`ConfigError` naming its key (exit 2)."""
-    return make_codec(protocol, dbc, ids, config_path, dbc_map, cia408, spool_stroke_m)
+    :class:`ConfigError` naming its key (exit 2). ``spool_stroke_m`` (m), ``stroke_current_a``
+    (A): the plant's spool stroke and the coil current that reaches it."""
+    return make_codec(protocol, dbc, ids, config_path, dbc_map, cia408, spool_stroke_m, stroke_current_a)
 
 
 def limit_sensor_rate(codec: FrameCodec, speed_max_m_s: float, ts_s: float) -> RateLimit:
