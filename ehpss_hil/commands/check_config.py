@@ -161,17 +161,22 @@ def _master_text(c: ControllerConfig) -> str:
     return f", protocol cia408 master (valve node {n.valve_node}, position from {source}, SYNC {sync})"
 
 
+#: runs of a campaign whose scenarios check-config builds (the cost does not grow with samples)
+CHECKED_CAMPAIGN_RUNS = 16
+
+
 def _summarize_campaign(path: Path, data: Any) -> str:
-    """A campaign file with its base scenario, every run's scenario built."""
+    """A campaign file with its base scenario and the scenarios of a draw of
+    :data:`CHECKED_CAMPAIGN_RUNS` runs built."""
     from ..campaign.sampling import plan_runs
     from ..campaign.spec import load_campaign
 
     c = load_campaign(path, data)
-    plans = plan_runs(c)
+    plan_runs(c, CHECKED_CAMPAIGN_RUNS)
     kinds = [k for k, w in c.spec.faults.kinds.weights().items() if w > 0]
     lo, hi = c.spec.faults.count
     return (
-        f"campaign {c.spec.name}: {len(plans)} runs of {c.duration_s:g} s ({c.spec.sampler}), "
+        f"campaign {c.spec.name}: {c.spec.samples} runs of {c.duration_s:g} s ({c.spec.sampler}), "
         f"{lo}-{hi} of {', '.join(kinds)}, modes {', '.join(c.spec.modes)}"
     )
 
