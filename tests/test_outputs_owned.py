@@ -115,3 +115,11 @@ def test_process_log_refuses_a_users_file(tmp_path: Path, argv: list[str]) -> No
     err = [ln for ln in r.stderr.splitlines() if "--log" in ln]
     assert len(err) == 1 and "--overwrite" in err[0] and "Traceback" not in r.stderr
     assert _unchanged(tmp_path)
+
+
+def test_bench_faults_rows_of_the_logs(tmp_path: Path) -> None:
+    """``bench faults`` runs the same three cases and passes them."""
+    from ehpss_hil.reliability.owned import log_rows
+
+    rows = log_rows(tmp_path)
+    assert len(rows) == 3 and all(r.ok for r in rows), rows
