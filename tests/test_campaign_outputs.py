@@ -6,6 +6,7 @@ the bad line is gone, a symlinked journal is refused; check-config is O(1) in ``
 from __future__ import annotations
 
 import json
+import re
 import shlex
 import shutil
 import subprocess
@@ -18,6 +19,8 @@ from ehpss_hil.campaign.journal import JOURNAL_NAME, MAX_RECORD_BYTES
 from ehpss_hil.campaign.session import run_campaign
 from ehpss_hil.campaign.spec import load_campaign
 from ehpss_hil.errors import ConfigError, OutputError
+from ehpss_hil.outputs import MANIFEST
+from ehpss_hil.rundir import prepare_run_dir
 
 SAMPLES = 4
 TINY = """\
@@ -97,6 +100,17 @@ def test_a_user_file_in_the_worst_folder_is_refused(finished: tuple[Path, Path],
         run_campaign(load_campaign(f), out, workers=1, figures=False)
     assert (out / "worst" / "all" / "1-run00000.yaml").read_text() == "mine\n"
     assert sorted(p.name for p in out.iterdir()) == ["worst"]
+
+
+def test_a_run_directory_is_not_taken_over(finished: tuple[Path, Path], tmp_path: Path) -> None:
+    """``run --out``'s manifest is another tool's: the campaign refuses to replace it."""
+    f, _done = finished
+    out = tmp_path / "run"
+    prepare_run_dir(out)
+    before = (out / MANIFEST).read_bytes()
+    with pytest.raises(OutputError, match=re.escape(MANIFEST)):
+        run_campaign(load_campaign(f), out, workers=1, figures=False)
+    assert (out / MANIFEST).read_bytes() == before and sorted(p.name for p in out.iterdir()) == [MANIFEST]
 
 
 @pytest.mark.parametrize("name", ["../../../../elsewhere", "a/b", ".hidden", "x" * 65])

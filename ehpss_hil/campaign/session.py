@@ -19,7 +19,7 @@ from typing import Any
 
 from ..canlog.sidecar import write_json_atomic
 from ..errors import OutputError
-from ..outputs import exists, foreign, manifest_files, refuse_foreign, write_manifest
+from ..outputs import MANIFEST, exists, foreign, manifest_files, refuse_foreign, write_manifest
 from .executors import run_dask, run_local
 from .figures import FIGURE_NAMES, write_figures
 from .journal import JOURNAL_NAME, Expected, Journal, read_journal
@@ -72,13 +72,13 @@ def prepare_out(out: Path, resume: bool, overwrite: bool = False) -> Path:
         listed = manifest_files(out, TOOL)
         if listed is None and resume and exists(journal):  # a campaign of before the manifest
             listed = [*campaign_file_names(), *_worst_files(out)]
-        ours = set(listed or [])
-        names = [out / n for n in campaign_file_names()]
+        ours = set(listed or []) | ({MANIFEST} if listed is not None else set())
+        names = [out / n for n in (MANIFEST, *campaign_file_names())]  # another tool's manifest too
         if not overwrite:
             refuse_foreign(
                 out, foreign([*names, *(out / n for n in _worst_files(out))], ours, out), "the campaign"
             )
-        write_manifest(out, TOOL, ours | set(campaign_file_names()))
+        write_manifest(out, TOOL, (ours - {MANIFEST}) | set(campaign_file_names()))
     except OutputError:
         raise
     except OSError as exc:
