@@ -53,6 +53,8 @@ class DaemonArgs:
     rt_priority: int | None = None
     cpu: int | None = None
     log: str | None = None
+    #: replace a file at ``log`` that is no log of ours (``--overwrite``)
+    overwrite_log: bool = False
     duration_s: float | None = None
     lockstep: bool = False
     summary_json: Path | None = None
@@ -150,8 +152,16 @@ def run_daemon(a: DaemonArgs) -> int:
         raise ConfigError(
             str(a.config), "protocol", "cia408 runs in realtime only (the master's SYNC paces the nodes)"
         )
+    plant = params.plant
     codec = process_codec(
-        cfg.dbc, cfg.ids, str(a.config), cfg.protocol, cfg.dbc_map, cfg.nodes, params.plant.spool_stroke_m
+        cfg.dbc,
+        cfg.ids,
+        str(a.config),
+        cfg.protocol,
+        cfg.dbc_map,
+        cfg.nodes,
+        plant.spool_stroke_m,
+        plant.stroke_current_a,
     )
     limit_sensor_rate(codec, params.plant.piston_speed_max_m_s, 1.0 / cfg.rate_hz)
     controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
@@ -180,6 +190,7 @@ def run_daemon(a: DaemonArgs) -> int:
                 "bus": f"{cfg.bus.interface}:{cfg.bus.channel}",
                 "lockstep": a.lockstep,
             },
+            overwrite=a.overwrite_log,
         )
     except BaseException:
         bus.shutdown()

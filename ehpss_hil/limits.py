@@ -42,6 +42,10 @@ MAX_REFERENCE_M = 0.5
 MIN_RATE_HZ = 10.0
 MAX_RATE_HZ = 10000.0
 
+#: largest DBC file read (bytes): cantools keeps ~70 bytes of objects per byte of DBC (a 20 MB
+#: file took 1.4 GB and 44 s); vendor DBCs of a whole machine are a few hundred kB
+MAX_DBC_BYTES = 2 * 2**20
+
 #: most runs in one campaign file (``samples``); each run simulates every mode of the campaign
 MAX_CAMPAIGN_RUNS = 1_000_000
 #: most faults injected at once in one campaign run (one per fault kind at most)

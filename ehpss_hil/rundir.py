@@ -1,7 +1,8 @@
 """The run directory of ``ehpss-hil run``: a run only ever removes files a run wrote.
 
-A run records every file it writes (relative paths) in the manifest :data:`MANIFEST` inside the
-directory. Before a run:
+A run records every file it writes (relative paths) in the manifest
+:data:`~ehpss_hil.outputs.MANIFEST` inside the directory (:mod:`ehpss_hil.outputs`, the one
+proof of ownership every writer uses). Before a run:
 
 - a missing or empty directory is used (and made);
 - a directory with a manifest (or the ``run.json`` of a run older than manifests) is a run
@@ -22,10 +23,11 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from .canlog.sidecar import write_json_atomic
 from .errors import OutputError
+from .outputs import MANIFEST, manifest_files, write_manifest
 
-MANIFEST = ".ehpss-run.json"
+#: the tool named in the manifest of a run directory
+TOOL = "ehpss-hil run"
 #: the candump logs of a run (each with ``<log>.json`` and rotations ``<log>.N``)
 RUN_LOGS = ("bus.log", "controller.log", "emulator.log")
 #: the other files every run writes, by exact name
@@ -58,22 +60,20 @@ def read_manifest(out: Path) -> list[str] | None:
     """The files a run recorded in ``out`` (relative paths), or None when ``out`` is no run
     directory. A ``run.json`` of ``ehpss-hil run`` without a manifest stands for the fixed
     names."""
-    try:
-        data = json.loads((out / MANIFEST).read_text())
-        return [str(f) for f in data["files"]]
-    except (OSError, ValueError, KeyError, TypeError):
-        pass
+    files = manifest_files(out, TOOL)
+    if files is not None:
+        return files
     try:
         legacy = json.loads((out / "run.json").read_text())
     except (OSError, ValueError):
         return None
-    if isinstance(legacy, dict) and legacy.get("tool") == "ehpss-hil run":
+    if isinstance(legacy, dict) and legacy.get("tool") == TOOL:
         return run_file_names()
     return None
 
 
 def _write_manifest(out: Path, files: Iterable[str]) -> None:
-    write_json_atomic(out / MANIFEST, {"tool": "ehpss-hil run", "files": sorted(set(files))})
+    write_manifest(out, TOOL, files)
 
 
 def _remove(out: Path, names: Iterable[str]) -> None:

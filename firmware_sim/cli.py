@@ -63,6 +63,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cpu", type=int, help="pin to this CPU")
     p.add_argument("--log", help="candump -L log of every frame sent and received")
     p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a file at the --log path that is no log of ours (and its numbered files)",
+    )
+    p.add_argument(
         "--duration",
         type=float,
         help="stop after this many seconds of plant time (default: the --scenario's duration; "
@@ -192,7 +197,7 @@ def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenari
     logging.getLogger("canopen").setLevel(logging.WARNING)  # its SDO server logs every transfer
     bus = open_bus(cfg.bus)
     logger = open_process_logger(
-        args.log, cfg.log, cfg.bus, bus, str(args.config), _sidecar(args, cfg, scenario)
+        args.log, cfg.log, cfg.bus, bus, str(args.config), _sidecar(args, cfg, scenario), args.overwrite
     )
     io = RawFrameIO(bus, logger)
     valve, encoder = build_nodes(cfg.nodes, valve_od, encoder_od, io, params.plant.spool_stroke_m)
@@ -228,7 +233,14 @@ def run(args: argparse.Namespace) -> int:
     if scenario.device_faults():
         log.warning("device_fault events are read with protocol cia408 only; ignored (%s)", cfg.protocol)
     params = load_params(cfg.params or None)
-    codec = process_codec(cfg.dbc, cfg.ids, str(args.config), cfg.protocol, cfg.dbc_map)
+    codec = process_codec(
+        cfg.dbc,
+        cfg.ids,
+        str(args.config),
+        cfg.protocol,
+        cfg.dbc_map,
+        stroke_current_a=params.plant.stroke_current_a,
+    )
     emu = PlantEmulation(params, scenario)
     bus = open_bus(cfg.bus)
     try:  # until the run's own shutdown takes over: the bus (and the log) closed on any error
@@ -239,6 +251,7 @@ def run(args: argparse.Namespace) -> int:
             bus,
             str(args.config),
             sidecar=_sidecar(args, cfg, scenario),
+            overwrite=args.overwrite,
         )
     except BaseException:
         bus.shutdown()

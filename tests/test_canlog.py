@@ -281,9 +281,15 @@ def test_close_is_idempotent_and_late_frames_counted(tmp_path: Path) -> None:
 
 
 def test_stale_backups_of_an_earlier_run_are_removed(tmp_path: Path) -> None:
-    (tmp_path / "run.log.1").write_text("(0000000001.000000) can0 110#00\n")
-    write_log(tmp_path / "run.log", [])
-    assert log_files(tmp_path / "run.log") == [tmp_path / "run.log"]
+    """The rotated files of an earlier log of ours (its sidecar lists them) go when the log is
+    opened again; a numbered file the sidecar does not list is the user's and stays."""
+    log = tmp_path / "run.log"
+    write_log(log, sample_frames(FrameCodec(), 40), max_bytes=1000, backups=3)
+    assert [p.name for p in log_files(log)] == ["run.log.3", "run.log.2", "run.log.1", "run.log"]
+    (tmp_path / "run.log.2024").write_text("the user's\n")
+    write_log(log, [])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.log", "run.log.2024", "run.log.json"]
+    assert (tmp_path / "run.log.2024").read_text() == "the user's\n"
 
 
 def test_kick_from_a_loop_keeps_every_frame(tmp_path: Path) -> None:

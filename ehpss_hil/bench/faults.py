@@ -6,7 +6,8 @@ lossless; processes: ``ehpss-hil run`` with a watchdog audit), duplicated/reorde
 frames against a controller process, kill -9 of either process (``--trials``), SIGTERM during a
 run, every config/scenario key made wrong, and hostile surroundings (issue #16: datagrams on the
 bus that are no frame, foreign files in ``run --out``, a full disk under the logs, a second
-VALVE_CMD transmitter). Process
+VALVE_CMD transmitter), and issue #29's rows (:mod:`ehpss_hil.reliability.owned`: a user's files
+under the logs and the campaign, tampered journals, vendor DBCs check-config must refuse). Process
 sections need a private network namespace (root + ``unshare``) and say so when they cannot run;
 the full-disk row needs root for ``mount``. Exit 1 when any row fails. Implementation:
 :mod:`ehpss_hil.reliability`.
@@ -23,7 +24,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ..reliability import badinput, duplicates, fuzz, hostile, kills, loss, rogue, stray
+from ..reliability import badinput, duplicates, fuzz, hostile, kills, loss, owned, rogue, stray
 from ..reliability.procs import skip_reason
 from ..reliability.table import (
     Row,
@@ -43,7 +44,8 @@ from .common import Scorecard, finite_json, write_json
 NAME = "faults"
 HELP = (
     "reliability suite: fuzzing, frame loss, duplicates, kill -9, SIGTERM, bad configs, "
-    "stray datagrams, foreign files in --out, full disk, a second transmitter"
+    "stray datagrams, foreign files in --out, full disk, a second transmitter, a user's files "
+    "under logs and campaigns, tampered journals, bad vendor DBCs"
 )
 
 
@@ -138,6 +140,11 @@ def run(args: argparse.Namespace) -> Scorecard:
     sim = loss.sim_loss()
     rows += loss_rows(sim, s)
     raw.update(fuzz=tallies, sim_loss=sim)
+    _say("a user's files, tampered journals, bad vendor DBCs ...")
+    with tempfile.TemporaryDirectory(prefix="ehpss-bench-owned-") as tmp:
+        own, raw_own = owned.owned_rows(args.out / "owned" if args.out else Path(tmp))
+    rows += own
+    raw.update(raw_own)
     why = skip_reason()
     if why is None:
         with tempfile.TemporaryDirectory(prefix="ehpss-bench-faults-") as tmp:

@@ -19,6 +19,8 @@ import numpy as np
 
 from .spec import FAULT_KINDS
 
+#: the files :func:`write_figures` may write
+FIGURE_NAMES = ("coverage-loe-drift.png", "coverage-onset.png", "distributions.png")
 #: bins per axis of a coverage map
 MAP_BINS = 8
 #: colour range of the mmac/oracle RMS ratio (log scale, 1 in the middle: blue = mmac better
@@ -150,9 +152,10 @@ def write_figures(rows: Sequence[dict[str, Any]], modes: Sequence[str], out: Pat
         return []
     if not rows:
         return []
+    loe_drift, onset, dist = (out / n for n in FIGURE_NAMES)
     made = [
-        coverage_loe_drift(rows, out / "coverage-loe-drift.png"),
-        coverage_onset(rows, out / "coverage-onset.png"),
-        distributions(rows, modes, out / "distributions.png"),
+        coverage_loe_drift(rows, loe_drift),
+        coverage_onset(rows, onset),
+        distributions(rows, modes, dist),
     ]
     return [p for p in made if p is not None]

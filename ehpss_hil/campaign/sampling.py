@@ -226,10 +226,13 @@ def _plant(camp: Campaign, u: np.ndarray, index: int) -> tuple[PlantSpec, tuple[
     return plant, errors
 
 
-def plan_runs(camp: Campaign) -> list[RunPlan]:
-    """Every run of the campaign, in index order."""
+def plan_runs(camp: Campaign, draw: int | None = None) -> list[RunPlan]:
+    """Every run of the campaign, in index order; with ``draw``: the runs of a draw of only
+    that many points (``check-config`` builds a few, whatever ``samples`` is; with ``random``
+    and ``sobol`` they are the campaign's first runs)."""
     spec = camp.spec
-    pts = unit_points(spec.sampler, spec.samples, dimensions(camp), _sampler_seed(camp.content_hash))
+    n = spec.samples if draw is None else min(draw, spec.samples)
+    pts = unit_points(spec.sampler, n, dimensions(camp), _sampler_seed(camp.content_hash))
     duration = camp.duration_s
     plans = []
     first_model_dim = 1 + _SLOT_DIMS * spec.faults.count[1]

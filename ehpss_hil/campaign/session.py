@@ -2,8 +2,11 @@
 then write the table, the worst cases, the figures and summary.md.
 
 Output directory (``--out``): ``runs.jsonl`` (the journal), ``results.parquet`` (+ ``.csv``),
-``summary.md``, ``worst/<class>/*.yaml``, the figures. A directory that holds a journal is only
-continued with ``resume``; without it the campaign refuses to touch it (exit 2).
+``summary.md``, ``worst/<class>/*.yaml``, the figures, and the manifest of
+:mod:`ehpss_hil.outputs` listing them. A directory that holds a journal is only continued with
+``resume``; without it the campaign refuses to touch it (exit 2). A file at one of those names
+that the manifest does not list (a user's ``summary.md``) is refused the same way unless
+``overwrite``, which replaces those names only.
 """
 
 from __future__ import annotations
@@ -16,14 +19,16 @@ from typing import Any
 
 from ..canlog.sidecar import write_json_atomic
 from ..errors import OutputError
+from ..outputs import MANIFEST, exists, foreign, manifest_files, refuse_foreign, write_manifest
 from .executors import run_dask, run_local
-from .figures import write_figures
-from .journal import JOURNAL_NAME, Journal, read_journal
+from .figures import FIGURE_NAMES, write_figures
+from .journal import JOURNAL_NAME, Expected, Journal, read_journal
 from .progress import Progress
-from .runs import RunTask
+from .runs import METRIC_COLUMNS, RunTask
 from .sampling import RunPlan, plan_runs
 from .spec import Campaign
 from .summary import (
+    WORST_DIR,
     ClassSummary,
     model_error_section,
     summarize,
@@ -31,10 +36,18 @@ from .summary import (
     summary_markdown,
     write_worst,
 )
-from .table import build_rows, to_table, write_table
+from .table import CSV_NAME, PARQUET_NAME, build_rows, to_table, write_table
 
 SUMMARY_NAME = "summary.md"
 SUMMARY_JSON_NAME = "summary.json"
+#: the tool named in a campaign directory's manifest
+TOOL = "ehpss-hil campaign"
+
+
+def campaign_file_names() -> list[str]:
+    """The fixed names a campaign writes in its directory (the worst cases not included)."""
+    names = [JOURNAL_NAME, PARQUET_NAME, CSV_NAME, SUMMARY_NAME, SUMMARY_JSON_NAME, *FIGURE_NAMES]
+    return [*names, *(f"{n}.tmp" for n in names if n != JOURNAL_NAME)]
 
 
 @dataclass
@@ -54,18 +67,48 @@ class Outcome:
     timings: list[dict[str, Any]] = field(default_factory=list)
 
 
-def prepare_out(out: Path, resume: bool) -> Path:
-    """Make ``out``; refuse one holding a journal unless ``resume``."""
+def prepare_out(out: Path, resume: bool, overwrite: bool = False) -> Path:
+    """Make ``out``; refuse one holding a journal unless ``resume``, and files at the campaign's
+    names it did not write unless ``overwrite``; record the names in its manifest."""
     journal = out / JOURNAL_NAME
-    if journal.exists() and not resume:
+    if exists(journal) and not resume:
         raise OutputError(
             f"{out} holds a campaign's runs ({JOURNAL_NAME}); pass --resume or choose another --out"
         )
     try:
         out.mkdir(parents=True, exist_ok=True)
+        listed = manifest_files(out, TOOL)
+        if listed is None and resume and exists(journal):  # a campaign of before the manifest
+            listed = [*campaign_file_names(), *_worst_files(out)]
+        ours = set(listed or []) | ({MANIFEST} if listed is not None else set())
+        names = [out / n for n in (MANIFEST, *campaign_file_names())]  # another tool's manifest too
+        if not overwrite:
+            refuse_foreign(
+                out, foreign([*names, *(out / n for n in _worst_files(out))], ours, out), "the campaign"
+            )
+        write_manifest(out, TOOL, (ours - {MANIFEST}) | set(campaign_file_names()))
+    except OutputError:
+        raise
     except OSError as exc:
-        raise OutputError(f"cannot create {out}: {exc.strerror or exc}") from exc
+        raise OutputError(f"cannot prepare {out}: {exc.strerror or exc}") from exc
     return journal
+
+
+def _worst_files(out: Path) -> list[str]:
+    """The files under ``out/worst`` (relative to ``out``), symlinks included, not followed."""
+    root = out / WORST_DIR
+    if not root.is_dir() or root.is_symlink():
+        return [WORST_DIR] if exists(root) else []
+    return sorted(str(p.relative_to(out)) for p in root.rglob("*") if p.is_symlink() or not p.is_dir())
+
+
+def record_files(out: Path, paths: list[Path]) -> None:
+    """Add ``paths`` (inside ``out``) to its manifest (OutputError when it cannot be written)."""
+    listed = set(manifest_files(out, TOOL) or [])
+    try:
+        write_manifest(out, TOOL, listed | {str(p.relative_to(out)) for p in paths})
+    except OSError as exc:
+        raise OutputError(f"cannot write the manifest of {out}: {exc.strerror or exc}") from exc
 
 
 def execute_runs(
@@ -87,13 +130,16 @@ def run_campaign(
     csv: bool = False,
     figures: bool = True,
     progress: Progress | None = None,
+    overwrite: bool = False,
 ) -> Outcome:
     """Run the campaign into ``out`` (see the module docstring). KeyboardInterrupt propagates
     after the journal is closed: every run that finished is kept."""
-    journal_path = prepare_out(out, resume)
+    journal_path = prepare_out(out, resume, overwrite)
     plans = plan_runs(camp)
+    columns = [f"{m}.{c}" for m in camp.spec.modes for c in METRIC_COLUMNS]
+    expected = Expected({p.run_hash: p.index for p in plans}, frozenset(columns))
     with Journal(journal_path) as journal:
-        records = read_journal(journal_path)
+        records = read_journal(journal_path, expected)
         todo = [p for p in plans if p.run_hash not in records]
         outcome = Outcome(len(plans), len(plans) - len(todo))
         prog = progress if progress is not None else Progress(len(plans), outcome.skipped)
@@ -130,7 +176,7 @@ def finish(
     outcome.rows = rows
     outcome.files += write_table(to_table(rows), out, csv)
     outcome.summaries = summarize(rows, camp.spec.modes)
-    write_worst(outcome.summaries, plans, out)
+    record_files(out, write_worst(outcome.summaries, plans, out))
     figs = write_figures(rows, camp.spec.modes, out) if figures else []
     outcome.files += figs
     spec = camp.spec

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -31,6 +32,8 @@ REQUIRED_MODES = ("nrc", "mmac", "oracle")
 FAULT_KINDS = ("loe", "kq", "drift", "sensor_failure", "bias", "stuck", "frame_loss")
 #: kinds whose magnitude can ramp in (incipient faults); the others change at once
 RAMPABLE = ("loe", "kq", "drift", "bias", "frame_loss")
+#: a campaign's name: one folder name (``runs/campaign-<name>``), never a path
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 
 
 def _pair(lo: float | None, hi: float | None, doc: str, *, lo_open: bool = False) -> dict[str, Any]:
@@ -204,6 +207,13 @@ class CampaignSpec:
     description: str = ""
 
     def __post_init__(self) -> None:
+        if not NAME_PATTERN.fullmatch(self.name):
+            raise ConfigError(
+                "",
+                "name",
+                "expected 1-64 letters, digits, '.', '_' or '-', starting with a letter or digit "
+                "(it names the folder runs/campaign-<name>)",
+            )
         _ordered(self, "noise_scale")
         for i, m in enumerate(self.modes):
             if m not in MODES:

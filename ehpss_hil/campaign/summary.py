@@ -88,13 +88,17 @@ def summarize(rows: Sequence[dict[str, Any]], modes: Sequence[str]) -> list[Clas
     return out
 
 
-def write_worst(summaries: Sequence[ClassSummary], plans: Sequence[RunPlan], out: Path) -> None:
-    """Write each listed worst run's scenario as ``worst/<class>/<rank>-run<index>.yaml``."""
+def write_worst(summaries: Sequence[ClassSummary], plans: Sequence[RunPlan], out: Path) -> list[Path]:
+    """Write each listed worst run's scenario as ``worst/<class>/<rank>-run<index>.yaml``;
+    returns the paths written."""
     by_index = {p.index: p for p in plans}
+    written = []
     for cs in summaries:
         for rank, w in enumerate(cs.worst, 1):
             name = f"{rank}-run{w.index:05d}.yaml"
             w.path = write_scenario(by_index[w.index].scenario, out / WORST_DIR / cs.fault_class / name)
+            written.append(w.path)
+    return written
 
 
 def summary_json(summaries: Sequence[ClassSummary]) -> dict[str, Any]:

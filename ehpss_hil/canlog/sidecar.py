@@ -189,3 +189,28 @@ def _write_in_place(path: Path, raw: bytes) -> bool:
     except OSError:
         return False
     return True
+
+
+def owned_names(log_path: Path) -> set[str]:
+    """The names (in the log's folder) of the files the sidecar ``<log>.json`` proves a
+    :class:`~ehpss_hil.canlog.writer.CandumpLogger` wrote: the log, the sidecar and the rotated
+    files it lists (``<log>.N`` only, whatever else it says); empty without such a sidecar."""
+    from ..outputs import read_record
+
+    side = sidecar_path(log_path)
+    data = read_record(side)
+    if data is None or data.get("format") != "candump -L" or data.get("log") != log_path.name:
+        return set()
+    names = {log_path.name, side.name}
+    files = data.get("files")
+    for f in files if isinstance(files, list) else []:
+        name = f.get("name") if isinstance(f, dict) else None
+        if isinstance(name, str) and is_rotation_of(log_path.name, name):
+            names.add(name)
+    return names
+
+
+def is_rotation_of(log_name: str, name: str) -> bool:
+    """``name`` is a rotated file ``<log_name>.N`` (N a positive decimal number)."""
+    tail = name[len(log_name) + 1 :] if name.startswith(log_name + ".") else ""
+    return tail.isdecimal() and tail.isascii() and int(tail) > 0

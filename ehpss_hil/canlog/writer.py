@@ -36,12 +36,15 @@ from typing import Any
 
 import can
 
+from ..outputs import foreign, refuse_foreign
 from .diskspace import DISK_RESERVE_BYTES, DiskRoom, LineDrops
 from .lineformat import MAX_LINE_BYTES, FrameItem, format_line
 from .sidecar import (
     SIDECAR_RESERVE_BYTES,
     FileRecord,
     build_sidecar,
+    is_rotation_of,
+    owned_names,
     sidecar_path,
     write_json_atomic,
 )
@@ -65,9 +68,13 @@ class CandumpLogger:
 
     ``disk_reserve_bytes``: free space left on the file system (see the module docstring).
 
-    Opening truncates ``path`` and removes stale ``path.N`` files of an earlier run; it raises
-    OSError when the log or its sidecar cannot be written (a read-only or full folder), leaving
-    no file it created behind.
+    Opening replaces only a log this class wrote (:mod:`ehpss_hil.outputs`: the sidecar
+    ``path.json`` names the log and its rotated files): it truncates ``path`` and removes the
+    rotated files that sidecar lists. Any other existing ``path``, ``path.json`` or ``path.1`` …
+    ``path.<backups>`` is refused (:class:`~ehpss_hil.errors.OutputError`) unless
+    ``overwrite``, which replaces those names only; rotation moves and deletes only files of
+    this log. It raises OSError when the log or its sidecar cannot be written (a read-only or
+    full folder), leaving no file it created behind.
     :meth:`log` may be called from any thread; :meth:`close` is idempotent and safe to call from
     a signal handler of the owning process (it also runs at interpreter exit).
     """
@@ -81,6 +88,7 @@ class CandumpLogger:
         queue_lines: int = 200_000,
         sidecar: dict[str, Any] | None = None,
         disk_reserve_bytes: int = DISK_RESERVE_BYTES,
+        overwrite: bool = False,
     ) -> None:
         if not iface or any(c.isspace() for c in iface):
             raise ValueError(f"iface must be a non-empty name without spaces, got {iface!r}")
@@ -107,7 +115,7 @@ class CandumpLogger:
         self._closed = False
         self._summary: LogSummary | None = None
         self._records: list[FileRecord] = [FileRecord()]  # [0] = current file, [i] = path.i
-        self._remove_stale_backups()
+        self._claim(overwrite)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._room = DiskRoom(self.path.parent, disk_reserve_bytes)
         self._drops = LineDrops(self.path)
@@ -276,7 +284,8 @@ class CandumpLogger:
         """``path`` → ``path.1`` → … → ``path.<backups>``; the oldest beyond that is deleted."""
         try:
             self._fh.close()
-            for i in range(self.backups - 1, 0, -1):
+            # only this log's rotated files move: path.1 … path.<len(records) - 1>
+            for i in range(min(len(self._records), self.backups) - 1, 0, -1):
                 src = self._numbered(i)
                 if src.exists():
                     os.replace(src, self._numbered(i + 1))
@@ -297,12 +306,17 @@ class CandumpLogger:
     def _numbered(self, i: int) -> Path:
         return self.path.with_name(f"{self.path.name}.{i}")
 
-    def _remove_stale_backups(self) -> None:
-        if not self.path.parent.is_dir():
-            return
-        prefix = self.path.name + "."
-        for p in self.path.parent.iterdir():
-            if p.name.startswith(prefix) and p.name[len(prefix) :].isdigit():
+    def _claim(self, overwrite: bool) -> None:
+        """Refuse a foreign target unless ``overwrite``; remove the earlier log's rotated files
+        (those its sidecar lists, nothing else)."""
+        root = self.path.parent
+        ours = owned_names(self.path)
+        names = [self.path, sidecar_path(self.path), *(self._numbered(i) for i in range(1, self.backups + 1))]
+        if not overwrite:
+            refuse_foreign(self.path, foreign(names, ours, root), "a candump log")
+        for name in sorted(ours):
+            p = root / name
+            if is_rotation_of(self.path.name, name) and (p.is_symlink() or p.is_file()):
                 p.unlink()
 
     # ---- shutdown ------------------------------------------------------------------------

@@ -31,6 +31,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", "-o", metavar="DIR", help="output directory (default: runs/campaign-<name>)")
     p.add_argument("--resume", action="store_true", help="continue in DIR: runs already finished are skipped")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace files at the campaign's names in DIR that it did not write (others are kept)",
+    )
     p.add_argument("--csv", action="store_true", help="also write results.csv")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
 
@@ -55,7 +60,14 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         res = run_campaign(
-            camp, out, max(1, args.workers), args.scheduler, args.resume, args.csv, not args.no_figures
+            camp,
+            out,
+            max(1, args.workers),
+            args.scheduler,
+            args.resume,
+            args.csv,
+            not args.no_figures,
+            overwrite=args.overwrite,
         )
     except KeyboardInterrupt:
         print(f"\ninterrupted: the finished runs are kept in {out}; continue with --resume", file=sys.stderr)

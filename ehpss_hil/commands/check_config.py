@@ -67,7 +67,10 @@ def _prepare_controller(path: Path, c: ControllerConfig) -> None:
     from ..runtime.frameio import process_codec
 
     params = load_params(c.params or None)
-    process_codec(c.dbc, c.ids, str(path), c.protocol, c.dbc_map, c.nodes, params.plant.spool_stroke_m)
+    plant = params.plant
+    process_codec(
+        c.dbc, c.ids, str(path), c.protocol, c.dbc_map, c.nodes, plant.spool_stroke_m, plant.stroke_current_a
+    )
     loop_options(c)
     default_factory(c.mode, params, 1.0 / c.rate_hz, c)
 
@@ -82,7 +85,9 @@ def _prepare_emulator(path: Path, e: EmulatorConfig) -> None:
 
         check_nodes(e.nodes, str(path))
     else:
-        process_codec(e.dbc, e.ids, str(path), e.protocol, e.dbc_map)
+        process_codec(
+            e.dbc, e.ids, str(path), e.protocol, e.dbc_map, stroke_current_a=params.plant.stroke_current_a
+        )
     if e.scenario:
         _prepare_scenario(load_scenario(e.scenario), params)
 
@@ -157,17 +162,22 @@ def _master_text(c: ControllerConfig) -> str:
     return f", protocol cia408 master (valve node {n.valve_node}, position from {source}, SYNC {sync})"
 
 
+#: runs of a campaign whose scenarios check-config builds (the cost does not grow with samples)
+CHECKED_CAMPAIGN_RUNS = 16
+
+
 def _summarize_campaign(path: Path, data: Any) -> str:
-    """A campaign file with its base scenario, every run's scenario built."""
+    """A campaign file with its base scenario and the scenarios of a draw of
+    :data:`CHECKED_CAMPAIGN_RUNS` runs built."""
     from ..campaign.sampling import plan_runs
     from ..campaign.spec import load_campaign
 
     c = load_campaign(path, data)
-    plans = plan_runs(c)
+    plan_runs(c, CHECKED_CAMPAIGN_RUNS)
     kinds = [k for k, w in c.spec.faults.kinds.weights().items() if w > 0]
     lo, hi = c.spec.faults.count
     return (
-        f"campaign {c.spec.name}: {len(plans)} runs of {c.duration_s:g} s ({c.spec.sampler}), "
+        f"campaign {c.spec.name}: {c.spec.samples} runs of {c.duration_s:g} s ({c.spec.sampler}), "
         f"{lo}-{hi} of {', '.join(kinds)}, modes {', '.join(c.spec.modes)}"
         + (f", model error on {', '.join(me.ranges())}" if (me := c.spec.model_error) is not None else "")
     )

@@ -24,6 +24,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority 1..99 (0 = none)")
     p.add_argument("--cpu", type=int, help="pin to this CPU")
     p.add_argument("--log", help="candump -L log of every frame sent and received")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a file at the --log path that is no log of ours (and its numbered files)",
+    )
     p.add_argument("--duration", type=float, help="stop after this many seconds (cycles)")
     p.add_argument(
         "--lockstep",
@@ -57,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
             rt_priority=args.rt_priority,
             cpu=args.cpu,
             log=args.log,
+            overwrite_log=args.overwrite,
             duration_s=args.duration,
             lockstep=args.lockstep,
             summary_json=args.summary_json,

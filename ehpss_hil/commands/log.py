@@ -3,7 +3,9 @@
 Writes ``FILE`` (rotated by size) and ``FILE.json`` (sidecar). Stops on SIGINT/SIGTERM or after
 ``--duration`` seconds, flushes everything and prints the counts (exit 0). A bus that cannot be
 opened exits 3 with the reason, a log that cannot be written (read-only or full folder) exits 2
-with the reason and leaves no file behind. A full disk while logging: lines are dropped and
+with the reason and leaves no file behind. An existing ``FILE`` (or ``FILE.json``, ``FILE.1`` …)
+that is no log of ours is refused the same way (exit 2, nothing touched) unless ``--overwrite``;
+rotation removes only files of this log. A full disk while logging: lines are dropped and
 counted (sidecar, final line), the logger goes on and exits 0. Datagrams on a udp_multicast
 group that are no frame are counted and skipped.
 """
@@ -43,6 +45,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("-c", "--channel", required=True, help="channel (vcan0, can0, 239.74.163.2, …)")
     p.add_argument("-o", "--output", required=True, type=Path, help="log file (candump -L)")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a file at --output that is no log of ours (and its numbered files)",
+    )
     p.add_argument(
         "--duration",
         type=float,
@@ -124,7 +131,10 @@ def run(args: argparse.Namespace) -> int:
                 backups=args.backups,
                 queue_lines=args.queue_lines,
                 sidecar=meta,
+                overwrite=args.overwrite,
             )
+        except OutputError:
+            raise
         except OSError as exc:
             raise OutputError(f"{args.output}: cannot write the log: {exc.strerror or exc}") from exc
         try:

@@ -56,6 +56,12 @@ class PlantParams:
         """Steady spool displacement per ampere of coil current (m/A)."""
         return self.valve_gain_m_per_a_s2 / self.valve_stiffness_1_s2
 
+    @property
+    def stroke_current_a(self) -> float:
+        """The steady coil current that moves the spool to its stroke (A): the command range a
+        valve's current field must hold either way."""
+        return self.spool_stroke_m / self.valve_static_gain_m_per_a
+
 
 @dataclass(frozen=True)
 class ControllerGains:

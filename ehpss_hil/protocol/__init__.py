@@ -20,6 +20,10 @@ __all__ = ["PROTOCOLS", "make_codec"]
 
 
 def _native(dbc: str, ids: CanIds, src: str) -> FrameCodec:
+    if dbc:
+        from .mapcheck import check_dbc_file
+
+        check_dbc_file(dbc, src, "dbc")
     try:
         return FrameCodec(
             dbc or None,
@@ -41,11 +45,13 @@ def make_codec(
     dbc_map: DbcMap | None = None,
     cia408: Cia408Config | None = None,
     spool_stroke_m: float = 0.0,
+    stroke_current_a: float = 0.0,
 ) -> FrameCodec:
     """The codec of a process config: ``protocol`` (``native``, ``dbc-map`` with ``dbc_map``, or
     the master's ``cia408`` with its nodes ``cia408`` and the valve's spool stroke (m)), the
     native DBC ``dbc`` (empty: the shipped one) and the ID layout ``ids``. A bad DBC, map, EDS
-    or ID layout is a :class:`ConfigError` naming its key (exit 2)."""
+    or ID layout is a :class:`ConfigError` naming its key (exit 2). ``stroke_current_a``: the
+    coil current (A) of the spool's stroke, which a mapped current field must hold."""
     native = _native(dbc, ids, src)
     if protocol == "native":
         return native
@@ -62,7 +68,7 @@ def make_codec(
     from .dbcmap import MappedCodec
     from .mapcheck import check_id_clash, resolve_map
 
-    vdb, frames = resolve_map(dbc_map, src)
+    vdb, frames = resolve_map(dbc_map, src, stroke_current_a)
     codec = MappedCodec(
         frames,
         dbc or None,

@@ -35,6 +35,10 @@ LOAD_PRESSURE_RESOLUTION_PA = 1e4
 #: coarsest LSB of the coil-current setpoint and of its echo (A)
 CURRENT_RESOLUTION_A = 1e-5
 
+#: a mapped field holds at least this many steps of its signal's needed resolution: a narrower
+#: one (a factor of 1e-300, a range of [0, 0.001] mA) cannot carry the signal at all
+MIN_FIELD_STEPS = 100
+
 #: the logical frames, in the order the map's E2E section names them (``e2e.sensor_pos`` …)
 LOGICAL_FRAMES = ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD")
 

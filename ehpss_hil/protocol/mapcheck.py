@@ -2,10 +2,15 @@
 
 What is checked (each a :class:`~ehpss_hil.errors.ConfigError`, exit 2, with the key path):
 
-* ``dbc_map.dbc``: a CAN DBC that loads; mapped messages are classic CAN (≤ 8 bytes);
+* ``dbc_map.dbc``: a regular file of at most :data:`~ehpss_hil.limits.MAX_DBC_BYTES`, a CAN DBC
+  that loads; mapped messages are classic CAN (≤ 8 bytes);
 * ``dbc_map.signals.<key>``: ``MESSAGE.Signal`` names an existing message and signal; its unit
   is one the quantity allows (:data:`~.logical.UNITS`); its LSB (DBC factor × unit) is no
-  coarser than the needed resolution (:mod:`.logical`); the signals of one logical frame share
+  coarser than the needed resolution (:mod:`.logical`); its scaling is one the codec can compute
+  with (a finite, normal, non-zero factor; a finite offset) and its range (the DBC's
+  ``[min|max]``, within what its bits hold) is ordered and holds :data:`~.logical.MIN_FIELD_STEPS`
+  steps of that resolution; a current holds 0 A (the fail-safe) and ± the coil current of the
+  spool's stroke (the controller's command range); the signals of one logical frame share
   one message (and one multiplexer page), the three logical frames use three messages;
 * ``dbc_map.e2e.<frame>.counter|crc|data_ids``: present exactly when the profile needs them, in
   the frame's message, a counter of at least 4 bits, the CRC and counter where the AUTOSAR
@@ -17,6 +22,10 @@ What is checked (each a :class:`~ehpss_hil.errors.ConfigError`, exit 2, with the
 
 from __future__ import annotations
 
+import math
+import os
+import stat
+import sys
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -27,7 +36,8 @@ from cantools.database.can import Message as DbcMessage
 
 from ..config import DbcMap, E2EFrameMap
 from ..errors import ConfigError
-from .logical import LOGICAL_FRAMES, LOGICAL_SIGNALS, UNITS, LogicalSignal
+from ..limits import MAX_DBC_BYTES
+from .logical import LOGICAL_FRAMES, LOGICAL_SIGNALS, MIN_FIELD_STEPS, UNITS, LogicalSignal
 
 #: counter values the receiver's sequence check tells apart (:class:`~ehpss_hil.codec.CounterCheck`)
 MIN_COUNTER_BITS = 4
@@ -63,8 +73,24 @@ class MappedFrame:
     data_ids: tuple[int, ...]
 
 
+def check_dbc_file(path: str, src: str, key: str) -> None:
+    """``path`` is a regular file of at most :data:`MAX_DBC_BYTES`, or a ConfigError naming
+    ``key`` (before cantools reads it: a 20 MB DBC costs cantools gigabytes)."""
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise ConfigError(src, key, f"cannot read {path}: {exc.strerror or exc}") from exc
+    if not stat.S_ISREG(st.st_mode):
+        raise ConfigError(src, key, f"{path} is not a regular file")
+    if st.st_size > MAX_DBC_BYTES:
+        raise ConfigError(
+            src, key, f"{path} is {st.st_size} bytes; a DBC may have at most {MAX_DBC_BYTES} (limits.py)"
+        )
+
+
 def load_vendor_dbc(path: str, src: str) -> Database:
     """The vendor DBC, or a ConfigError naming ``dbc_map.dbc``."""
+    check_dbc_file(path, src, "dbc_map.dbc")
     try:
         db = cantools.database.load_file(path)
     except (OSError, ValueError, cantools.database.UnsupportedDatabaseFormatError) as exc:
@@ -92,8 +118,56 @@ def _signal(db: Database, ref: str, src: str, key: str) -> tuple[DbcMessage, Any
     return msg, sig
 
 
-def _si_per_unit(ls: LogicalSignal, sig: Any, src: str, key: str) -> float:
-    """The SI value of one unit of ``sig``; checks the unit and the resolution."""
+def _field_range(sig: Any) -> tuple[float, float]:
+    """The values ``sig`` carries (its unit): the DBC's ``[min|max]`` (when given and not equal)
+    within what its raw bits hold through factor and offset (± inf for a float field)."""
+    lo, hi = -math.inf, math.inf
+    if not sig.conversion.is_float:
+        n = int(sig.length)
+        raw = (-(1 << (n - 1)), (1 << (n - 1)) - 1) if sig.is_signed else (0, (1 << n) - 1)
+        ends = sorted(float(sig.offset) + float(sig.scale) * r for r in raw)
+        lo, hi = ends[0], ends[1]
+    if sig.minimum is not None and sig.maximum is not None and sig.minimum != sig.maximum:
+        lo, hi = max(lo, float(sig.minimum)), min(hi, float(sig.maximum))
+    return lo, hi
+
+
+def _check_scaling(
+    ls: LogicalSignal, sig: Any, si: float, src: str, key: str, stroke_current_a: float
+) -> None:
+    """Factor, offset and range of a scaled field (see the module docstring)."""
+    scale, offset = float(sig.scale), float(sig.offset)
+    if not (math.isfinite(scale) and math.isfinite(offset)) or abs(scale) < sys.float_info.min:
+        raise ConfigError(
+            src,
+            key,
+            f"{sig.name} has factor {scale:g}, offset {offset:g}: the factor must be a finite normal "
+            "number (not 0, not denormal) and the offset finite",
+        )
+    if sig.minimum is not None and sig.maximum is not None and sig.minimum > sig.maximum:
+        raise ConfigError(src, key, f"{sig.name} has the range [{sig.minimum:g}|{sig.maximum:g}]: min > max")
+    lo, hi = (x * si for x in _field_range(sig))
+    assert ls.resolution is not None
+    need = MIN_FIELD_STEPS * ls.resolution
+    if not (lo <= hi and hi - lo >= need * (1 - 1e-9)) or math.isnan(hi - lo):
+        raise ConfigError(
+            src,
+            key,
+            f"{sig.name} holds [{lo:g}, {hi:g}] SI with factor {scale:g} and offset {offset:g} in "
+            f"{sig.length} bits; {ls.key} needs a span of at least {need:g} ({MIN_FIELD_STEPS} steps "
+            f"of {ls.resolution:g})",
+        )
+    if ls.quantity == "current" and not lo <= -stroke_current_a <= 0.0 <= stroke_current_a <= hi:
+        raise ConfigError(
+            src,
+            key,
+            f"{sig.name} holds [{lo:g}, {hi:g}] A; the controller commands 0 A (fail-safe) and "
+            f"±{stroke_current_a:g} A (the spool's stroke)",
+        )
+
+
+def _si_per_unit(ls: LogicalSignal, sig: Any, src: str, key: str, stroke_current_a: float = 0.0) -> float:
+    """The SI value of one unit of ``sig``; checks the unit, the resolution and the scaling."""
     units = UNITS[ls.quantity]
     unit = (sig.unit or "").strip()
     if unit not in units:
@@ -104,6 +178,7 @@ def _si_per_unit(ls: LogicalSignal, sig: Any, src: str, key: str) -> float:
         if sig.conversion.is_float or sig.scale != 1 or sig.offset != 0:
             raise ConfigError(src, key, f"{sig.name} must be a plain 0/1 field (factor 1, offset 0)")
         return si
+    _check_scaling(ls, sig, si, src, key, stroke_current_a)
     lsb = abs(float(sig.scale)) * si
     if not sig.conversion.is_float and lsb > ls.resolution * (1 + 1e-9):
         raise ConfigError(
@@ -126,7 +201,7 @@ def _page(msg: DbcMessage, sig: Any) -> tuple[tuple[str, int], ...]:
 
 
 def _frame_signals(
-    db: DbcMap, vdb: Database, src: str, role: str
+    db: DbcMap, vdb: Database, src: str, role: str, stroke_current_a: float
 ) -> tuple[DbcMessage, list[MappedSignal], Any]:
     msg: DbcMessage | None = None
     mapped: list[MappedSignal] = []
@@ -149,7 +224,8 @@ def _frame_signals(
                 src, key, f"{sig.name} is on another multiplexer page than {role}'s other signals"
             )
         msg, page = m, p
-        mapped.append(MappedSignal(ls.signal, sig.name, _si_per_unit(ls, sig, src, key)))
+        si = _si_per_unit(ls, sig, src, key, stroke_current_a)
+        mapped.append(MappedSignal(ls.signal, sig.name, si))
     assert msg is not None  # position, load_pressure and current_setpoint are required keys
     return msg, mapped, page
 
@@ -205,13 +281,17 @@ def _e2e(
     return counter, crc
 
 
-def resolve_map(m: DbcMap, src: str) -> tuple[Database, tuple[MappedFrame, ...]]:
-    """The vendor DBC and the three mapped logical frames (ConfigError naming the bad key)."""
+def resolve_map(
+    m: DbcMap, src: str, stroke_current_a: float = 0.0
+) -> tuple[Database, tuple[MappedFrame, ...]]:
+    """The vendor DBC and the three mapped logical frames (ConfigError naming the bad key);
+    ``stroke_current_a``: the coil current (A) that moves the spool to its stroke, which the
+    current fields must hold either way (0: only 0 A is required)."""
     vdb = load_vendor_dbc(m.dbc, src)
     frames: list[MappedFrame] = []
     used: dict[str, str] = {}
     for role, e2e_key in zip(LOGICAL_FRAMES, ("sensor_pos", "sensor_aux", "valve_cmd"), strict=True):
-        msg, signals, page = _frame_signals(m, vdb, src, role)
+        msg, signals, page = _frame_signals(m, vdb, src, role, stroke_current_a)
         if msg.name in used:
             first = next(ls.key for ls in LOGICAL_SIGNALS if ls.frame == role)
             raise ConfigError(

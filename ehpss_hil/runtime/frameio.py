@@ -33,7 +33,7 @@ from ..bus import (
 from ..codec import FrameCodec
 from ..codec.ratelimit import RateLimit, position_step_bound_m
 from ..config import BusConfig, CanIds, Cia408Config, DbcMap, LogConfig
-from ..errors import ConfigError, FrameError
+from ..errors import ConfigError, FrameError, OutputError
 from ..protocol import make_codec
 from .bushealth import BusHealth
 from .collisions import IdCollisions, SentFrames
@@ -54,9 +54,14 @@ class FrameLogger(Protocol):
 
 
 def open_can_logger(
-    path: str, cfg: LogConfig, bus: BusConfig, sidecar: dict[str, Any] | None = None
+    path: str,
+    cfg: LogConfig,
+    bus: BusConfig,
+    sidecar: dict[str, Any] | None = None,
+    overwrite: bool = False,
 ) -> FrameLogger | None:
-    """A candump logger for ``path`` (None when ``path`` is empty or canlog is unavailable)."""
+    """A candump logger for ``path`` (None when ``path`` is empty or canlog is unavailable);
+    ``overwrite``: replace a file at ``path`` that is no log of ours (``--overwrite``)."""
     if not path:
         return None
     from ..canlog import CandumpLogger
@@ -69,6 +74,7 @@ def open_can_logger(
         backups=cfg.backups,
         queue_lines=cfg.queue_lines,
         sidecar=sidecar,
+        overwrite=overwrite,
     )
     return logger
 
@@ -81,11 +87,13 @@ def process_codec(
     dbc_map: DbcMap | None = None,
     cia408: Cia408Config | None = None,
     spool_stroke_m: float = 0.0,
+    stroke_current_a: float = 0.0,
 ) -> FrameCodec:
     """The frame codec of a process config (:func:`ehpss_hil.protocol.make_codec`): its DBC
     (empty: the shipped one), ID layout and protocol profile; a bad DBC, map or ID layout is a
-    :class:`ConfigError` naming its key (exit 2)."""
-    return make_codec(protocol, dbc, ids, config_path, dbc_map, cia408, spool_stroke_m)
+    :class:`ConfigError` naming its key (exit 2). ``spool_stroke_m`` (m), ``stroke_current_a``
+    (A): the plant's spool stroke and the coil current that reaches it."""
+    return make_codec(protocol, dbc, ids, config_path, dbc_map, cia408, spool_stroke_m, stroke_current_a)
 
 
 def limit_sensor_rate(codec: FrameCodec, speed_max_m_s: float, ts_s: float) -> RateLimit:
@@ -102,12 +110,17 @@ def open_process_logger(
     bus: can.BusABC,
     config_path: str,
     sidecar: dict[str, Any],
+    overwrite: bool = False,
 ) -> FrameLogger | None:
     """:func:`open_can_logger` for a process whose bus is open (``--log`` wins over
-    ``log.path``): a log that cannot be written shuts the bus (nothing was sent yet) and is a
-    :class:`ConfigError` naming the option or key it came from (exit 2)."""
+    ``log.path``): a log that cannot be written, or a file there that is no log of ours (unless
+    ``overwrite``), shuts the bus (nothing was sent yet) and is a :class:`ConfigError` naming
+    the option or key it came from (exit 2)."""
     try:
-        return open_can_logger(cli_path or cfg.path, cfg, bus_cfg, sidecar=sidecar)
+        return open_can_logger(cli_path or cfg.path, cfg, bus_cfg, sidecar=sidecar, overwrite=overwrite)
+    except OutputError as exc:
+        bus.shutdown()
+        raise ConfigError(config_path, "--log" if cli_path else "log.path", str(exc)) from exc
     except OSError as exc:
         bus.shutdown()
         raise ConfigError(

@@ -67,8 +67,17 @@ def config_codec(path: str) -> FrameCodec:
     from ..protocol import make_codec
 
     cfg = load_controller_config(path)
-    stroke = load_params(cfg.params or None).plant.spool_stroke_m
-    return make_codec(cfg.protocol, cfg.dbc, cfg.ids, path, cfg.dbc_map, cfg.nodes, stroke)
+    plant = load_params(cfg.params or None).plant
+    return make_codec(
+        cfg.protocol,
+        cfg.dbc,
+        cfg.ids,
+        path,
+        cfg.dbc_map,
+        cfg.nodes,
+        plant.spool_stroke_m,
+        plant.stroke_current_a,
+    )
 
 
 def reference_output(params: Params, ts_s: float, x_d: np.ndarray) -> np.ndarray:
