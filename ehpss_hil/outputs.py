@@ -65,10 +65,18 @@ def manifest_files(out: Path, tool: str) -> list[str] | None:
 
 
 def write_manifest(out: Path, tool: str, files: Iterable[str]) -> None:
-    """Record ``files`` (relative paths) as written by ``tool`` in ``out`` (atomically)."""
-    from .canlog.sidecar import write_json_atomic  # canlog imports this module
-
-    write_json_atomic(out / MANIFEST, {"tool": tool, "files": sorted(set(files))})
+    """Record ``files`` (relative paths) as written by ``tool`` in ``out`` (atomically: a
+    temporary file, then ``os.replace``; a failed write leaves no temporary file and raises
+    OSError)."""
+    raw = json.dumps({"tool": tool, "files": sorted(set(files))}, indent=2) + "\n"
+    path = out / MANIFEST
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        tmp.write_text(raw)
+        os.replace(tmp, path)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def exists(path: Path) -> bool:
