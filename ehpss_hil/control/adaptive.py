@@ -168,7 +168,8 @@ class MmacController(LoopBase):
                 sensor = self.attribution.update(
                     meas.position_m, self.k_dft_hat, ps.active, ps.guarded, broken, self._was_trusted
                 )
-                self.set_position_nominal(not (sensor or self.flow.flow_fault), self._ramp_n)
+                ramp = 1 if self.attribution.by_jump else self._ramp_n
+                self.set_position_nominal(not (sensor or self.flow.flow_fault), ramp)
         else:
             self.clock.dead_cycle(self.k_loe_hat / self.k_q_hat)
         cmd = self._close(meas)

@@ -7,9 +7,9 @@ So the position model in use is compensated only once independent evidence has a
 the sensor; until then the loop feeds the raw sensor back (``LoopBase.position_nominal``).
 The evidence, each enough on its own:
 
-* the load-pressure test decided H_D (:class:`.FlowGainMonitor`), or the increment gain θ_prod
-  is above 1 + ``min_deviation`` (a flow-gain *loss* cannot raise it):
-  :attr:`.FlowGainMonitor.sensor_favoured`;
+* the load-pressure test decided H_D (:class:`.FlowGainMonitor`,
+  :attr:`.FlowGainMonitor.sensor_favoured`; an increment gain θ_prod above 1 is no evidence on
+  its own: a flow gain may be above the model's);
 * the model changed while the piston was at rest (θ_prod stale: no excited increment) from one
   that agreed with θ_prod when the motion stopped: a flow gain moves nothing without flow, a
   sensor gain moves the reading at once;
@@ -58,6 +58,7 @@ class SensorAttribution:
         "_theta_before",
         "_to",
         "_unexplained",
+        "by_jump",
         "jump",
         "jumped_since_guard",
         "since_guard",
@@ -88,6 +89,9 @@ class SensorAttribution:
         self.since_guard = 0
         #: the reading jumped since the position guard rose (False: not guarded)
         self.jumped_since_guard = False
+        #: the model in use is the gain a jump of the reading explained: the reading stepped, so
+        #: its compensation applies at once (no ramp)
+        self.by_jump = False
 
     def update(
         self, position_m: float, theta_d: float, model: int, guarded: bool, broken: bool, trusted: bool
@@ -126,6 +130,7 @@ class SensorAttribution:
                 self._gain = theta_d
                 self._left = 0
         near = abs(theta_d - self._gain) <= 0.5 * self._min_dev  # False while NaN
+        self.by_jump = near
         if not near:
             self._gain = math.nan
         if self._left == 0:

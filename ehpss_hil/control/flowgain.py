@@ -12,7 +12,8 @@ loop the noise-driven valve activity gives P_L ≈ 20 kPa RMS of broadband, mode
 content, so a likelihood test decides within tens of milliseconds between
 
 * H_D (sensor): k_Q = 1, k_DFT = θ_pos, and
-* H_Q (flow gain): k_Q = θ_pos, k_DFT = 1,
+* H_Q (flow gain, either sign: a loss, or a plant whose flow gain is above the model's):
+  k_Q = θ_pos, k_DFT = 1,
 
 where θ_pos is the (offset-free, accurate) estimate of the product. The window holds
 k̂_LOE-free sums of ``u = (m/A_h)·ẍ₁``: ``Σw·u²``, ``Σw·u·P_L``, ``Σw·P_L²``, so evidence taken before
@@ -23,7 +24,7 @@ model changes (the pressure model changed) or when an attributed deviation moves
 ``min_deviation`` (a new fault; the attribution stands until the new evidence overturns it).
 The statistic is the log-likelihood ratio over an exponentially weighted window,
 ``Λ = (E_D − E_Q)/(2σ̂²)``, ``E_h = Σ w·(P_L − g_h·u)²`` with g_D = k̂_LOE, g_Q = k̂_LOE·θ_pos and
-``σ̂² = min(E_D, E_Q)/Σw``; H_Q (a flow-gain *loss*: θ_pos ≤ 1 − ``min_deviation``) is entered
+``σ̂² = min(E_D, E_Q)/Σw``; H_Q (|θ_pos − 1| ≥ ``min_deviation``) is entered
 when ``Λ > Λ_on`` and left when ``Λ < −Λ_on``; H_D is decided when ``Λ < −Λ_D`` with the larger
 ``Λ_D`` (``flow_gain_sensor_threshold``): a flow loss compensated as a drift costs more than a
 drift left to the plain loop. A decision ends only when neither θ_pos nor the position bank's
@@ -282,9 +283,9 @@ class FlowGainMonitor:
 
     @property
     def sensor_favoured(self) -> bool:
-        """The present deviation may be compensated as the sensor's: H_D decided, or the product
-        above 1 + ``min_deviation`` (a flow-gain *loss* cannot raise it)."""
-        return not self.flow_fault and (self.sensor_decided or self.theta_prod > 1.0 + self._min_dev)
+        """The present deviation may be compensated as the sensor's: H_D decided (a product
+        above 1 is no evidence for the sensor: a flow gain may be above the model's too)."""
+        return not self.flow_fault and self.sensor_decided
 
     @property
     def attributed(self) -> bool:
@@ -312,7 +313,7 @@ class FlowGainMonitor:
         if self.flow_fault:
             self.flow_fault = self.llr > -self._on
         else:
-            self.flow_fault = self.llr > self._on and theta <= 1.0 - self._min_dev
+            self.flow_fault = self.llr > self._on and abs(theta - 1.0) >= self._min_dev
         if self.flow_fault:
             self.sensor_decided = False
         elif self.llr < -self._on_d:
