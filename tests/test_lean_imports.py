@@ -80,6 +80,17 @@ def _with_blocked(blocked: set[str], args: list[str], cwd: Path) -> subprocess.C
             "plot",
         ),
         (["report", "no-such.log"], {"matplotlib"}, "plot"),
+        (
+            [
+                "identify",
+                "--scenario",
+                str(ROOT / "scenarios" / "identify" / "kq075.yaml"),
+                "--out",
+                "P.yaml",
+            ],
+            {"scipy"},
+            "identify",
+        ),
     ],
 )
 def test_a_missing_extra_is_one_line_naming_it_and_exit_2(

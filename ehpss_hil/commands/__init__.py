@@ -30,6 +30,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "export_arxml",
         "write the DBC as AUTOSAR 4 ARXML (unique signal names, multiplexed PDUs, E2E DataIDs)",
     ),
+    "identify": (
+        "identify",
+        "identify the plant (bounded multisine around the PI, least-squares fit with intervals); "
+        "write a params file",
+    ),
     "log": ("log", "log every frame of a CAN bus to a candump -L file (+ JSON sidecar), rotated by size"),
     "monitor": (
         "monitor",

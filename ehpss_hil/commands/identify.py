@@ -1,0 +1,53 @@
+"""``ehpss-hil identify --scenario S.yaml --out P.yaml``: identify the plant, write a params file."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..extras import require
+
+NAME = "identify"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--scenario",
+        metavar="S.yaml",
+        required=True,
+        help="run the experiment in lockstep against the emulated plant of S's plant: section and "
+        "noise (its reference and fault events are not used)",
+    )
+    p.add_argument("--out", metavar="P.yaml", required=True, help="the params file to write")
+    p.add_argument("--report", metavar="DIR", help="write report.md, frf.csv (and frf.png) here")
+    p.add_argument(
+        "--params",
+        metavar="PARAMS.yaml",
+        default="",
+        help="the start params: PI gains of the experiment, the fit's start values and the keys "
+        "not fitted (default configs/params.yaml)",
+    )
+    p.add_argument("--amplitude", type=float, metavar="M", help="peak of the multisine reference (m)")
+    p.add_argument("--travel-limit", type=float, metavar="M", help="measured travel limit (m)")
+    p.add_argument("--current-limit", type=float, metavar="A", help="commanded current limit (A)")
+
+
+def run(args: argparse.Namespace) -> int:
+    require("identify", "identify")
+    from ..identify.engine import run_lockstep
+    from ..identify.excitation import Excitation
+    from ..identify.report import format_table
+    from ..schema import build
+
+    given = {
+        "amplitude_m": args.amplitude,
+        "travel_limit_m": args.travel_limit,
+        "current_limit_a": args.current_limit,
+    }
+    exc = build(Excitation, {k: v for k, v in given.items() if v is not None}, "command line")
+    ident = run_lockstep(
+        args.scenario, Path(args.out), Path(args.report) if args.report else None, args.params, exc
+    )
+    print(format_table(ident.result, ident.truth))
+    print(f"wrote {args.out}" + (f" and {args.report}/report.md" if args.report else ""))
+    return 0
