@@ -98,3 +98,17 @@ def test_a_bad_limit_is_one_line_and_exit_2(tmp_path: Path) -> None:
     )
     assert r.returncode == 2, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "amplitude_m" in r.stderr
+
+
+def test_bench_identify_judges_a_plant_and_mmac_with_its_identified_params(tmp_path: Path) -> None:
+    out = tmp_path / "b.json"
+    r = _cli("bench", "identify", "--plant", "wv130", "--json", str(out))
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
+    assert "bench identify: 9 target(s) PASS" in r.stdout
+    import json
+
+    data = json.loads(out.read_text())
+    omega = next(row for row in data["identification"] if row["quantity"] == "omega_sv_rad_s")
+    assert omega["true"] == pytest.approx(9.97945e6**0.5)
+    assert abs(omega["identified"] / omega["true"] - 1) < 0.05
+    assert {row["run"] for row in data["control"]} == {"fault-free", "loe", "drift"}

@@ -12,6 +12,7 @@ BENCHES: tuple[str, ...] = (
     "codec",
     "control",
     "faults",
+    "identify",
     "loop",
     "monitor",
     "plant",
