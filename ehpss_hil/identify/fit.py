@@ -192,52 +192,41 @@ def _log_estimate(name: str, value: float, grad: Array, cov: Array, unit: str) -
     return Estimate(name, value, math.expm1(Z95 * sd), unit)
 
 
+#: each derived quantity as ``const·Π key^power``: name → (const, {key: power}, unit)
+DERIVED: dict[str, tuple[float, dict[str, float], str]] = {
+    "omega_sv_rad_s": (1.0, {"valve_stiffness_1_s2": 0.5}, "rad/s"),
+    "zeta_sv": (0.5, {"valve_damping_1_s": 1.0, "valve_stiffness_1_s2": -0.5}, ""),
+    "valve_static_gain_m_per_a": (1.0, {"valve_gain_m_per_a_s2": 1.0, "valve_stiffness_1_s2": -1.0}, "m/A"),
+    "omega_h_rad_s": (1.0, {"hydraulic_stiffness_1_s2": 0.5}, "rad/s"),
+    "zeta_h": (0.5, {"cylinder_damping_1_s": 1.0, "hydraulic_stiffness_1_s2": -0.5}, ""),
+    "velocity_gain_1_s": (1.0, {"flow_gain_1_s3": 1.0, "hydraulic_stiffness_1_s2": -1.0}, "1/s"),
+}
+#: the unit of each fitted key
+UNITS = {
+    "valve_gain_m_per_a_s2": "m/(A·s²)",
+    "valve_stiffness_1_s2": "1/s²",
+    "valve_damping_1_s": "1/s",
+    "flow_gain_1_s3": "1/s³",
+    "hydraulic_stiffness_1_s2": "1/s²",
+    "cylinder_damping_1_s": "1/s",
+}
+
+
 def _result(prob: _Problem, start: Params, theta: Array, cov: Array, evals: int) -> FitResult:
     n = len(FITTED_KEYS)
     plant = prob.plant(theta)
-    units = {"valve_gain_m_per_a_s2": "m/(A·s²)", "valve_stiffness_1_s2": "1/s²", "valve_damping_1_s": "1/s"}
-    units |= {"flow_gain_1_s3": "1/s³", "hydraulic_stiffness_1_s2": "1/s²", "cylinder_damping_1_s": "1/s"}
     e = np.eye(n + N_OFFSETS)
-    keys = tuple(_log_estimate(k, getattr(plant, k), e[i], cov, units[k]) for i, k in enumerate(FITTED_KEYS))
-    g = {k: e[i] for i, k in enumerate(FITTED_KEYS)}
-    w_sv, w_h = math.sqrt(plant.valve_stiffness_1_s2), math.sqrt(plant.hydraulic_stiffness_1_s2)
-    derived = (
-        _log_estimate("omega_sv_rad_s", w_sv, 0.5 * g["valve_stiffness_1_s2"], cov, "rad/s"),
-        _log_estimate(
-            "zeta_sv",
-            plant.valve_damping_1_s / (2 * w_sv),
-            g["valve_damping_1_s"] - 0.5 * g["valve_stiffness_1_s2"],
-            cov,
-            "",
-        ),
-        _log_estimate(
-            "valve_static_gain_m_per_a",
-            plant.valve_static_gain_m_per_a,
-            g["valve_gain_m_per_a_s2"] - g["valve_stiffness_1_s2"],
-            cov,
-            "m/A",
-        ),
-        _log_estimate("omega_h_rad_s", w_h, 0.5 * g["hydraulic_stiffness_1_s2"], cov, "rad/s"),
-        _log_estimate(
-            "zeta_h",
-            plant.cylinder_damping_1_s / (2 * w_h),
-            g["cylinder_damping_1_s"] - 0.5 * g["hydraulic_stiffness_1_s2"],
-            cov,
-            "",
-        ),
-        _log_estimate(
-            "velocity_gain_1_s",
-            plant.velocity_gain_1_s,
-            g["flow_gain_1_s3"] - g["hydraulic_stiffness_1_s2"],
-            cov,
-            "1/s",
-        ),
-    )
+    keys = tuple(_log_estimate(k, getattr(plant, k), e[i], cov, UNITS[k]) for i, k in enumerate(FITTED_KEYS))
+    derived = []
+    for name, (const, powers, unit) in DERIVED.items():
+        value = const * math.prod(getattr(plant, k) ** a for k, a in powers.items())
+        grad = sum((a * e[FITTED_KEYS.index(k)] for k, a in powers.items()), np.zeros(n + N_OFFSETS))
+        derived.append(_log_estimate(name, value, grad, cov, unit))
     k_sv = plant.valve_static_gain_m_per_a
     i0, sd_i0 = theta[n] * 1e-6, math.sqrt(max(cov[n, n], 0.0)) * 1e-6
     y0, sd_y0 = theta[n + 1] * 1e-6, math.sqrt(max(cov[n + 1, n + 1], 0.0)) * 1e-6
     null = Estimate("spool_null_offset_m", i0 * k_sv, Z95 * sd_i0 * k_sv, "m (± absolute)")
     zero = Estimate("position_zero_m", y0, Z95 * sd_y0, "m (± absolute)")
-    resid = (prob.y - prob.outputs(theta)) * prob.mask
+    resid = prob.y - prob.outputs(theta)
     rms = {c: _rms(resid[prob.mask[:, i], i]) for i, c in enumerate(CHANNELS)}
-    return FitResult(replace(start, plant=plant), keys, derived, null, zero, rms, evals)
+    return FitResult(replace(start, plant=plant), keys, tuple(derived), null, zero, rms, evals)

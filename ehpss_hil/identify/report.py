@@ -5,6 +5,7 @@ extra), written to ``report.md`` in a directory."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ from numpy.typing import NDArray
 from ..extras import missing
 from ..physics.params import PlantParams
 from .experiment import Record
-from .fit import FitResult, simulate
+from .fit import DERIVED, FitResult, simulate
 
 Array = NDArray[np.complex128]
 
@@ -26,16 +27,11 @@ PATHS = (
 
 
 def truth_of(plant: PlantParams, name: str) -> float:
-    """The value of key or derived quantity ``name`` for a known plant."""
-    derived = {
-        "omega_sv_rad_s": plant.valve_stiffness_1_s2**0.5,
-        "zeta_sv": plant.valve_damping_1_s / (2 * plant.valve_stiffness_1_s2**0.5),
-        "valve_static_gain_m_per_a": plant.valve_static_gain_m_per_a,
-        "omega_h_rad_s": plant.hydraulic_stiffness_1_s2**0.5,
-        "zeta_h": plant.cylinder_damping_1_s / (2 * plant.hydraulic_stiffness_1_s2**0.5),
-        "velocity_gain_1_s": plant.velocity_gain_1_s,
-    }
-    return derived[name] if name in derived else float(getattr(plant, name))
+    """The value of key or derived quantity ``name`` (:data:`~.fit.DERIVED`) for a known plant."""
+    if name in DERIVED:
+        const, powers, _ = DERIVED[name]
+        return const * math.prod(getattr(plant, k) ** a for k, a in powers.items())
+    return float(getattr(plant, name))
 
 
 def format_table(result: FitResult, truth: PlantParams | None = None) -> str:
