@@ -60,6 +60,8 @@ class DaemonArgs:
     summary_json: Path | None = None
     controller_factory: str | None = None
     sensor_age_us: float | None = None
+    #: a factory given in code (``ehpss-hil identify -c``); it wins over ``controller_factory``
+    factory: ControllerFactory | None = None
 
 
 def resolve_config(a: DaemonArgs) -> ControllerConfig:
@@ -164,7 +166,8 @@ def run_daemon(a: DaemonArgs) -> int:
         plant.stroke_current_a,
     )
     limit_sensor_rate(codec, params.plant.piston_speed_max_m_s, 1.0 / cfg.rate_hz)
-    controller = load_factory(a.controller_factory)(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
+    factory = a.factory or load_factory(a.controller_factory)
+    controller = factory(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
     if not isinstance(controller, Controller):
         raise ConfigError(
             "",

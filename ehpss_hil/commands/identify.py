@@ -1,8 +1,11 @@
-"""``ehpss-hil identify --scenario S.yaml --out P.yaml``: identify the plant, write a params file."""
+"""``ehpss-hil identify (--scenario S.yaml | -c controller.yaml) --out P.yaml``: identify the
+plant (in lockstep against a scenario's emulated plant, or on a live bus), write a params file."""
 
 from __future__ import annotations
 
 import argparse
+import logging
+import sys
 from pathlib import Path
 
 from ..extras import require
@@ -11,12 +14,24 @@ NAME = "identify"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument(
         "--scenario",
         metavar="S.yaml",
-        required=True,
         help="run the experiment in lockstep against the emulated plant of S's plant: section and "
         "noise (its reference and fault events are not used)",
+    )
+    where.add_argument(
+        "-c",
+        "--config",
+        metavar="CONTROLLER.yaml",
+        help="run it on the live bus of this controller config (the emulator or a real valve, any "
+        "protocol profile) with the daemon's loop; the config's params are the start params",
+    )
+    p.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="with -c: one loop cycle per received sensor pair (the emulator in lockstep too)",
     )
     p.add_argument("--out", metavar="P.yaml", required=True, help="the params file to write")
     p.add_argument("--report", metavar="DIR", help="write report.md, frf.csv (and frf.png) here")
@@ -24,8 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--params",
         metavar="PARAMS.yaml",
         default="",
-        help="the start params: PI gains of the experiment, the fit's start values and the keys "
-        "not fitted (default configs/params.yaml)",
+        help="with --scenario: the start params: PI gains of the experiment, the fit's start "
+        "values and the keys not fitted (default configs/params.yaml)",
     )
     p.add_argument("--amplitude", type=float, metavar="M", help="peak of the multisine reference (m)")
     p.add_argument("--travel-limit", type=float, metavar="M", help="measured travel limit (m)")
@@ -45,9 +60,16 @@ def run(args: argparse.Namespace) -> int:
         "current_limit_a": args.current_limit,
     }
     exc = build(Excitation, {k: v for k, v in given.items() if v is not None}, "command line")
-    ident = run_lockstep(
-        args.scenario, Path(args.out), Path(args.report) if args.report else None, args.params, exc
-    )
+    report = Path(args.report) if args.report else None
+    if args.config:
+        from ..identify.engine import run_on_bus
+
+        logging.basicConfig(
+            level=logging.INFO, stream=sys.stderr, format="ehpss-hil identify: %(levelname)s: %(message)s"
+        )
+        ident = run_on_bus(Path(args.config), Path(args.out), report, exc, args.lockstep)
+    else:
+        ident = run_lockstep(args.scenario, Path(args.out), report, args.params, exc)
     print(format_table(ident.result, ident.truth))
     print(f"wrote {args.out}" + (f" and {args.report}/report.md" if args.report else ""))
     return 0

@@ -69,3 +69,20 @@ def run_lockstep(
     if report_dir is not None:
         write_report(report_dir, ident.record, ident.result, ident.truth, scenario_path)
     return ident
+
+
+def run_on_bus(
+    config: Path, out: Path, report_dir: Path | None, exc: Excitation | None = None, lockstep: bool = False
+) -> Identification:
+    """The live-bus form: the experiment with the daemon's loop on controller config ``config``'s
+    bus (:mod:`.live`), the fit from the config's params, ``out`` (and the report) written."""
+    from .live import run_live
+
+    rec, params = run_live(config, exc or Excitation(), lockstep)
+    res = fit(rec, params)
+    check(res)
+    write_params(out, res, str(config))
+    ident = Identification(rec, res, None)
+    if report_dir is not None:
+        write_report(report_dir, rec, res, None, str(config))
+    return ident
