@@ -22,6 +22,7 @@ from pathlib import Path
 
 from ehpss_hil.blas import limit_blas_threads
 from ehpss_hil.bus import open_bus
+from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import EmulatorConfig, apply_overrides, load_emulator_config
 from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.errors import ConfigError, run_console
@@ -196,7 +197,8 @@ def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenari
     )
     io = RawFrameIO(bus, logger)
     valve, encoder = build_nodes(cfg.nodes, valve_od, encoder_od, io, params.plant.spool_stroke_m)
-    proc = CanopenEmulatorProcess(emu, io, valve, encoder, CanopenOptions())
+    truth = FrameCodec(cfg.dbc or None, id_base=cfg.ids.id_base) if cfg.truth else None
+    proc = CanopenEmulatorProcess(emu, io, valve, encoder, CanopenOptions(truth=truth))
     stop, previous = install_stop_handlers()
     try:
         limit_blas_threads(1)

@@ -148,3 +148,74 @@ def test_reset_communication_keeps_the_device_state_and_restores_comm_objects(st
         m for m in stepper.frames() if m.arbitration_id == cobid.HEARTBEAT + v and bytes(m.data) == b"\x00"
     ]
     assert len(boots) == 3  # power-on, reset communication, reset node
+
+
+def _activate(s: Stepper) -> None:
+    """NMT start of the valve, then an RPDO asking for ACTIVE at +10 %."""
+    v = s.cfg.valve_node
+    s.send(cobid.NMT, bytes([NmtCommand.START, v]))
+    s.step()
+    s.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, 1638))
+    s.step()
+    assert s.proc.valve.device.state == DeviceState.ACTIVE and s.proc.valve.current_a() > 0.0
+
+
+def _emcy(s: Stepper) -> list[bytes]:
+    return [bytes(m.data) for m in s.frames() if m.arbitration_id == cobid.EMCY + s.cfg.valve_node]
+
+
+def test_nmt_stop_while_active_is_the_fault_reaction_and_no_rpdo_gets_through(stepper: Stepper) -> None:
+    """Another node's NMT Stop: the valve goes to FAULT_HOLD (0 A), no EMCY in STOPPED (the
+    error register holds 0x11), and an RPDO asking for ACTIVE at +100 % changes nothing."""
+    v, valve = stepper.cfg.valve_node, stepper.proc.valve
+    _activate(stepper)
+    list(stepper.frames())
+    stepper.send(cobid.NMT, bytes([NmtCommand.STOP, v]))
+    stepper.step()
+    assert (valve.nmt, valve.device.state) == (NmtState.STOPPED, DeviceState.FAULT_HOLD)
+    assert valve.current_a() == 0.0 and valve.device.fault_code == 0x8100
+    assert int(valve.store.get(0x1001, 0)) == 0x11 and _emcy(stepper) == []
+    for _ in range(50):
+        stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, 16384))
+        stepper.step()
+    assert valve.device.state == DeviceState.FAULT_HOLD and valve.current_a() == 0.0
+    assert int(valve.store.get(0x6300, 1)) == 1638  # not even stored
+    assert valve._rpdo_late == {0x1400}  # the event timer ran on in STOPPED and elapsed
+
+
+def test_error_behaviour_takes_the_node_to_stopped_on_a_communication_error(stepper: Stepper) -> None:
+    """0x1029.1 = 2: the set-point RPDO's timeout (a communication error) also stops the node
+    (CiA 301), so a late rogue RPDO is not processed; default 1 (no change) keeps it OPERATIONAL."""
+    valve = stepper.proc.valve
+    assert int(valve.store.get(0x1029, 1)) == 1
+    valve.store.set(0x1029, 1, 2)
+    _activate(stepper)
+    stepper.step(25)
+    assert (valve.device.state, valve.nmt) == (DeviceState.FAULT_HOLD, NmtState.STOPPED)
+    assert struct.pack("<HB5x", 0x8250, 0x11) in _emcy(stepper)  # sent before the NMT change
+
+
+def test_a_short_rpdo_is_not_processed_and_reported_once(stepper: Stepper) -> None:
+    v, valve = stepper.cfg.valve_node, stepper.proc.valve
+    _activate(stepper)
+    list(stepper.frames())
+    for _ in range(5):
+        stepper.send(cobid.RPDO1 + v, struct.pack("<H", 0x0001))  # 2 bytes of 4 mapped
+        stepper.step()
+    assert _emcy(stepper) == [struct.pack("<HB5x", 0x8210, 0x11)]
+    assert valve.bad_length_frames == 5 and int(valve.store.get(0x6300, 1)) == 1638
+
+
+def test_a_sync_with_data_is_not_answered_and_reported_once(stepper: Stepper) -> None:
+    v, e = stepper.cfg.valve_node, stepper.cfg.encoder_node
+    stepper.send(cobid.NMT, bytes([NmtCommand.START, 0]))
+    stepper.step()
+    list(stepper.frames())
+    for _ in range(3):
+        stepper.send(cobid.SYNC, b"\x01")
+        stepper.step()
+    got = [(m.arbitration_id, bytes(m.data)) for m in stepper.frames()]
+    assert not [i for i, _ in got if i & 0x780 == 0x180]  # no TPDO answered it
+    assert got.count((cobid.EMCY + v, struct.pack("<HB5x", 0x8240, 0x11))) == 1
+    assert got.count((cobid.EMCY + e, struct.pack("<HB5x", 0x8240, 0x11))) == 1
+    assert stepper.proc.syncs == 0

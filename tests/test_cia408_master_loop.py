@@ -21,7 +21,14 @@ from ehpss_hil.protocol import make_codec
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.check import check_nodes
 from ehpss_hil.protocol.cia408.codec import Cia408Codec
-from ehpss_hil.protocol.cia408.objects import CONTROL_WORD, VPOC_SETPOINT, VPOC_SUB, DeviceState, NmtCommand
+from ehpss_hil.protocol.cia408.objects import (
+    CONTROL_WORD,
+    VPOC_SETPOINT,
+    VPOC_SUB,
+    DeviceState,
+    NmtCommand,
+    NmtState,
+)
 from ehpss_hil.runtime.cia408_master import CyclicMaster
 from ehpss_hil.runtime.controller_loop import CIA408_OWN_FRAMES, OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
@@ -60,7 +67,10 @@ class Rig:
                 valve.store.set(0x1801, sub, value)
             valve.store.set(0x1A01, 1, 0x21000020)
             valve.store.set(0x1A01, 0, 1)
-        self.host(cobid.NMT, bytes([NmtCommand.START, 0]))
+        # the start-up's NMT start, on the master's own bus (as MasterSession sends it)
+        self.buses[0].send(
+            can.Message(arbitration_id=cobid.NMT, data=bytes([NmtCommand.START, 0]), is_extended_id=False)
+        )
         self.proc.step_period()  # NMT start taken
         for _ in self.io.drain():  # the boot-up messages: the start-up's (MasterSession) to read
             pass
@@ -193,3 +203,47 @@ def test_the_position_from_an_object_of_the_valve() -> None:
         assert r.loop.meas.position_m == pytest.approx(sent * 1e-7, abs=1e-12)
     finally:
         r.close()
+
+
+@pytest.mark.parametrize(
+    ("can_id", "data", "frame"),
+    [
+        (cobid.RPDO1 + 32, bytes.fromhex("07000040"), "VALVE_CMD"),  # ACTIVE, +100 %
+        (cobid.NMT, bytes([NmtCommand.STOP, 32]), "NMT"),
+        (cobid.SYNC, b"", "SYNC"),
+        (cobid.RPDO1 + 32, bytes.fromhex("0700"), "VALVE_CMD"),  # shorter than mapped
+    ],
+    ids=["rpdo", "nmt-stop", "sync", "short-rpdo"],
+)
+def test_a_third_node_on_the_masters_frames_shuts_the_valve_out(
+    rig: Rig, can_id: int, data: bytes, frame: str
+) -> None:
+    """Fail-safe ID_COLLISION in the cycle that drains the first foreign frame; the master's SDO
+    DISABLED and NMT Stop reach the valve in the next period: STOPPED, no current, and the
+    foreign frames after it change nothing (the heartbeat of our own Stop is no failure)."""
+    rig.step(50)
+    rig.host(can_id, data)
+    rig.loop.poll_cycle()
+    assert (rig.loop.life.state, rig.loop.life.reason) == (State.FAULT, FailsafeReason.ID_COLLISION)
+    assert rig.io.sent["NMT"] == 1 and rig.io.sent["SDO"] == 1 and rig.master.shut_out
+    rig.proc.step_period()
+    valve = rig.proc.valve
+    assert valve.nmt is NmtState.STOPPED and valve.current_a() == 0.0
+    assert valve.device.state in (DeviceState.DISABLED, DeviceState.FAULT_HOLD)
+    for _ in range(300):  # the rogue goes on; heartbeats of the stopped valve come in
+        rig.host(can_id, data)
+        rig.step()
+    assert valve.current_a() == 0.0 and valve.device.state is not DeviceState.ACTIVE
+    assert rig.loop.life.reason is FailsafeReason.ID_COLLISION
+    assert rig.master.reason is FailsafeReason.ID_COLLISION and rig.io.sent["NMT"] == 1
+    assert rig.io.collisions.by_name[frame] >= 1
+
+
+def test_a_tpdo_shorter_than_mapped_is_a_pdo_error(rig: Rig) -> None:
+    rig.step(50)
+    rig.host(cobid.TPDO1 + 32, bytes.fromhex("0f00"))  # the valve's TPDO 1, 2 of 4 bytes
+    rig.loop.poll_cycle()
+    assert (rig.loop.life.state, rig.loop.life.reason) == (State.FAULT, FailsafeReason.PDO_ERROR)
+    assert rig.master.summary()["bad_length_pdos"] == 1 and rig.master.shut_out
+    rig.proc.step_period()
+    assert rig.proc.valve.nmt is NmtState.STOPPED and rig.proc.valve.current_a() == 0.0

@@ -13,9 +13,20 @@ the CiA 408 device drive (control word from the newest status word,
 fail-safe reason when a node's heartbeat stops or shows another NMT state (HEARTBEAT_LOST), an
 EMCY with an error code arrives once the valve has been ACTIVE (EMCY; before, the drive resets
 the fault it reports: the valve may have missed our heartbeat during the start-up) or the
-status word leaves ACTIVE (DEVICE_FAULT); these latch, and the valve is asked for DISABLED. A
-cycle without a status word counts for the loop's watchdog as a cycle without data
-(:attr:`CyclicMaster.status_fresh`: SENSOR_TIMEOUT, with the watchdog's own recovery).
+status word leaves ACTIVE (DEVICE_FAULT) or a TPDO's length is not its mapping's (PDO_ERROR);
+these latch, and the valve is asked for DISABLED. A cycle without a status word counts for the
+loop's watchdog as a cycle without data (:attr:`CyclicMaster.status_fresh`: SENSOR_TIMEOUT,
+with the watchdog's own recovery).
+
+**Shutting the valve out.** Plain CANopen PDOs carry no sender and no E2E: while another node
+sends the valve's RPDO (or SYNC, or an NMT command), our RPDO asking for DISABLED may be
+overwritten by the next foreign one. On a second transmitter (the loop's ID_COLLISION:
+:meth:`CyclicMaster.second_transmitter`), a node leaving OPERATIONAL that we did not command or
+a lost heartbeat (HEARTBEAT_LOST), or a malformed TPDO (PDO_ERROR), the master also sends, once,
+an SDO write of the control word DISABLED (processed while the valve is still OPERATIONAL) and
+then NMT Stop of the valve: in STOPPED a CiA 301 node processes no PDO (the rogue's RPDOs are
+shut out) and a CiA 408 valve takes its fault reaction. Our own Stop is expected in the valve's
+heartbeat from then on, not a failure.
 """
 
 from __future__ import annotations
@@ -32,10 +43,19 @@ from ..errors import NodeError
 from ..protocol.cia408 import cobid
 from ..protocol.cia408.codec import Cia408Codec
 from ..protocol.cia408.configure import configure_encoder, configure_valve
-from ..protocol.cia408.cyclic import Scaling, step_of_nm, unpack_emcy, unpack_heartbeat
+from ..protocol.cia408.cyclic import Scaling, frame, step_of_nm, unpack_emcy, unpack_heartbeat
 from ..protocol.cia408.drive import DeviceDrive
 from ..protocol.cia408.eds import ENCODER_EDS, VALVE_EDS
-from ..protocol.cia408.objects import DEVICE_TYPE, EMCY_NO_ERROR, PROFILE_ENCODER, PROFILE_VALVE, NmtState
+from ..protocol.cia408.objects import (
+    BIT_D,
+    CONTROL_WORD,
+    DEVICE_TYPE,
+    EMCY_NO_ERROR,
+    PROFILE_ENCODER,
+    PROFILE_VALVE,
+    NmtCommand,
+    NmtState,
+)
 from ..protocol.cia408.startup import SDO_TIMEOUT_S, NodeIdentity, check_identity, go_operational, stop_nodes
 from .lifecycle import FailsafeReason
 
@@ -50,6 +70,19 @@ NODE_POLL_S = 1.0
 STATUS_SLACK_CYCLES = 1
 #: the start-up notifier's read timeout (s): how long stopping it may take
 NOTIFIER_CYCLE_S = 0.05
+#: the fail-safe reasons on which the master shuts the valve out (module docstring)
+SHUT_OUT_REASONS = frozenset(
+    (FailsafeReason.ID_COLLISION, FailsafeReason.HEARTBEAT_LOST, FailsafeReason.PDO_ERROR)
+)
+#: SDO expedited download of 2 bytes (CiA 301 command specifier: ccs 1, e 1, s 1, n 2)
+SDO_DOWNLOAD_2_BYTES = 0x2B
+
+
+def sdo_write_u16(node: int, index: int, sub: int, value: int) -> can.Message:
+    """An SDO expedited download request of an UNSIGNED16 to ``node`` (its answer is not
+    awaited: the loop does not block)."""
+    data = bytes([SDO_DOWNLOAD_2_BYTES, index & 0xFF, index >> 8, sub, value & 0xFF, value >> 8, 0, 0])
+    return frame(cobid.SDO_RX + node, data)
 
 
 class MasterSession:
@@ -143,6 +176,12 @@ class CyclicMaster:
         self.drive = DeviceDrive()
         nodes = (c.valve_node, c.encoder_node) if c.position_source == "encoder" else (c.valve_node,)
         self._hb_ids = {cobid.HEARTBEAT + n: n for n in nodes}
+        self._valve_node = c.valve_node
+        #: the NMT state each node's heartbeat should show (we commanded it)
+        self._expected = dict.fromkeys(nodes, NmtState.OPERATIONAL)
+        #: frames the loop sends after this cycle's command: (name, frame)
+        self._outbox: list[tuple[str, can.Message]] = []
+        self.shut_out = False
         self._emcy_ids = {cobid.EMCY + n: n for n in nodes}
         #: cycles without a node's heartbeat after which it is lost
         self.hb_timeout_cycles = max(1, math.ceil(c.node_heartbeat_timeout_ms * 1e-3 * rate_hz))
@@ -174,7 +213,7 @@ class CyclicMaster:
         if node is not None:
             self._hb_cycle[node] = self._cycle + 1  # the cycle that drains it (the next update)
             state = unpack_heartbeat(bytes(msg.data))
-            if state is not NmtState.OPERATIONAL:
+            if state is not self._expected[node]:
                 shown = state.name if state is not None else bytes(msg.data).hex()
                 self._heard(FailsafeReason.HEARTBEAT_LOST, f"node {node}: heartbeat shows {shown}")
             return
@@ -212,7 +251,33 @@ class CyclicMaster:
             )
         elif self.drive.gave_up:
             self._fail(FailsafeReason.DEVICE_FAULT, "valve fault persists after the fault resets")
+        if self.codec.bad_length_pdos:
+            name, length = self.codec.last_bad_length
+            self._fail(FailsafeReason.PDO_ERROR, f"{name} TPDO of {length} bytes, not its mapping's")
         return self.reason
+
+    def second_transmitter(self, cause: str) -> None:
+        """The loop saw another transmitter of our frames (ID_COLLISION): shut the valve out."""
+        self._fail(FailsafeReason.ID_COLLISION, cause)
+        self._shut_out()
+
+    def take_frames(self) -> list[tuple[str, can.Message]]:
+        """The frames to send after this cycle's command (and forget them)."""
+        out, self._outbox = self._outbox, []
+        return out
+
+    def _shut_out(self) -> None:
+        """Once: SDO control word DISABLED, then NMT Stop of the valve (module docstring)."""
+        if self.shut_out:
+            return
+        self.shut_out = True
+        node = self._valve_node
+        self._expected[node] = NmtState.STOPPED
+        log.error("cycle %d: cia408 master: valve %d shut out (SDO DISABLED, NMT Stop)", self._cycle, node)
+        self._outbox += [
+            ("SDO", sdo_write_u16(node, CONTROL_WORD, 0, BIT_D)),
+            ("NMT", self.codec.encode("NMT", {"Command": NmtCommand.STOP, "Node": node})),
+        ]
 
     def _heard(self, reason: FailsafeReason, text: str) -> None:
         """A failure in a received frame, taken by the next :meth:`update` (the first one)."""
@@ -226,6 +291,8 @@ class CyclicMaster:
         log.error("cycle %d: cia408 master: %s -> %s", self._cycle, text, reason.name)
         self.drive.disable()
         self.codec.control_word = self.drive.control_word
+        if reason in SHUT_OUT_REASONS:
+            self._shut_out()
 
     def stop(self) -> None:
         """The stop sequence's control word: DISABLED (the loop then sends set-point 0)."""
@@ -258,4 +325,6 @@ class CyclicMaster:
             "emcy_frames": self.emcy_frames,
             "sync": "produced" if self.produces_sync else f"followed ({self.syncs_seen} seen)",
             "fault_resets": self.drive.fault_resets,
+            "shut_out": self.shut_out,
+            "bad_length_pdos": self.codec.bad_length_pdos,
         }

@@ -6,7 +6,10 @@ full-scale current, the actual value of the spool stroke). The cylinder position
 0x2100 (manufacturer-specific, 100 nm steps; TPDO 2 is free to map it, off by default). The plant gets
 ``set-point / 16384 × full_scale_current_a`` in ACTIVE and 0 A in every other state. Faults:
 the master's heartbeat lost (0x1016) or the set-point RPDO late (0x1400.5 event timer) while
-ACTIVE → FAULT_HOLD with EMCY 0x8130 / 0x8250; an injected device fault → FAULT with its code.
+ACTIVE → FAULT_HOLD with EMCY 0x8130 / 0x8250, then the NMT state 0x1029.1 names; the node
+leaving NMT OPERATIONAL (an NMT Stop or Enter Pre-operational, from whichever node) while enabled
+(HOLD or ACTIVE) → FAULT_HOLD with 0x8100 (no PDO set-point reaches it any more; in STOPPED the
+EMCY cannot be sent, the error register holds it); an injected device fault → FAULT with its code.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from ehpss_hil.protocol.cia408.objects import (
     CONTROL_WORD,
     DEVICE_CONTROL_MODE,
     DEVICE_MODE,
+    EMCY_COMMUNICATION,
     EMCY_HEARTBEAT,
     EMCY_NO_ERROR,
     EMCY_RPDO_TIMEOUT,
@@ -115,10 +119,16 @@ class ValveNode(CanopenSlave):
 
     def on_heartbeat_lost(self, producer: int) -> None:
         self._fault(EMCY_HEARTBEAT, ERR_REG_GENERIC | ERR_REG_COMMUNICATION, hold=True)
+        self.communication_error()
 
     def on_rpdo_timeout(self, comm_index: int) -> None:
         if self.device.state == DeviceState.ACTIVE:
             self._fault(EMCY_RPDO_TIMEOUT, ERR_REG_GENERIC | ERR_REG_COMMUNICATION, hold=True)
+            self.communication_error()
+
+    def on_left_operational(self) -> None:
+        if self.device.state in (DeviceState.HOLD, DeviceState.ACTIVE):
+            self._fault(EMCY_COMMUNICATION, ERR_REG_GENERIC | ERR_REG_COMMUNICATION, hold=True)
 
     def inject_fault(self, code: int) -> None:
         """A device fault with EMCY ``code`` (a scenario's ``device_fault`` event) → FAULT."""

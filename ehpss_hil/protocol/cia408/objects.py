@@ -18,6 +18,10 @@ DEVICE_NAME = 0x1008
 COB_ID_EMCY = 0x1014
 CONSUMER_HEARTBEAT = 0x1016  #: sub n: UNSIGNED32 (producer node << 16) | time (ms)
 PRODUCER_HEARTBEAT = 0x1017  #: UNSIGNED16 period (ms), 0 = off
+#: sub 1: UNSIGNED8, the NMT state a node takes on a communication error (heartbeat of a consumed
+#: producer lost, an RPDO event timer elapsed) while OPERATIONAL: one of ErrorBehaviour
+ERROR_BEHAVIOUR = 0x1029
+ERROR_BEHAVIOUR_COMMUNICATION = 1
 IDENTITY = 0x1018  #: sub 1 vendor-ID, 2 product code, 3 revision, 4 serial number
 RPDO_COMM, RPDO_MAP = 0x1400, 0x1600
 TPDO_COMM, TPDO_MAP = 0x1800, 0x1A00
@@ -106,6 +110,14 @@ class NmtCommand(enum.IntEnum):
     RESET_COMMUNICATION = 0x82
 
 
+class ErrorBehaviour(enum.IntEnum):
+    """0x1029 values (CiA 301): the NMT state after a communication error in OPERATIONAL."""
+
+    PRE_OPERATIONAL = 0
+    NO_CHANGE = 1
+    STOPPED = 2
+
+
 class NmtState(enum.IntEnum):
     """NMT states as the heartbeat's byte carries them."""
 
@@ -117,8 +129,11 @@ class NmtState(enum.IntEnum):
 
 # ---- EMCY (CiA 301) -----------------------------------------------------------------------
 EMCY_NO_ERROR = 0x0000  #: error reset / no error
+EMCY_COMMUNICATION = 0x8100  #: communication, generic (the valve left NMT OPERATIONAL while enabled)
 EMCY_HEARTBEAT = 0x8130  #: life guard or heartbeat error (the master's heartbeat was lost)
 EMCY_RPDO_TIMEOUT = 0x8250  #: an RPDO (the set-point) did not arrive within its event timer
+EMCY_PDO_LENGTH = 0x8210  #: a PDO not processed: shorter than its mapping
+EMCY_SYNC_LENGTH = 0x8240  #: a SYNC with a data length other than the one configured (0: no counter)
 ERR_REG_GENERIC = 0x01
 ERR_REG_COMMUNICATION = 0x10
 
