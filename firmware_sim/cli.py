@@ -180,6 +180,21 @@ def realtime_periods(args: argparse.Namespace, rate_hz: float, scenario: Scenari
     return scenario.n_samples if args.scenario is not None else None
 
 
+def _truth_codec(cfg: EmulatorConfig, src: str) -> FrameCodec:
+    """The native codec whose PLANT_TRUTH the CANopen emulator sends (``truth``); an ID that is
+    one of the nodes' COB-IDs is a ConfigError naming ``ids.id_base``."""
+    from ehpss_hil.protocol.cia408 import cobid
+
+    codec = FrameCodec(cfg.dbc or None, id_base=cfg.ids.id_base)
+    can_id = codec.can_id("PLANT_TRUTH")
+    service, node = cobid.classify(can_id)
+    if service in ("NMT", "SYNC") or node in (cfg.nodes.valve_node, cfg.nodes.encoder_node):
+        raise ConfigError(
+            src, "ids.id_base", f"PLANT_TRUTH at 0x{can_id:03X} is the {service} of node {node}"
+        )
+    return codec
+
+
 def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenario) -> int:
     """``protocol: cia408``: the plant behind an emulated CiA 408 valve and CiA 406 encoder."""
     from ehpss_hil.protocol.cia408.check import check_nodes
@@ -197,7 +212,7 @@ def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenari
     )
     io = RawFrameIO(bus, logger)
     valve, encoder = build_nodes(cfg.nodes, valve_od, encoder_od, io, params.plant.spool_stroke_m)
-    truth = FrameCodec(cfg.dbc or None, id_base=cfg.ids.id_base) if cfg.truth else None
+    truth = _truth_codec(cfg, str(args.config)) if cfg.truth else None
     proc = CanopenEmulatorProcess(emu, io, valve, encoder, CanopenOptions(truth=truth))
     stop, previous = install_stop_handlers()
     try:
