@@ -247,3 +247,14 @@ def test_a_tpdo_shorter_than_mapped_is_a_pdo_error(rig: Rig) -> None:
     assert rig.master.summary()["bad_length_pdos"] == 1 and rig.master.shut_out
     rig.proc.step_period()
     assert rig.proc.valve.nmt is NmtState.STOPPED and rig.proc.valve.current_a() == 0.0
+
+
+def test_the_master_reads_the_error_history_after_an_emcy(rig: Rig) -> None:
+    """The EMCY is followed by the master's SDO reads of 0x1003.0 and 0x1003.1 (one request
+    per cycle, answered by the valve's SDO server in the emulator's loop)."""
+    rig.step(50)
+    rig.proc.valve.inject_fault(0x5000)
+    rig.step(10)
+    assert rig.master.history.codes == [0x5000] and rig.master.history.reads == 1
+    assert rig.master.summary()["error_history"] == {"node": 32, "codes": [0x5000]}
+    assert rig.io.sent["SDO"] == 2 and not rig.master.shut_out  # the valve's own fault: no stop

@@ -27,6 +27,11 @@ an SDO write of the control word DISABLED (processed while the valve is still OP
 then NMT Stop of the valve: in STOPPED a CiA 301 node processes no PDO (the rogue's RPDOs are
 shut out) and a CiA 408 valve takes its fault reaction. Our own Stop is expected in the valve's
 heartbeat from then on, not a failure.
+
+**The error history.** After each EMCY with an error code the master reads the node's error
+history 0x1003 by SDO (:class:`~ehpss_hil.protocol.cia408.history.ErrorHistoryReader`: one
+expedited upload per cycle, the answers taken from the drain), logs it and reports it in the
+summary (``error_history``).
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ from ..protocol.cia408.configure import configure_encoder, configure_valve
 from ..protocol.cia408.cyclic import Scaling, frame, step_of_nm, unpack_emcy, unpack_heartbeat
 from ..protocol.cia408.drive import DeviceDrive
 from ..protocol.cia408.eds import ENCODER_EDS, VALVE_EDS
+from ..protocol.cia408.history import ErrorHistoryReader
 from ..protocol.cia408.objects import (
     BIT_D,
     CONTROL_WORD,
@@ -182,6 +188,8 @@ class CyclicMaster:
         #: frames the loop sends after this cycle's command: (name, frame)
         self._outbox: list[tuple[str, can.Message]] = []
         self.shut_out = False
+        #: the error history of the node that sent the last EMCY
+        self.history = ErrorHistoryReader()
         self._emcy_ids = {cobid.EMCY + n: n for n in nodes}
         #: cycles without a node's heartbeat after which it is lost
         self.hb_timeout_cycles = max(1, math.ceil(c.node_heartbeat_timeout_ms * 1e-3 * rate_hz))
@@ -205,6 +213,12 @@ class CyclicMaster:
     def on_frame(self, msg: can.Message) -> None:
         """A received frame the loop does not consume (heartbeats and EMCY of the nodes are used)."""
         fid = msg.arbitration_id
+        if cobid.SDO_TX < fid <= cobid.SDO_TX + cobid.NODE_MAX:
+            reads = self.history.reads
+            if self.history.on_response(fid, bytes(msg.data)) and self.history.reads != reads:
+                codes = ", ".join(f"0x{c:04X}" for c in self.history.codes) or "empty"
+                log.warning("node %d: error history (newest first): %s", self.history.node, codes)
+            return
         if fid == cobid.SYNC:
             self.syncs_seen += 1
             self.codec.sync_seen(self._cycle + 1)  # the cycle that drains it
@@ -223,6 +237,7 @@ class CyclicMaster:
             if e is not None and e[0] != EMCY_NO_ERROR:
                 self.emcy = (node, e[0], e[1])
                 self.emcy_frames += 1
+                self.history.start(node)
                 text = f"node {node}: EMCY 0x{e[0]:04X} (error register 0x{e[1]:02X})"
                 if self.drive.was_active:
                     self._heard(FailsafeReason.EMCY, text)
@@ -263,7 +278,9 @@ class CyclicMaster:
 
     def take_frames(self) -> list[tuple[str, can.Message]]:
         """The frames to send after this cycle's command (and forget them)."""
-        out, self._outbox = self._outbox, []
+        req = self.history.take_request()
+        out = [("SDO", req)] if req is not None else []
+        out, self._outbox = out + self._outbox, []
         return out
 
     def _shut_out(self) -> None:
@@ -326,5 +343,8 @@ class CyclicMaster:
             "sync": "produced" if self.produces_sync else f"followed ({self.syncs_seen} seen)",
             "fault_resets": self.drive.fault_resets,
             "shut_out": self.shut_out,
+            "error_history": {"node": self.history.node, "codes": self.history.codes}
+            if self.history.reads
+            else None,
             "bad_length_pdos": self.codec.bad_length_pdos,
         }

@@ -25,6 +25,7 @@ from canopen.sdo import SdoAbortedError, SdoServer
 
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.objects import (
+    ABORT_RANGE,
     ABORT_STATE,
     CONSUMER_HEARTBEAT,
     EMCY_PDO_LENGTH,
@@ -33,6 +34,7 @@ from ehpss_hil.protocol.cia408.objects import (
     ERR_REG_GENERIC,
     ERROR_BEHAVIOUR,
     ERROR_BEHAVIOUR_COMMUNICATION,
+    ERROR_HISTORY,
     ERROR_REGISTER,
     PDO_COB_ID,
     PDO_EVENT_TIMER,
@@ -227,11 +229,26 @@ class CanopenSlave:
 
     def send_emcy(self, code: int, register: int) -> None:
         """An EMCY frame (0x080 + node): error code, error register (0x1001, stored), 5 zero
-        bytes; sent in PRE-OPERATIONAL and OPERATIONAL (CiA 301)."""
+        bytes; sent in PRE-OPERATIONAL and OPERATIONAL (CiA 301). An error code other than 0
+        enters the error history 0x1003 in every state."""
         self.store.set(ERROR_REGISTER, 0, register)
+        if code:
+            self._record_error(code)
         if self.nmt in (NmtState.PRE_OPERATIONAL, NmtState.OPERATIONAL):
             self._send(cobid.EMCY + self.node_id, struct.pack("<HB5x", code, register))
             self.emcy_sent += 1
+
+    def _record_error(self, code: int) -> None:
+        """The error history 0x1003: ``code`` at sub 1, the older ones one down, sub 0 the
+        number held (at most the EDS's sub-indices)."""
+        od = self.store.object_dictionary
+        if ERROR_HISTORY not in od:
+            return
+        size = len(od[ERROR_HISTORY]) - 1
+        held = [int(self.store.get(ERROR_HISTORY, s)) for s in range(1, size + 1)]
+        for sub, value in enumerate([code & 0xFFFF, *held][:size], start=1):
+            self.store.set(ERROR_HISTORY, sub, value)
+        self.store.set(ERROR_HISTORY, 0, min(size, int(self.store.get(ERROR_HISTORY, 0)) + 1))
 
     # ---- time -------------------------------------------------------------------------------
     def _hb_period_s(self) -> float:
@@ -304,6 +321,11 @@ class CanopenSlave:
             raise SdoAbortedError(ABORT_STATE)
         if is_map and sub > 0:
             check_entry(self.store, int(value))
+        if index == ERROR_HISTORY:  # sub 0: only 0 may be written, which clears the history
+            if int(value) != 0:
+                raise SdoAbortedError(ABORT_RANGE)
+            for s in range(1, len(self.store.object_dictionary[ERROR_HISTORY])):
+                self.store.set(ERROR_HISTORY, s, 0)
         self.on_object_write(index, sub, value)
 
     # ---- profile hooks ------------------------------------------------------------------------

@@ -14,6 +14,9 @@ import enum
 # ---- communication objects (CiA 301) ------------------------------------------------------
 DEVICE_TYPE = 0x1000  #: UNSIGNED32: low word the profile number, high word profile-specific
 ERROR_REGISTER = 0x1001
+#: pre-defined error field (error history): sub 0 the number of errors (write 0 to clear), sub
+#: 1… UNSIGNED32 errors, newest first (low word the EMCY error code)
+ERROR_HISTORY = 0x1003
 DEVICE_NAME = 0x1008
 COB_ID_EMCY = 0x1014
 CONSUMER_HEARTBEAT = 0x1016  #: sub n: UNSIGNED32 (producer node << 16) | time (ms)
@@ -59,6 +62,13 @@ VALVE_POSITION_STEP_NM = 100
 # ---- CiA 406 encoder objects -----------------------------------------------------------
 POSITION_VALUE = 0x6004  #: INTEGER32 position in measuring steps
 MEASURING_STEP = 0x6005  #: sub 1: UNSIGNED32 measuring step (nm)
+OPERATING_PARAMETERS = 0x6000  #: UNSIGNED16 (bit 0 code sequence, bit 2 scaling), as 0x6500 shows
+PRESET_VALUE = 0x6003  #: INTEGER32: writing it makes the position value equal to it now
+SPEED_VALUE = 0x6030  #: sub 1: INTEGER16 speed in SPEED_LSB_M_S steps (the emulated encoder's unit)
+OPERATING_STATUS = 0x6500  #: UNSIGNED16
+OFFSET_VALUE = 0x6509  #: INTEGER32: the offset the preset set (steps)
+#: the emulated encoder's speed value step (m/s): 0.1 mm/s, ±3.2 m/s in INTEGER16
+SPEED_LSB_M_S = 1e-4
 
 # ---- control word / status word bits (CiA 408) -------------------------------------------
 BIT_D = 0x0001  #: disabled → enabled electronics (DISABLED)
