@@ -17,14 +17,33 @@ from ehpss_hil.protocol.cia408.check import check_nodes
 from ehpss_hil.protocol.cia408.objects import DeviceState, NmtCommand, NmtState
 from ehpss_hil.runtime.rawio import RawFrameIO
 from ehpss_hil.scenario import Scenario
-from firmware_sim.canopen_node.device import ValveStateMachine
+from firmware_sim.canopen_node.device import FAULT_REACTION_S, INIT_S, NOT_READY_S, ValveStateMachine
 from firmware_sim.canopen_process import CanopenEmulatorProcess, CanopenOptions, build_nodes
+
+
+def test_state_machine_powers_up_through_not_ready_and_init() -> None:
+    """NOT_READY (status 0x0000) then INIT (0x0008) on the loop's clock; a control word met
+    there is not obeyed until DISABLED, where its request takes effect at once."""
+    sm = ValveStateMachine()
+    sm.power_on(1.0)
+    assert (sm.state, sm.status_word) == (DeviceState.NOT_READY, 0x0000)
+    assert sm.command(0x0007) is False and sm.state == DeviceState.NOT_READY
+    sm.tick(1.0 + NOT_READY_S - 0.001)
+    assert sm.state == DeviceState.NOT_READY
+    sm.tick(1.0 + NOT_READY_S)
+    assert (sm.state, sm.status_word) == (DeviceState.INIT, 0x0008)
+    sm.tick(1.0 + NOT_READY_S + INIT_S)
+    assert (sm.state, sm.status_word) == (DeviceState.ACTIVE, 0x000F)  # the stored request
+    late = ValveStateMachine()
+    late.power_on(0.0)
+    late.tick(1.0)  # a loop that slept: both steps at once, to DISABLED with no request
+    assert late.state == DeviceState.DISABLED and late.transitions == 2
 
 
 def test_state_machine_follows_the_control_word_and_latches_faults() -> None:
     sm = ValveStateMachine()
-    assert sm.command(0x0007) is False and sm.state == DeviceState.NOT_READY  # not initialised
     sm.power_on()
+    sm.tick(NOT_READY_S + INIT_S)
     steps = [
         (0x0001, DeviceState.DISABLED, 0x0009),
         (0x0003, DeviceState.HOLD, 0x000B),
@@ -35,15 +54,24 @@ def test_state_machine_follows_the_control_word_and_latches_faults() -> None:
     for word, state, status in steps:
         sm.command(word)
         assert (sm.state, sm.status_word) == (state, status)
-    assert sm.fault(0x8130, hold=True) and sm.status_word == 0x0003
+    assert sm.fault(0x8130, hold=True) and sm.status_word == 0x0007  # FAULT_REACTION, R clear
+    assert sm.command(0x0008) is False  # no reset while the reaction runs
+    sm.tick(NOT_READY_S + INIT_S + FAULT_REACTION_S)
+    assert (sm.state, sm.status_word) == (DeviceState.FAULT_HOLD, 0x0003)
+    sm.command(0x0000)
     assert not sm.fault(0x5000, hold=False) and sm.fault_code == 0x8130  # the first fault stays
     sm.command(0x000F)  # R rises: reset → DISABLED
     assert (sm.state, sm.fault_code) == (DeviceState.DISABLED, 0)
     sm.fault(0x5000, hold=False)
+    sm.tick(1.0)
     assert sm.status_word == 0x0001
     assert sm.command(0x000F) is False  # R held high: no rising edge
     assert sm.command(0x0000) is False and sm.command(0x0008) is True
     assert sm.state == DeviceState.DISABLED
+
+
+#: periods (1 kHz) until the valve's power-on states are over
+POWER_ON_PERIODS = round((NOT_READY_S + INIT_S) * 1000)
 
 
 class Stepper:
@@ -81,6 +109,7 @@ class Stepper:
 @pytest.fixture
 def stepper(request: pytest.FixtureRequest) -> Iterator[Stepper]:
     s = Stepper(f"step-{request.node.name}", Cia408Config(setpoint_timeout_ms=20))
+    s.step(POWER_ON_PERIODS)  # the valve's NOT_READY and INIT (no heartbeat due yet)
     yield s
     s.close()
 
@@ -123,6 +152,8 @@ def test_setpoint_timeout_is_counted_in_plant_periods(stepper: Stepper) -> None:
     while valve.device.state == DeviceState.ACTIVE:
         stepper.step()
     assert stepper.proc.emu.k - 1 - k_seen == 21  # > 20 ms after the last RPDO
+    assert valve.device.state == DeviceState.FAULT_REACTION and valve.current_a() == 0.0
+    stepper.step(round(FAULT_REACTION_S * 1000))
     assert valve.device.state == DeviceState.FAULT_HOLD and valve.current_a() == 0.0
     emcy = [bytes(m.data) for m in stepper.frames() if m.arbitration_id == cobid.EMCY + v]
     assert emcy == [struct.pack("<HB5x", 0x8250, 0x11)]
@@ -143,7 +174,9 @@ def test_reset_communication_keeps_the_device_state_and_restores_comm_objects(st
     assert valve.store.get(0x1017) == stepper.cfg.heartbeat_time_ms and valve.device.state == DeviceState.HOLD
     stepper.send(cobid.NMT, bytes([NmtCommand.RESET_NODE, v]))
     stepper.step()
-    assert valve.device.state == DeviceState.DISABLED and valve.nmt == NmtState.PRE_OPERATIONAL
+    assert valve.device.state == DeviceState.NOT_READY and valve.nmt == NmtState.PRE_OPERATIONAL
+    stepper.step(POWER_ON_PERIODS)
+    assert valve.device.state == DeviceState.DISABLED
     boots = [
         m for m in stepper.frames() if m.arbitration_id == cobid.HEARTBEAT + v and bytes(m.data) == b"\x00"
     ]
@@ -172,7 +205,7 @@ def test_nmt_stop_while_active_is_the_fault_reaction_and_no_rpdo_gets_through(st
     list(stepper.frames())
     stepper.send(cobid.NMT, bytes([NmtCommand.STOP, v]))
     stepper.step()
-    assert (valve.nmt, valve.device.state) == (NmtState.STOPPED, DeviceState.FAULT_HOLD)
+    assert (valve.nmt, valve.device.state) == (NmtState.STOPPED, DeviceState.FAULT_REACTION)
     assert valve.current_a() == 0.0 and valve.device.fault_code == 0x8100
     assert int(valve.store.get(0x1001, 0)) == 0x11 and _emcy(stepper) == []
     for _ in range(50):

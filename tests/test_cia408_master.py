@@ -160,7 +160,7 @@ def test_master_heartbeat_loss_is_fault_hold_with_emcy_and_a_rising_reset_clears
         assert r.proc.valve.current_a() == 0.0
         _command(r, 0x0007, 1000)  # no rising edge of R: the fault stays
         assert wait_until(lambda: r.proc.valve.rpdos >= 2)
-        assert r.proc.valve.device.state == DeviceState.FAULT_HOLD
+        assert wait_until(lambda: r.proc.valve.device.state == DeviceState.FAULT_HOLD)  # after its reaction
         _command(r, 0x0008, 0)  # rising edge of R: fault reset → DISABLED, EMCY "no error"
         assert wait_until(lambda: EMCY_NO_ERROR in emcy_codes(v))
         assert state_of_status(v.sdo[0x6041].raw) == DeviceState.DISABLED
@@ -173,7 +173,7 @@ def test_setpoint_timeout_while_active_is_fault_hold() -> None:
         _operational(r)
         _command(r, 0x0007, 2000)
         assert wait_until(lambda: EMCY_RPDO_TIMEOUT in emcy_codes(r.valve))  # no second RPDO
-        assert r.proc.valve.device.state == DeviceState.FAULT_HOLD
+        assert wait_until(lambda: r.proc.valve.device.state == DeviceState.FAULT_HOLD)  # after its reaction
         assert r.proc.valve.current_a() == 0.0
 
 

@@ -103,12 +103,15 @@ def _applied_setpoint(r: Rig) -> int:
 
 
 def test_the_loop_enables_the_valve_then_steps_with_sync_per_cycle(rig: Rig) -> None:
-    rig.step(10)
+    rig.step(8)  # the valve powers up: NOT_READY 5 ms, INIT 5 ms; the drive asks for DISABLED
+    assert rig.proc.valve.device.state is DeviceState.INIT and rig.loop.life.state is State.CONFIGURED
+    assert rig.codec.control_word == 0x0001
+    rig.step(12)  # DISABLED, then HOLD and ACTIVE as the status word confirms each
     assert rig.proc.valve.device.state is DeviceState.ACTIVE and rig.loop.life.state is State.ACTIVE
     rig.step(200)
     sent = rig.io.sent
-    assert sent["SYNC"] == sent["VALVE_CMD"] == 210 and rig.proc.syncs == 210
-    assert rig.proc.valve.tpdos == rig.proc.encoder.tpdos == 210
+    assert sent["SYNC"] == sent["VALVE_CMD"] == 220 and rig.proc.syncs == 220
+    assert rig.proc.valve.tpdos == rig.proc.encoder.tpdos == 220
     assert rig.loop.last_current_a != 0.0  # the sine reference moves the piston
     assert _applied_setpoint(rig) == rig.codec.scaling.setpoint_raw(rig.loop.last_current_a)
     assert rig.proc.valve.current_a() == pytest.approx(rig.codec.scaling.current_a(_applied_setpoint(rig)))
@@ -229,7 +232,7 @@ def test_a_third_node_on_the_masters_frames_shuts_the_valve_out(
     rig.proc.step_period()
     valve = rig.proc.valve
     assert valve.nmt is NmtState.STOPPED and valve.current_a() == 0.0
-    assert valve.device.state in (DeviceState.DISABLED, DeviceState.FAULT_HOLD)
+    assert valve.device.state in (DeviceState.DISABLED, DeviceState.FAULT_REACTION, DeviceState.FAULT_HOLD)
     for _ in range(300):  # the rogue goes on; heartbeats of the stopped valve come in
         rig.host(can_id, data)
         rig.step()

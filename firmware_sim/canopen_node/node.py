@@ -106,6 +106,7 @@ class CanopenSlave:
     # ---- NMT ------------------------------------------------------------------------------------
     def boot(self, t_s: float) -> None:
         """Power-on: every object to its power-on value, boot-up message, PRE-OPERATIONAL."""
+        self._t_s = t_s
         self.store.reset(0x0000, 0xFFFF)
         self.reset_application()
         self._boot_up(t_s)

@@ -94,7 +94,15 @@ class ValveNode(CanopenSlave):
     # ---- hooks ------------------------------------------------------------------------------
     def reset_application(self) -> None:
         self.device = ValveStateMachine()
-        self.device.power_on()
+        self.device.power_on(self._t_s)
+
+    def tick(self, t_s: float) -> None:
+        """The device's timed states (power-on, fault reaction), then the node's clocks."""
+        was = self.device.state
+        self.device.tick(t_s)
+        if self.device.state != was:
+            log.info("valve %d: %s -> %s", self.node_id, was.name, self.device.state.name)
+        super().tick(t_s)
 
     def _control_word(self, word: int) -> None:
         was = self.device.state

@@ -81,12 +81,14 @@ STATE_BITS = BIT_D | BIT_H | BIT_M
 class DeviceState(enum.IntEnum):
     """CiA 408 device states the emulated valve takes (the status word shows each)."""
 
-    NOT_READY = 0
+    NOT_READY = 0  #: after power-on: the electronics not ready, control words not obeyed
     DISABLED = 1
     HOLD = 2
     ACTIVE = 3  #: DEVICE_MODE_ACTIVE: the set-point drives the spool
     FAULT = 4  #: FAULT_DISABLED
     FAULT_HOLD = 5
+    INIT = 6  #: initialising (after NOT_READY), control words not obeyed yet
+    FAULT_REACTION = 7  #: a fault met: the reaction runs, then FAULT or FAULT_HOLD
 
 
 #: status word of each state (bits 0…3)
@@ -97,6 +99,8 @@ STATUS_OF = {
     DeviceState.ACTIVE: BIT_D | BIT_H | BIT_M | BIT_R,
     DeviceState.FAULT: BIT_D,
     DeviceState.FAULT_HOLD: BIT_D | BIT_H,
+    DeviceState.INIT: BIT_R,
+    DeviceState.FAULT_REACTION: BIT_D | BIT_H | BIT_M,
 }
 
 
