@@ -252,3 +252,48 @@ def test_a_sync_with_data_is_not_answered_and_reported_once(stepper: Stepper) ->
     assert got.count((cobid.EMCY + v, struct.pack("<HB5x", 0x8240, 0x11))) == 1
     assert got.count((cobid.EMCY + e, struct.pack("<HB5x", 0x8240, 0x11))) == 1
     assert stepper.proc.syncs == 0
+
+
+def test_the_setpoint_path_limits_ramps_and_holds(stepper: Stepper) -> None:
+    """Limits clip the set-point (status word bit 10), a linear ramp of 100 ms per 100 % moves
+    the demand 0x6311.1 by 163.84 a period, the hold set-point drives the valve in HOLD; the
+    objects written by SDO (0x2B/0x2F expedited downloads), as a master would."""
+    v, valve = stepper.cfg.valve_node, stepper.proc.valve
+
+    def sdo(index: int, sub: int, value: int, size: int = 2) -> None:
+        cmd = {1: 0x2F, 2: 0x2B}[size]
+        stepper.send(
+            cobid.SDO_RX + v, struct.pack("<BHB", cmd, index, sub) + value.to_bytes(4, "little", signed=True)
+        )
+
+    sdo(0x6320, 1, 8192)  # upper limit +50 %
+    sdo(0x6314, 1, -1638)  # hold set-point −10 %
+    stepper.step()
+    _activate(stepper)  # +10 %: inside the limits
+    assert valve.status_word() == 0x000F and int(valve.store.get(0x6311, 1)) == 1638
+    stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, 16384))
+    stepper.step()
+    assert valve.status_word() == 0x040F and int(valve.store.get(0x6311, 1)) == 8192  # clipped
+    assert valve.current_a() == pytest.approx(0.5 * stepper.cfg.full_scale_current_a)
+    stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0003, 0))  # HOLD
+    stepper.step()
+    assert int(valve.store.get(0x6311, 1)) == -1638 and valve.status_word() == 0x000B
+    stepper.send(cobid.NMT, bytes([NmtCommand.ENTER_PRE_OPERATIONAL, v]))  # SDO while not enabled
+    stepper.step()
+    stepper.send(cobid.NMT, bytes([NmtCommand.START, v]))
+    sdo(0x6330, 0, 1, size=1)  # linear ramp
+    sdo(0x6331, 1, 100)  # 100 ms per 100 %
+    stepper.step()
+    stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0008, 0))  # the fault (left OPERATIONAL) reset
+    stepper.step()
+    stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, 4096))  # +25 % from 0
+    stepper.step()
+    assert valve.device.state == DeviceState.ACTIVE
+    for n in range(2, 6):
+        stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, 4096))
+        stepper.step()
+        assert int(valve.store.get(0x6311, 1)) == round(min(4096, n * 163.84)), n
+    for _ in range(30):
+        stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, 4096))
+        stepper.step()
+    assert int(valve.store.get(0x6311, 1)) == 4096

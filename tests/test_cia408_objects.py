@@ -65,3 +65,26 @@ def test_the_encoder_objects_and_its_preset() -> None:
         before = e.sdo[0x6004].raw
         e.sdo[0x6003].raw = 12345
         assert e.sdo[0x6004].raw == 12345 and e.sdo[0x6509].raw == 12345 - before
+
+
+def test_the_setpoint_path_objects_by_sdo() -> None:
+    """The set-point path read and written by canopen's master: defaults (±100 %, no ramp, hold
+    0), an upper limit that clips +100 % (demand 0x6311.1 at the limit, status word bit 10)."""
+    v = 32
+    with _rig("setpoint") as r:
+        sdo = r.valve.sdo
+        assert [sdo[0x6320][1].raw, sdo[0x6321][1].raw, sdo[0x6330].raw, sdo[0x6331][1].raw] == [
+            16384,
+            -16384,
+            0,
+            0,
+        ]
+        assert sdo[0x6314][1].raw == 0 and sdo[0x6311][1].raw == 0
+        with pytest.raises(canopen.SdoAbortedError):
+            sdo[0x6330].raw = 2  # only 0 (none) and 1 (linear)
+        sdo[0x6320][1].raw = 4096
+        r.valve.nmt.state = "OPERATIONAL"
+        assert heartbeat_state(r.valve, "OPERATIONAL") == "OPERATIONAL"
+        r.net.send_message(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, 16384))
+        assert wait_until(lambda: sdo[0x6041].raw == 0x040F)
+        assert sdo[0x6311][1].raw == 4096 and sdo[0x6300][1].raw == 16384

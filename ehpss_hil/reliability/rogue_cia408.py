@@ -7,7 +7,9 @@ is ACTIVE, a rogue process (``python -m ehpss_hil.reliability.rogue_cia408 --cas
 one of :data:`CASES` on the embedded bus. Judged: the controller's fail-safe reason, the
 controller cycles (its RPDOs) from the rogue's first frame to its first RPDO asking for
 DISABLED, and the piston's largest deviation from x_d (PLANT_TRUTH; where the emulator sends
-none, an older build, the encoder's position value stands in). ``python -m
+none, an older build, the encoder's position value stands in). A trial in which the master had
+disabled the valve before the rogue's first frame (a loaded host: the valve's set-point timeout,
+an EMCY) has its reason and cycles not judged (:attr:`RogueCanopenResult.preempted`). ``python -m
 ehpss_hil.reliability.rogue_cia408 --trial DIR --case CASE`` runs one trial and prints it.
 """
 
@@ -37,6 +39,8 @@ MAX_FAILSAFE_CYCLES = 3
 #: the valve node of the shipped configs and the rogue's frame rate (Hz)
 VALVE = 32
 ROGUE_RATE_HZ = 1000.0
+#: the control word asking for DEVICE_MODE_ACTIVE (D+H+M)
+ACTIVE_WORD = 0x0007
 #: the encoder's position value step (m) of the shipped EDS (0x6005.1 = 100 nm)
 ENCODER_STEP_M = 1e-7
 
@@ -116,6 +120,8 @@ class RogueCanopenResult:
     source: str = ""
     #: the controller's RPDOs from the rogue's first frame to the first asking for DISABLED
     failsafe_cycles: int | None = None
+    #: the master asked for DISABLED before the rogue's first frame (its own fault came first)
+    preempted: bool = False
     exits: dict[str, int | None] = field(default_factory=dict)
     error: str = ""
 
@@ -129,14 +135,17 @@ class RogueCanopenResult:
 
     @property
     def ok(self) -> bool:
-        """The expected reason within :data:`MAX_FAILSAFE_CYCLES`, the piston within
-        :data:`MAX_DEVIATION_M` of x_d, both exits 0."""
+        """The expected reason within :data:`MAX_FAILSAFE_CYCLES` (unless :attr:`preempted`),
+        the piston within :data:`MAX_DEVIATION_M` of x_d, both exits 0."""
+        judged = self.preempted or (
+            self.reason == self.expected_reason
+            and self.failsafe_cycles is not None
+            and self.failsafe_cycles <= MAX_FAILSAFE_CYCLES
+        )
         return (
             not self.error
             and self.sent > 0
-            and self.reason == self.expected_reason
-            and self.failsafe_cycles is not None
-            and self.failsafe_cycles <= MAX_FAILSAFE_CYCLES
+            and judged
             and self.samples > 0
             and self.max_deviation_m <= MAX_DEVIATION_M
             and all(v == 0 for v in self.exits.values())
@@ -152,6 +161,7 @@ class RogueCanopenResult:
             f" ({cia.get('fault')}); valve {self.emulator.get('valve_state')} NMT "
             f"{valve.get('nmt')}; piston max |x − x_d| {self.max_deviation_m * 1e3:.3f} mm "
             f"({self.source}, {self.samples} samples); exits {self.exits}"
+            + ("; the master had disabled the valve before the rogue (not judged)" if self.preempted else "")
             + (f"; error: {self.error}" if self.error else "")
         )
 
@@ -176,6 +186,23 @@ def _piston(log: Path) -> tuple[float, int, str]:
     if truth[1]:
         return truth[0], int(truth[1]), "truth"
     return enc[0], int(enc[1]), "encoder"
+
+
+def _disabled_before(log: Path, first_s: float) -> bool:
+    """The controller's log: an RPDO asking for DISABLED after one asking for ACTIVE, sent
+    before ``first_s`` (its own fail-safe came before the rogue)."""
+    from ..canlog import BadLines, read_log
+
+    active = False
+    for msg in read_log(log, bad=BadLines()):
+        if msg.timestamp >= first_s:
+            return False
+        if msg.arbitration_id == cobid.RPDO1 + VALVE and len(msg.data) == 4:
+            word = struct.unpack_from("<H", bytes(msg.data))[0]
+            active = active or word == ACTIVE_WORD
+            if active and word == BIT_D:
+                return True
+    return False
 
 
 def _failsafe_cycles(log: Path, first_s: float, rogue: bytes) -> int | None:
@@ -231,6 +258,7 @@ def rogue_cia408_trial(
     res.emulator = read_json_object(out / "emulator.json")
     res.max_deviation_m, res.samples, res.source = _piston(out / "emulator.log")
     res.failsafe_cycles = _failsafe_cycles(out / "controller.log", res.first_s, CASES[case].data)
+    res.preempted = _disabled_before(out / "controller.log", res.first_s)
     return res
 
 
@@ -244,7 +272,8 @@ def cia408_rogue_rows(results: list[RogueCanopenResult], s: Summary) -> list[Row
             Row(
                 "cia408 rogue node",
                 f"{c.what}{' at 1 kHz' if c.repeat else ''}, {r.sent} sent",
-                f"controller {r.reason} after {r.failsafe_cycles} cycle(s); piston max |x − x_d| "
+                ("(valve disabled before the rogue: reason not judged) " if r.preempted else "")
+                + f"controller {r.reason} after {r.failsafe_cycles} cycle(s); piston max |x − x_d| "
                 f"{r.max_deviation_m * 1e3:.3f} mm ({r.source}); exits "
                 f"{'/'.join(str(v) for v in r.exits.values())}" + (f"; error: {r.error}" if r.error else ""),
                 f"{r.expected_reason} ≤ {MAX_FAILSAFE_CYCLES} cycles, "

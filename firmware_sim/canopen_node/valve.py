@@ -21,6 +21,7 @@ from canopen.sdo import SdoAbortedError
 
 from ehpss_hil.protocol.cia408.objects import (
     ABORT_RANGE,
+    BIT_LIMIT,
     CONTROL_WORD,
     DEVICE_CONTROL_MODE,
     DEVICE_MODE,
@@ -35,6 +36,7 @@ from ehpss_hil.protocol.cia408.objects import (
     VALVE_POSITION,
     VALVE_POSITION_STEP_NM,
     VPOC_ACTUAL,
+    VPOC_DEMAND,
     VPOC_SETPOINT,
     VPOC_SUB,
     DeviceState,
@@ -42,6 +44,7 @@ from ehpss_hil.protocol.cia408.objects import (
 
 from .device import ValveStateMachine
 from .node import CanopenSlave, Send
+from .setpoint import SetpointPath
 from .store import Key
 
 log = logging.getLogger("firmware_sim")
@@ -68,17 +71,22 @@ class ValveNode(CanopenSlave):
         self.spool_actual = 0
         self.position_value = 0
         super().__init__(node_id, od, send, overrides)
-        self.store.live[(STATUS_WORD, 0)] = lambda: self.device.status_word
+        self.setpoint = SetpointPath(self.store)
+        self.store.live[(STATUS_WORD, 0)] = self.status_word
+        self.store.live[(VPOC_DEMAND, VPOC_SUB)] = lambda: round(self.setpoint.demand(self.device.state))
         self.store.live[(VPOC_ACTUAL, VPOC_SUB)] = lambda: self.spool_actual
         self.store.live[(VALVE_POSITION, 0)] = lambda: self.position_value
 
     # ---- process values ---------------------------------------------------------------------
     def current_a(self) -> float:
-        """The coil current the amplifier applies (A): the set-point's share of full scale in
-        ACTIVE, else 0."""
-        if self.device.state != DeviceState.ACTIVE:
-            return 0.0
-        return int(self.store.get(VPOC_SETPOINT, VPOC_SUB)) / SCALE_100_PERCENT * self.full_scale_current_a
+        """The coil current the amplifier applies (A): the demand value's share of full scale
+        (the set-point in ACTIVE, the hold set-point in HOLD, after limits and ramp), else 0."""
+        return self.setpoint.demand(self.device.state) / SCALE_100_PERCENT * self.full_scale_current_a
+
+    def status_word(self) -> int:
+        """0x6041: the device state's bits, and bit 10 while the limits clip the set-point."""
+        _, limited = self.setpoint.target(self.device.state)
+        return self.device.status_word | (BIT_LIMIT if limited else 0)
 
     def measure(self, spool_m: float) -> None:
         """The spool position measured this period (m) → the actual value (0x6301.1)."""
@@ -103,6 +111,7 @@ class ValveNode(CanopenSlave):
         if self.device.state != was:
             log.info("valve %d: %s -> %s", self.node_id, was.name, self.device.state.name)
         super().tick(t_s)
+        self.setpoint.tick(self.device.state, t_s)
 
     def _control_word(self, word: int) -> None:
         was = self.device.state

@@ -48,6 +48,13 @@ DEVICE_CONTROL_MODE = 0x6043  #: INTEGER8, 1 = spool position control, open loop
 VPOC_SETPOINT = 0x6300  #: sub 1: INTEGER16 spool set-point, ±SCALE_100_PERCENT = ±100 %
 VPOC_ACTUAL = 0x6301  #: sub 1: INTEGER16 spool actual value, same scaling
 VPOC_SUB = 1
+VPOC_DEMAND = 0x6311  #: sub 1: INTEGER16 demand value (the set-point after limits and ramp)
+VPOC_HOLD_SETPOINT = 0x6314  #: sub 1: INTEGER16 set-point applied in HOLD
+VPOC_UPPER_LIMIT = 0x6320  #: sub 1: INTEGER16 upper set-point limit
+VPOC_LOWER_LIMIT = 0x6321  #: sub 1: INTEGER16 lower set-point limit
+VPOC_RAMP_TYPE = 0x6330  #: INTEGER8: 0 no ramp, RAMP_LINEAR
+VPOC_RAMP_TIME = 0x6331  #: sub 1: UNSIGNED16 ms for 100 % (the emulated valve's one ramp time)
+RAMP_NONE, RAMP_LINEAR = 0, 1
 DEVICE_MODE_SETPOINT_VIA_BUS = 1
 CONTROL_MODE_SPOOL_OPEN_LOOP = 1
 #: the CiA 408 16-bit value of 100 % (set-point, actual value)
@@ -76,6 +83,8 @@ BIT_H = 0x0002  #: hold
 BIT_M = 0x0004  #: device mode active
 BIT_R = 0x0008  #: control word: fault reset (rising edge); status word: ready (no fault)
 STATE_BITS = BIT_D | BIT_H | BIT_M
+#: status word bit 10: the set-point is clipped by the limits 0x6320/0x6321
+BIT_LIMIT = 0x0400
 
 
 class DeviceState(enum.IntEnum):
