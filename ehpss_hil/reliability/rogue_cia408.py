@@ -189,20 +189,17 @@ def _piston(log: Path) -> tuple[float, int, str]:
 
 
 def _disabled_before(log: Path, first_s: float) -> bool:
-    """The controller's log: an RPDO asking for DISABLED after one asking for ACTIVE, sent
-    before ``first_s`` (its own fail-safe came before the rogue)."""
+    """The controller's log: its last RPDO sent before ``first_s`` did not ask for ACTIVE (its
+    own fail-safe came before the rogue)."""
     from ..canlog import BadLines, read_log
 
-    active = False
+    last: tuple[float, int] | None = None  # (send time s, control word)
     for msg in read_log(log, bad=BadLines()):
-        if msg.timestamp >= first_s:
-            return False
-        if msg.arbitration_id == cobid.RPDO1 + VALVE and len(msg.data) == 4:
+        if msg.arbitration_id == cobid.RPDO1 + VALVE and len(msg.data) == 4 and msg.timestamp < first_s:
             word = struct.unpack_from("<H", bytes(msg.data))[0]
-            active = active or word == ACTIVE_WORD
-            if active and word == BIT_D:
-                return True
-    return False
+            if last is None or msg.timestamp >= last[0]:
+                last = (msg.timestamp, word)
+    return last is not None and last[1] != ACTIVE_WORD
 
 
 def _failsafe_cycles(log: Path, first_s: float, rogue: bytes) -> int | None:
