@@ -297,3 +297,31 @@ def test_the_setpoint_path_limits_ramps_and_holds(stepper: Stepper) -> None:
         stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, 4096))
         stepper.step()
     assert int(valve.store.get(0x6311, 1)) == 4096
+
+
+def test_the_valves_own_spool_loop_and_its_deviation_monitoring(stepper: Stepper) -> None:
+    """Device control mode 2: the set-point is a spool position and the valve's PI drives the
+    spool there (+50 %: within 1 % after 40 periods); the deviation monitoring (threshold 500,
+    delay 1 ms) sets status bit 11 during the step and clears it once the spool is there."""
+    v, valve = stepper.cfg.valve_node, stepper.proc.valve
+
+    def sdo(index: int, value: int, size: int) -> None:
+        cmd = {1: 0x2F, 2: 0x2B}[size]
+        stepper.send(cobid.SDO_RX + v, struct.pack("<BHB", cmd, index, 0) + value.to_bytes(4, "little"))
+
+    for index, value, size in ((0x6043, 2, 1), (0x6351, 1, 1), (0x6352, 1, 2), (0x6353, 500, 2)):
+        sdo(index, value, size)
+    stepper.step()
+    assert valve.closed_loop
+    _activate(stepper)
+    words = []
+    for _ in range(40):
+        stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, 8192))
+        stepper.step()
+        words.append(valve.status_word())
+    assert any(w & 0x0800 for w in words[:20]) and not words[-1] & 0x0800
+    assert abs(valve.spool_actual - 8192) < 164 and abs(valve.deviation()) < 164
+    assert 0.0 < valve.current_a() < stepper.cfg.full_scale_current_a
+    stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0001, 0))  # DISABLED: no current
+    stepper.step()
+    assert valve.current_a() == 0.0

@@ -88,3 +88,18 @@ def test_the_setpoint_path_objects_by_sdo() -> None:
         r.net.send_message(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, 16384))
         assert wait_until(lambda: sdo[0x6041].raw == 0x040F)
         assert sdo[0x6311][1].raw == 4096 and sdo[0x6300][1].raw == 16384
+
+
+def test_the_control_mode_and_deviation_monitoring_objects_by_sdo() -> None:
+    """0x6043 takes 1 (open loop) and 2 (the valve's own spool loop), nothing else; the
+    monitoring objects read their defaults and take a threshold; the deviation reads 0 at rest."""
+    with _rig("deviation") as r:
+        sdo = r.valve.sdo
+        sdo[0x6043].raw = 2
+        assert sdo[0x6043].raw == 2
+        with pytest.raises(canopen.SdoAbortedError):
+            sdo[0x6043].raw = 3
+        assert [sdo[0x6350].raw, sdo[0x6351].raw, sdo[0x6352].raw, sdo[0x6353].raw] == [0, 0, 0, 1638]
+        sdo[0x6353].raw = 800
+        sdo[0x6351].raw = 1
+        assert sdo[0x6353].raw == 800 and sdo[0x6351].raw == 1 and sdo[0x6041].raw & 0x0800 == 0

@@ -21,7 +21,9 @@ from canopen.sdo import SdoAbortedError
 
 from ehpss_hil.protocol.cia408.objects import (
     ABORT_RANGE,
+    BIT_DEVIATION,
     BIT_LIMIT,
+    CONTROL_MODE_SPOOL_CLOSED_LOOP,
     CONTROL_WORD,
     DEVICE_CONTROL_MODE,
     DEVICE_MODE,
@@ -37,6 +39,10 @@ from ehpss_hil.protocol.cia408.objects import (
     VALVE_POSITION_STEP_NM,
     VPOC_ACTUAL,
     VPOC_DEMAND,
+    VPOC_DEVIATION,
+    VPOC_MONITORING_DELAY,
+    VPOC_MONITORING_THRESHOLD,
+    VPOC_MONITORING_TYPE,
     VPOC_SETPOINT,
     VPOC_SUB,
     DeviceState,
@@ -45,6 +51,7 @@ from ehpss_hil.protocol.cia408.objects import (
 from .device import ValveStateMachine
 from .node import CanopenSlave, Send
 from .setpoint import SetpointPath
+from .spoolloop import DeviationMonitor, SpoolLoop
 from .store import Key
 
 log = logging.getLogger("firmware_sim")
@@ -70,28 +77,53 @@ class ValveNode(CanopenSlave):
         self._actual_per_m = SCALE_100_PERCENT / stroke_m
         self.spool_actual = 0
         self.position_value = 0
+        self._spool_m = 0.0  # the spool measured last (m)
+        self._stroke_m = stroke_m
+        self.spool_loop = SpoolLoop(full_scale_current_a)
+        self.monitor = DeviationMonitor()
+        self._tick_s: float | None = None
         super().__init__(node_id, od, send, overrides)
         self.setpoint = SetpointPath(self.store)
         self.store.live[(STATUS_WORD, 0)] = self.status_word
         self.store.live[(VPOC_DEMAND, VPOC_SUB)] = lambda: round(self.setpoint.demand(self.device.state))
+        self.store.live[(VPOC_DEVIATION, 0)] = self.deviation
         self.store.live[(VPOC_ACTUAL, VPOC_SUB)] = lambda: self.spool_actual
         self.store.live[(VALVE_POSITION, 0)] = lambda: self.position_value
 
     # ---- process values ---------------------------------------------------------------------
+    @property
+    def closed_loop(self) -> bool:
+        """Device control mode 0x6043 = 2: the valve closes its own spool position loop."""
+        return int(self.store.get(DEVICE_CONTROL_MODE, 0)) == CONTROL_MODE_SPOOL_CLOSED_LOOP
+
     def current_a(self) -> float:
-        """The coil current the amplifier applies (A): the demand value's share of full scale
-        (the set-point in ACTIVE, the hold set-point in HOLD, after limits and ramp), else 0."""
+        """The coil current the amplifier applies (A). Open loop: the demand value's share of
+        full scale (the set-point in ACTIVE, the hold set-point in HOLD, after limits and ramp),
+        else 0; closed loop: the spool loop's current for the demand as a spool position."""
+        if self.closed_loop:
+            return self.spool_loop.current_a
         return self.setpoint.demand(self.device.state) / SCALE_100_PERCENT * self.full_scale_current_a
 
+    def deviation(self) -> int:
+        """0x6350: demand − spool actual value (set-point units), clipped to INTEGER16."""
+        d = round(self.setpoint.demand(self.device.state)) - self.spool_actual
+        return max(-_INT16_MAX, min(_INT16_MAX, d))
+
     def status_word(self) -> int:
-        """0x6041: the device state's bits, and bit 10 while the limits clip the set-point."""
+        """0x6041: the device state's bits, bit 10 while the limits clip the set-point, bit 11
+        while the deviation monitoring alarms."""
         _, limited = self.setpoint.target(self.device.state)
-        return self.device.status_word | (BIT_LIMIT if limited else 0)
+        return (
+            self.device.status_word
+            | (BIT_LIMIT if limited else 0)
+            | (BIT_DEVIATION if self.monitor.alarm else 0)
+        )
 
     def measure(self, spool_m: float) -> None:
         """The spool position measured this period (m) → the actual value (0x6301.1)."""
         v = round(spool_m * self._actual_per_m)
         self.spool_actual = max(-_INT16_MAX, min(_INT16_MAX, v))
+        self._spool_m = spool_m
 
     def measure_position(self, position_m: float) -> None:
         """The cylinder position measured this period (m) → 0x2100 (steps of
@@ -111,7 +143,20 @@ class ValveNode(CanopenSlave):
         if self.device.state != was:
             log.info("valve %d: %s -> %s", self.node_id, was.name, self.device.state.name)
         super().tick(t_s)
-        self.setpoint.tick(self.device.state, t_s)
+        state = self.device.state
+        self.setpoint.tick(state, t_s)
+        dt = 0.0 if self._tick_s is None else max(0.0, t_s - self._tick_s)
+        self._tick_s = t_s
+        demand = self.setpoint.demand(state)
+        if self.closed_loop and state in (DeviceState.ACTIVE, DeviceState.HOLD):
+            self.spool_loop.step(demand / SCALE_100_PERCENT * self._stroke_m, self._spool_m, dt)
+        else:
+            self.spool_loop.reset()
+        st = self.store
+        on = int(st.values.get((VPOC_MONITORING_TYPE, 0), 0)) == 1
+        threshold = int(st.values.get((VPOC_MONITORING_THRESHOLD, 0), SCALE_100_PERCENT))
+        delay_s = int(st.values.get((VPOC_MONITORING_DELAY, 0), 0)) * 1e-3
+        self.monitor.update(on, self.deviation(), threshold, delay_s, t_s)
 
     def _control_word(self, word: int) -> None:
         was = self.device.state

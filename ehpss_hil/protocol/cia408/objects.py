@@ -57,6 +57,14 @@ VPOC_RAMP_TIME = 0x6331  #: sub 1: UNSIGNED16 ms for 100 % (the emulated valve's
 RAMP_NONE, RAMP_LINEAR = 0, 1
 DEVICE_MODE_SETPOINT_VIA_BUS = 1
 CONTROL_MODE_SPOOL_OPEN_LOOP = 1
+#: the valve's own spool position loop: the set-point is a spool position (±16384 = ±stroke)
+CONTROL_MODE_SPOOL_CLOSED_LOOP = 2
+#: control deviation monitoring: deviation (demand − actual, INTEGER16), type (INTEGER8: 0 off,
+#: 1 on), delay (UNSIGNED16 ms), threshold (INTEGER16)
+VPOC_DEVIATION = 0x6350
+VPOC_MONITORING_TYPE = 0x6351
+VPOC_MONITORING_DELAY = 0x6352
+VPOC_MONITORING_THRESHOLD = 0x6353
 #: the CiA 408 16-bit value of 100 % (set-point, actual value)
 SCALE_100_PERCENT = 16384
 
@@ -85,6 +93,8 @@ BIT_R = 0x0008  #: control word: fault reset (rising edge); status word: ready (
 STATE_BITS = BIT_D | BIT_H | BIT_M
 #: status word bit 10: the set-point is clipped by the limits 0x6320/0x6321
 BIT_LIMIT = 0x0400
+#: status word bit 11: the control deviation beyond its threshold for longer than its delay
+BIT_DEVIATION = 0x0800
 
 
 class DeviceState(enum.IntEnum):
