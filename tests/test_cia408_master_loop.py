@@ -261,3 +261,21 @@ def test_the_master_reads_the_error_history_after_an_emcy(rig: Rig) -> None:
     assert rig.master.history.codes == [0x5000] and rig.master.history.reads == 1
     assert rig.master.summary()["error_history"] == {"node": 32, "codes": [0x5000]}
     assert rig.io.sent["SDO"] == 2 and not rig.master.shut_out  # the valve's own fault: no stop
+
+
+def test_following_sync_a_second_producer_is_a_collision() -> None:
+    """sync: follow: SYNC is another node's; a second producer doubles the SYNCs per cycle and
+    within the 40-cycle window the master declares ID_COLLISION and shuts the valve out."""
+    r = Rig("loop-follow-two", sync="follow")
+    try:
+        r.step(60, external_sync=True)
+        assert r.loop.life.state is State.ACTIVE
+        for _ in range(45):
+            r.host(cobid.SYNC, b"")  # the second producer
+            r.step(external_sync=True)
+        assert (r.loop.life.state, r.loop.life.reason) == (State.FAULT, FailsafeReason.ID_COLLISION)
+        assert r.master.shut_out and "second producer" in r.master.fault_text
+        r.step(1, external_sync=True)
+        assert r.proc.valve.nmt is NmtState.STOPPED and r.proc.valve.current_a() == 0.0
+    finally:
+        r.close()

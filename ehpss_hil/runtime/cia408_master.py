@@ -26,7 +26,9 @@ a lost heartbeat (HEARTBEAT_LOST), or a malformed TPDO (PDO_ERROR), the master a
 an SDO write of the control word DISABLED (processed while the valve is still OPERATIONAL) and
 then NMT Stop of the valve: in STOPPED a CiA 301 node processes no PDO (the rogue's RPDOs are
 shut out) and a CiA 408 valve takes its fault reaction. Our own Stop is expected in the valve's
-heartbeat from then on, not a failure.
+heartbeat from then on, not a failure. With ``sync: follow`` SYNC is not ours: a second
+producer shows as more SYNCs than one producer at the loop rate sends
+(:class:`~ehpss_hil.runtime.foreign.RateWindow` over the last 40 cycles), ID_COLLISION too.
 
 **The error history.** After each EMCY with an error code the master reads the node's error
 history 0x1003 by SDO (:class:`~ehpss_hil.protocol.cia408.history.ErrorHistoryReader`: one
@@ -63,6 +65,7 @@ from ..protocol.cia408.objects import (
     NmtState,
 )
 from ..protocol.cia408.startup import SDO_TIMEOUT_S, NodeIdentity, check_identity, go_operational, stop_nodes
+from .foreign import RateWindow
 from .lifecycle import FailsafeReason
 
 log = logging.getLogger("ehpss_hil.controller")
@@ -172,8 +175,9 @@ class CyclicMaster:
         self.codec = codec
         #: the loop sends SYNC after each command (else another node produces it)
         self.produces_sync = c.sync == "produce"
-        #: SYNC frames received from another producer (``sync: follow``)
+        #: SYNC frames received from another producer (``sync: follow``), per cycle over a window
         self.syncs_seen = 0
+        self._sync_rate = RateWindow()
         #: a valve TPDO (a status word) arrived in this cycle or the one before: the loop's
         #: watchdog counts a cycle without one as a cycle without data
         self.status_fresh = False
@@ -221,6 +225,7 @@ class CyclicMaster:
             return
         if fid == cobid.SYNC:
             self.syncs_seen += 1
+            self._sync_rate.add(self._cycle + 1)
             self.codec.sync_seen(self._cycle + 1)  # the cycle that drains it
             return
         node = self._hb_ids.get(fid)
@@ -266,6 +271,10 @@ class CyclicMaster:
             )
         elif self.drive.gave_up:
             self._fail(FailsafeReason.DEVICE_FAULT, "valve fault persists after the fault resets")
+        if not self.produces_sync and self._sync_rate.total > self._sync_rate.bound():
+            self.second_transmitter(
+                f"{self._sync_rate.total} SYNCs in {len(self._sync_rate)} cycles: a second producer"
+            )
         if self.codec.bad_length_pdos:
             name, length = self.codec.last_bad_length
             self._fail(FailsafeReason.PDO_ERROR, f"{name} TPDO of {length} bytes, not its mapping's")

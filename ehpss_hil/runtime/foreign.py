@@ -118,6 +118,10 @@ class RateWindow:
         self._counts[cycle % n] += 1
         self.total += 1
 
+    def __len__(self) -> int:
+        """The window (periods)."""
+        return len(self._counts)
+
     def bound(self) -> float:
         """The most frames one sensor at one frame per period delivers in the window."""
         return SENSOR_RATE_FACTOR * len(self._counts) + SENSOR_RATE_SLACK
