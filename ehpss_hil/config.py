@@ -256,8 +256,6 @@ class EmulatorConfig:
             raise ConfigError(
                 "", "mode", "lockstep is not available with protocol cia408 (the nodes run in realtime)"
             )
-        if self.truth:
-            raise ConfigError("", "truth", "PLANT_TRUTH/PLANT_FAULTS are not sent with protocol cia408 yet")
         if self.fault_inject:
             raise ConfigError(
                 "", "fault_inject", "FAULT_INJECT is not read with protocol cia408 (use a device_fault event)"

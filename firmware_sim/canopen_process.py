@@ -5,8 +5,9 @@ Realtime, each period k (fixed deadline grid, plant time t = k·Ts): drain RX wi
 each frame to both nodes (NMT, SDO, RPDO, the master's heartbeat), SYNCs counted → the
 scenario's ``device_fault`` events due → the nodes' clocks (heartbeats, timeouts) → the valve's
 current (ACTIVE: set-point × full scale, else 0 A) → measure y[k]: spool actual and position
-value → one round of synchronous TPDOs per SYNC received → advance the plant over [k, k+1).
-The TPDOs answering a SYNC thus carry the sample of the period in which it arrived.
+value → one round of synchronous TPDOs per SYNC received → PLANT_TRUTH (``truth``: the native
+DBC frame, for the bench's judgement of the piston; no CANopen node sends it) → advance the plant
+over [k, k+1). The TPDOs answering a SYNC thus carry the sample of the period in which it arrived.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import logging
 from dataclasses import dataclass
 from typing import Any
 
+from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import Cia408Config
 from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.protocol.cia408 import cobid
@@ -33,9 +35,11 @@ log = logging.getLogger("firmware_sim")
 
 @dataclass(frozen=True)
 class CanopenOptions:
-    """Run options: ``stats_capacity`` samples of the loop statistics."""
+    """Run options: ``stats_capacity`` samples of the loop statistics; ``truth``: the native
+    codec whose PLANT_TRUTH goes out each period (None: none)."""
 
     stats_capacity: int = 600_000
+    truth: FrameCodec | None = None
 
 
 def build_nodes(
@@ -85,6 +89,8 @@ class CanopenEmulatorProcess:
         self.syncs = 0
         self.unused_frames = 0
         self.applied_a = 0.0
+        self._truth = opts.truth
+        self._truth_bounds = opts.truth.signal_bounds("PLANT_TRUTH") if opts.truth is not None else {}
 
     @property
     def t_s(self) -> float:
@@ -96,12 +102,14 @@ class CanopenEmulatorProcess:
         for node in self.nodes:
             node.boot(self.t_s)
 
-    def _receive(self) -> int:
-        """Hand every pending frame to the nodes; returns the SYNCs among them."""
-        syncs, t = 0, self.t_s
+    def _receive(self) -> list[int]:
+        """Hand every pending frame to the nodes; returns the data lengths of the SYNCs among
+        them (0: a well-formed SYNC)."""
+        syncs: list[int] = []
+        t = self.t_s
         for msg in self.io.drain():
             if msg.arbitration_id == cobid.SYNC:
-                syncs += 1
+                syncs.append(len(msg.data))
                 continue
             if msg.is_extended_id or msg.is_remote_frame:
                 self.unused_frames += 1
@@ -135,14 +143,27 @@ class CanopenEmulatorProcess:
         self.valve.measure(y.spool_m)
         self.valve.measure_position(y.position_m)
         self.encoder.measure(y.position_m)
-        for _ in range(syncs):
+        for length in syncs:
             for node in self.nodes:
-                node.on_sync()
-        self.syncs += syncs
+                node.on_sync(length)
+        self.syncs += syncs.count(0)
+        if self._truth is not None:
+            self._send_truth(y.true_position_m, y.true_spool_m, bool(y.faults.stuck))
         self.applied_a = self.emu.advance(current)
         self.periods += 1
         self.io.idle()
         return self.applied_a
+
+    def _send_truth(self, position_m: float, spool_m: float, stuck: bool) -> None:
+        """PLANT_TRUTH of this sample (values clipped to the DBC's ranges)."""
+        assert self._truth is not None
+        values = {"Position": position_m, "SpoolActual": spool_m, "Stuck": int(stuck)}
+        for sig, (lo, hi) in self._truth_bounds.items():
+            if sig in values:
+                values[sig] = min(hi, values[sig]) if hi is not None else values[sig]
+                values[sig] = max(lo, values[sig]) if lo is not None else values[sig]
+        msg = self._truth.encode("PLANT_TRUTH", values)
+        self.io.send(msg.arbitration_id, bytes(msg.data))
 
     def run_realtime(self, stop: StopFlag, n_periods: int | None = None) -> None:
         """Boot the nodes, then run on the deadline grid until ``stop`` or ``n_periods``."""
@@ -167,6 +188,7 @@ class CanopenEmulatorProcess:
                     "rpdos": n.rpdos,
                     "tpdos": n.tpdos,
                     "emcy": n.emcy_sent,
+                    "bad_length_frames": n.bad_length_frames,
                 }
                 for n in self.nodes
             },

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from ehpss_hil.blas import limit_blas_threads
 from ehpss_hil.bus import open_bus
+from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import EmulatorConfig, apply_overrides, load_emulator_config
 from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.errors import ConfigError, run_console
@@ -184,6 +185,21 @@ def realtime_periods(args: argparse.Namespace, rate_hz: float, scenario: Scenari
     return scenario.n_samples if args.scenario is not None else None
 
 
+def _truth_codec(cfg: EmulatorConfig, src: str) -> FrameCodec:
+    """The native codec whose PLANT_TRUTH the CANopen emulator sends (``truth``); an ID that is
+    one of the nodes' COB-IDs is a ConfigError naming ``ids.id_base``."""
+    from ehpss_hil.protocol.cia408 import cobid
+
+    codec = FrameCodec(cfg.dbc or None, id_base=cfg.ids.id_base)
+    can_id = codec.can_id("PLANT_TRUTH")
+    service, node = cobid.classify(can_id)
+    if service in ("NMT", "SYNC") or node in (cfg.nodes.valve_node, cfg.nodes.encoder_node):
+        raise ConfigError(
+            src, "ids.id_base", f"PLANT_TRUTH at 0x{can_id:03X} is the {service} of node {node}"
+        )
+    return codec
+
+
 def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenario) -> int:
     """``protocol: cia408``: the plant behind an emulated CiA 408 valve and CiA 406 encoder."""
     from ehpss_hil.protocol.cia408.check import check_nodes
@@ -201,7 +217,8 @@ def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenari
     )
     io = RawFrameIO(bus, logger)
     valve, encoder = build_nodes(cfg.nodes, valve_od, encoder_od, io, params.plant.spool_stroke_m)
-    proc = CanopenEmulatorProcess(emu, io, valve, encoder, CanopenOptions())
+    truth = _truth_codec(cfg, str(args.config)) if cfg.truth else None
+    proc = CanopenEmulatorProcess(emu, io, valve, encoder, CanopenOptions(truth=truth))
     stop, previous = install_stop_handlers()
     try:
         limit_blas_threads(1)

@@ -20,11 +20,14 @@ from ehpss_hil.protocol.cia408.codec import Cia408Codec
 from ehpss_hil.protocol.cia408.cyclic import Scaling, unpack_emcy, unpack_heartbeat
 from ehpss_hil.protocol.cia408.drive import MAX_FAULT_RESETS, REQUEST, DeviceDrive
 from ehpss_hil.protocol.cia408.objects import BIT_R, DeviceState, NmtCommand, NmtState
+from firmware_sim.canopen_node.device import INIT_S, NOT_READY_S
 from firmware_sim.canopen_node.encoder import EncoderNode
 from firmware_sim.canopen_node.valve import ValveNode
 
 CFG = Cia408Config()
 STROKE_M = load_params().plant.spool_stroke_m
+#: the loop period the nodes' clock advances by per SYNC (s)
+TS_S = 0.001
 
 
 class Nodes:
@@ -38,6 +41,9 @@ class Nodes:
         for n in (self.valve, self.encoder):
             n.boot(0.0)
             n.on_frame(cobid.NMT, bytes([NmtCommand.START, 0]), 0.0)
+        #: loop time (s): a SYNC a period; the valve's power-on states are over
+        self.t_s = NOT_READY_S + INIT_S
+        self.valve.device.tick(self.t_s)
         self.sent.clear()
 
     def _send(self, can_id: int, data: bytes) -> None:
@@ -50,6 +56,8 @@ class Nodes:
     def sync(self) -> list[can.Message]:
         """A SYNC: the TPDOs it makes the nodes send, in order."""
         self.sent.clear()
+        self.t_s += TS_S
+        self.valve.device.tick(self.t_s)  # a fault reaction ends
         for n in (self.valve, self.encoder):
             n.on_sync()
         out, self.sent = self.sent, []
@@ -132,16 +140,19 @@ def test_status_leaving_active_trips_the_drive_and_disables(codec: Cia408Codec) 
     emcy = nodes.sent[-1]
     assert emcy.arbitration_id == cobid.EMCY + CFG.valve_node and unpack_emcy(bytes(emcy.data)) == (0x5000, 1)
     words = _enable(nodes, codec, drive, cycles=3)
-    assert drive.left_active is DeviceState.FAULT and words == [0x0001] * 3  # no reset: DISABLED
+    # the first status word after it shows the fault reaction; no reset: DISABLED
+    assert drive.left_active is DeviceState.FAULT_REACTION and words == [0x0001] * 3
     assert not drive.active and nodes.valve.device.state is DeviceState.FAULT
 
 
 def test_a_fault_met_while_enabling_is_reset_on_a_rising_edge(codec: Cia408Codec) -> None:
     nodes, drive = Nodes(), DeviceDrive()
     nodes.valve.inject_fault(0x5000)
-    words = _enable(nodes, codec, drive, cycles=6)
-    assert words[0] == 0x0001 | BIT_R and not any(w & BIT_R for w in words[1:])  # one rising edge
-    assert words[1:3] == [0x0003, 0x0007]  # DISABLED after the reset: enabling starts over
+    words = _enable(nodes, codec, drive, cycles=8)
+    edge = words.index(0x0001 | BIT_R)  # after the fault reaction (no reset while it runs)
+    assert words[:edge] == [0x0001] * edge and edge <= 3
+    assert not any(w & BIT_R for w in words[edge + 1 :])  # one rising edge
+    assert words[edge + 1 : edge + 3] == [0x0003, 0x0007]  # DISABLED after it: enabling again
     assert nodes.valve.device.state is DeviceState.ACTIVE and drive.fault_resets == 1
     assert drive.left_active is None
 

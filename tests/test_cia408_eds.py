@@ -88,7 +88,7 @@ def test_a_valve_eds_of_another_profile_is_refused(tmp_path: Path) -> None:
         ({"protocol": "cia408", "cia408": {"valve_node": 128}}, "cia408.valve_node"),
         ({"protocol": "native", "cia408": {}}, "cia408"),
         ({"protocol": "cia408", "mode": "lockstep"}, "mode"),
-        ({"protocol": "cia408", "truth": True}, "truth"),
+        ({"protocol": "cia408", "fault_inject": True}, "fault_inject"),
     ],
 )
 def test_emulator_config_refuses_what_cia408_cannot_do(data: dict[str, object], key: str) -> None:

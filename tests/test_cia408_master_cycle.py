@@ -73,7 +73,7 @@ def test_an_emcy_is_the_reason_with_its_code_and_disables_the_valve() -> None:
         "EmcyNode": CFG.valve_node,
         "EmcyCode": 0x5000,
         "ErrorRegister": 1,
-        "StatusWord": 0x0001,  # FAULT: D with R (ready) clear
+        "StatusWord": 0x0007,  # FAULT_REACTION: D+H+M with R (ready) clear
     }
     assert rig.cycle() is FailsafeReason.EMCY  # latched: the status word leaving ACTIVE adds nothing
 

@@ -21,7 +21,14 @@ from ehpss_hil.protocol import make_codec
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.check import check_nodes
 from ehpss_hil.protocol.cia408.codec import Cia408Codec
-from ehpss_hil.protocol.cia408.objects import CONTROL_WORD, VPOC_SETPOINT, VPOC_SUB, DeviceState, NmtCommand
+from ehpss_hil.protocol.cia408.objects import (
+    CONTROL_WORD,
+    VPOC_SETPOINT,
+    VPOC_SUB,
+    DeviceState,
+    NmtCommand,
+    NmtState,
+)
 from ehpss_hil.runtime.cia408_master import CyclicMaster
 from ehpss_hil.runtime.controller_loop import CIA408_OWN_FRAMES, OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
@@ -60,7 +67,10 @@ class Rig:
                 valve.store.set(0x1801, sub, value)
             valve.store.set(0x1A01, 1, 0x21000020)
             valve.store.set(0x1A01, 0, 1)
-        self.host(cobid.NMT, bytes([NmtCommand.START, 0]))
+        # the start-up's NMT start, on the master's own bus (as MasterSession sends it)
+        self.buses[0].send(
+            can.Message(arbitration_id=cobid.NMT, data=bytes([NmtCommand.START, 0]), is_extended_id=False)
+        )
         self.proc.step_period()  # NMT start taken
         for _ in self.io.drain():  # the boot-up messages: the start-up's (MasterSession) to read
             pass
@@ -93,12 +103,15 @@ def _applied_setpoint(r: Rig) -> int:
 
 
 def test_the_loop_enables_the_valve_then_steps_with_sync_per_cycle(rig: Rig) -> None:
-    rig.step(10)
+    rig.step(8)  # the valve powers up: NOT_READY 5 ms, INIT 5 ms; the drive asks for DISABLED
+    assert rig.proc.valve.device.state is DeviceState.INIT and rig.loop.life.state is State.CONFIGURED
+    assert rig.codec.control_word == 0x0001
+    rig.step(12)  # DISABLED, then HOLD and ACTIVE as the status word confirms each
     assert rig.proc.valve.device.state is DeviceState.ACTIVE and rig.loop.life.state is State.ACTIVE
     rig.step(200)
     sent = rig.io.sent
-    assert sent["SYNC"] == sent["VALVE_CMD"] == 210 and rig.proc.syncs == 210
-    assert rig.proc.valve.tpdos == rig.proc.encoder.tpdos == 210
+    assert sent["SYNC"] == sent["VALVE_CMD"] == 220 and rig.proc.syncs == 220
+    assert rig.proc.valve.tpdos == rig.proc.encoder.tpdos == 220
     assert rig.loop.last_current_a != 0.0  # the sine reference moves the piston
     assert _applied_setpoint(rig) == rig.codec.scaling.setpoint_raw(rig.loop.last_current_a)
     assert rig.proc.valve.current_a() == pytest.approx(rig.codec.scaling.current_a(_applied_setpoint(rig)))
@@ -191,5 +204,78 @@ def test_the_position_from_an_object_of_the_valve() -> None:
         assert r.loop.life.state is State.ACTIVE and r.io.sent["SYNC"] == 100
         assert r.codec.counts_by_name["SENSOR_POS"][Verdict.OK] == 99
         assert r.loop.meas.position_m == pytest.approx(sent * 1e-7, abs=1e-12)
+    finally:
+        r.close()
+
+
+@pytest.mark.parametrize(
+    ("can_id", "data", "frame"),
+    [
+        (cobid.RPDO1 + 32, bytes.fromhex("07000040"), "VALVE_CMD"),  # ACTIVE, +100 %
+        (cobid.NMT, bytes([NmtCommand.STOP, 32]), "NMT"),
+        (cobid.SYNC, b"", "SYNC"),
+        (cobid.RPDO1 + 32, bytes.fromhex("0700"), "VALVE_CMD"),  # shorter than mapped
+    ],
+    ids=["rpdo", "nmt-stop", "sync", "short-rpdo"],
+)
+def test_a_third_node_on_the_masters_frames_shuts_the_valve_out(
+    rig: Rig, can_id: int, data: bytes, frame: str
+) -> None:
+    """Fail-safe ID_COLLISION in the cycle that drains the first foreign frame; the master's SDO
+    DISABLED and NMT Stop reach the valve in the next period: STOPPED, no current, and the
+    foreign frames after it change nothing (the heartbeat of our own Stop is no failure)."""
+    rig.step(50)
+    rig.host(can_id, data)
+    rig.loop.poll_cycle()
+    assert (rig.loop.life.state, rig.loop.life.reason) == (State.FAULT, FailsafeReason.ID_COLLISION)
+    assert rig.io.sent["NMT"] == 1 and rig.io.sent["SDO"] == 1 and rig.master.shut_out
+    rig.proc.step_period()
+    valve = rig.proc.valve
+    assert valve.nmt is NmtState.STOPPED and valve.current_a() == 0.0
+    assert valve.device.state in (DeviceState.DISABLED, DeviceState.FAULT_REACTION, DeviceState.FAULT_HOLD)
+    for _ in range(300):  # the rogue goes on; heartbeats of the stopped valve come in
+        rig.host(can_id, data)
+        rig.step()
+    assert valve.current_a() == 0.0 and valve.device.state is not DeviceState.ACTIVE
+    assert rig.loop.life.reason is FailsafeReason.ID_COLLISION
+    assert rig.master.reason is FailsafeReason.ID_COLLISION and rig.io.sent["NMT"] == 1
+    assert rig.io.collisions.by_name[frame] >= 1
+
+
+def test_a_tpdo_shorter_than_mapped_is_a_pdo_error(rig: Rig) -> None:
+    rig.step(50)
+    rig.host(cobid.TPDO1 + 32, bytes.fromhex("0f00"))  # the valve's TPDO 1, 2 of 4 bytes
+    rig.loop.poll_cycle()
+    assert (rig.loop.life.state, rig.loop.life.reason) == (State.FAULT, FailsafeReason.PDO_ERROR)
+    assert rig.master.summary()["bad_length_pdos"] == 1 and rig.master.shut_out
+    rig.proc.step_period()
+    assert rig.proc.valve.nmt is NmtState.STOPPED and rig.proc.valve.current_a() == 0.0
+
+
+def test_the_master_reads_the_error_history_after_an_emcy(rig: Rig) -> None:
+    """The EMCY is followed by the master's SDO reads of 0x1003.0 and 0x1003.1 (one request
+    per cycle, answered by the valve's SDO server in the emulator's loop)."""
+    rig.step(50)
+    rig.proc.valve.inject_fault(0x5000)
+    rig.step(10)
+    assert rig.master.history.codes == [0x5000] and rig.master.history.reads == 1
+    assert rig.master.summary()["error_history"] == {"node": 32, "codes": [0x5000]}
+    assert rig.io.sent["SDO"] == 2 and not rig.master.shut_out  # the valve's own fault: no stop
+
+
+def test_following_sync_a_second_producer_is_a_collision() -> None:
+    """sync: follow: SYNC is another node's; a second producer doubles the SYNCs per cycle and
+    within the 40-cycle window the master declares ID_COLLISION and shuts the valve out."""
+    r = Rig("loop-follow-two", sync="follow")
+    try:
+        r.step(60, external_sync=True)
+        assert r.loop.life.state is State.ACTIVE
+        for _ in range(45):
+            r.host(cobid.SYNC, b"")  # the second producer
+            r.step(external_sync=True)
+        assert (r.loop.life.state, r.loop.life.reason) == (State.FAULT, FailsafeReason.ID_COLLISION)
+        assert r.master.shut_out and "second producer" in r.master.fault_text
+        r.step(1, external_sync=True)
+        assert r.proc.valve.nmt is NmtState.STOPPED and r.proc.valve.current_a() == 0.0
     finally:
         r.close()

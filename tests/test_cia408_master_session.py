@@ -35,6 +35,13 @@ def test_start_up_writes_the_configuration_and_starts_the_nodes() -> None:
             assert isinstance(codec, Cia408Codec)
             codec.scaling = replace(codec.scaling, step_m=1e-3)  # start-up reads the real one
             session = MasterSession(bus, MASTER)
+            for (index, sub), value in {
+                (0x6320, 1): 8000,
+                (0x6321, 1): -8000,
+                (0x6330, 0): 1,
+                (0x6314, 1): 500,
+            }.items():
+                r.proc.valve.store.set(index, sub, value)  # a valve that came with limits and a ramp
             before = set(threading.enumerate())
             valve, encoder = session.start(codec)
             assert (valve.profile, encoder.profile) == (408, 406)
@@ -42,6 +49,12 @@ def test_start_up_writes_the_configuration_and_starts_the_nodes() -> None:
             assert v.get(0x1017) == e.get(0x1017) == 50
             assert v.get(0x1016, 1) == (1 << 16) | 250 and v.get(0x1400, 5) == 20
             assert (v.get(0x6042), v.get(0x6043)) == (1, 1)
+            assert [v.get(0x6320, 1), v.get(0x6321, 1), v.get(0x6330), v.get(0x6314, 1)] == [
+                16384,
+                -16384,
+                0,
+                0,
+            ]
             assert [v.get(0x1600, s) for s in (0, 1, 2)] == [2, 0x60400010, 0x63000110]
             assert [v.get(0x1A00, s) for s in (0, 1, 2)] == [2, 0x60410010, 0x63010110]
             assert [e.get(0x1A00, s) for s in (0, 1)] == [1, 0x60040020]

@@ -68,7 +68,10 @@ def test_canopen_master_process_drives_the_emulated_valve(tmp_path: Path) -> Non
     positions = [r[2] for r in rows]
     assert positions == sorted(positions) and positions[-1] > positions[0]  # the piston moves out
     s = json.loads(summary.read_text())
-    assert s["syncs"] == 100 and s["valve_state"] == "ACTIVE"
+    # the master's NMT Stop reached the valve while ACTIVE: its fault reaction (no PDO set-point
+    # reaches a STOPPED node), FAULT_HOLD at 0 A
+    assert s["syncs"] == 100 and s["valve_state"] == "FAULT_HOLD"
+    assert s["nodes"]["ValveNode:32"]["nmt"] == "STOPPED"
     assert s["nodes"]["ValveNode:32"]["tpdos"] == 100 and s["nodes"]["EncoderNode:33"]["tpdos"] == 100
     services = {cobid.classify(m.arbitration_id)[0] for m in read_log(log)}
     assert services == {"NMT", "SYNC", "HEARTBEAT", "SDO_RX", "SDO_TX", "TPDO1", "RPDO1"}

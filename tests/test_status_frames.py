@@ -26,3 +26,17 @@ def test_frame_schedule_keeps_due_frames_over_skipped_cycles() -> None:
     # every cycle but CTRL_STATUS's, and the index frames still go out beside it
     assert [c for c, d in enumerate(both, 1) if not d.stats] == [20, 40]
     assert [c for c, d in enumerate(both, 1) if not d.ctrl_index] == [20, 40]
+
+
+def test_the_dbc_names_every_failsafe_reason() -> None:
+    """CTRL_STATUS's FailsafeReason VAL_ table is the enum, value for value (PDO_ERROR = 11)."""
+    import cantools
+
+    from ehpss_hil import DATA_DIR
+    from ehpss_hil.runtime.lifecycle import FailsafeReason
+
+    db = cantools.database.load_file(str(DATA_DIR / "dbc" / "ehpss.dbc"))
+    assert isinstance(db, cantools.database.can.Database)
+    sig = db.get_message_by_name("CTRL_STATUS").get_signal_by_name("FailsafeReason")
+    assert sig.choices is not None
+    assert {int(k): str(v) for k, v in sig.choices.items()} == {r.value: r.name for r in FailsafeReason}

@@ -6,8 +6,10 @@ lossless; processes: ``ehpss-hil run`` with a watchdog audit), duplicated/reorde
 frames against a controller process, kill -9 of either process (``--trials``), SIGTERM during a
 run, every config/scenario key made wrong, and hostile surroundings (issue #16: datagrams on the
 bus that are no frame, foreign files in ``run --out``, a full disk under the logs, a second
-VALVE_CMD transmitter), and issue #29's rows (:mod:`ehpss_hil.reliability.owned`: a user's files
-under the logs and the campaign, tampered journals, vendor DBCs check-config must refuse). Process
+VALVE_CMD transmitter), issue #29's rows (:mod:`ehpss_hil.reliability.owned`: a user's files
+under the logs and the campaign, tampered journals, vendor DBCs check-config must refuse) and a
+rogue CANopen node beside the CiA 408 master, one row per case of
+:data:`~ehpss_hil.reliability.rogue_cia408.CASES`. Process
 sections need a private network namespace (root + ``unshare``) and say so when they cannot run;
 the full-disk row needs root for ``mount``. Exit 1 when any row fails. Implementation:
 :mod:`ehpss_hil.reliability`.
@@ -24,7 +26,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ..reliability import badinput, duplicates, fuzz, hostile, kills, loss, owned, rogue, stray
+from ..reliability import badinput, duplicates, fuzz, hostile, kills, loss, owned, rogue, rogue_cia408, stray
 from ..reliability.procs import skip_reason
 from ..reliability.table import (
     Row,
@@ -45,7 +47,7 @@ NAME = "faults"
 HELP = (
     "reliability suite: fuzzing, frame loss, duplicates, kill -9, SIGTERM, bad configs, "
     "stray datagrams, foreign files in --out, full disk, a second transmitter, a user's files "
-    "under logs and campaigns, tampered journals, bad vendor DBCs"
+    "under logs and campaigns, tampered journals, bad vendor DBCs, a rogue CANopen node"
 )
 
 
@@ -123,7 +125,15 @@ def _hostile_section(q: bool, out: Path, rows: list[Row], s: Summary, raw: dict[
     _say("a second VALVE_CMD transmitter ...")
     rg = rogue.rogue_trial(out / "rogue", rogue_s=0.5 if q else 1.0, duration_s=2.0 if q else 3.0)
     rows += rogue_rows(rg, s)
-    raw.update(stray=st, foreign_files=fo, disk_full=disk, rogue=rg)
+    _say("a rogue CANopen node beside the CiA 408 master ...")
+    rc = [
+        rogue_cia408.rogue_cia408_trial(
+            out / f"rogue-cia408-{case}", case, rogue_s=0.5 if q else 1.0, duration_s=4.0 if q else 6.0
+        )
+        for case in rogue_cia408.CASES
+    ]
+    rows += rogue_cia408.cia408_rogue_rows(rc, s)
+    raw.update(stray=st, foreign_files=fo, disk_full=disk, rogue=rg, rogue_cia408=rc)
 
 
 def run(args: argparse.Namespace) -> Scorecard:

@@ -98,8 +98,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _sends_truth(emulator_yaml: Path) -> bool:
-    """PLANT_TRUTH on, unless the emulator cannot send it (``protocol: cia408``: then the run's
-    metrics say what they lack)."""
+    """PLANT_TRUTH on, except with ``protocol: cia408`` (the run's metrics read native frames,
+    which such a run lacks, and say so; ``firmware-sim --truth`` sends PLANT_TRUTH there for the
+    rogue-node trials)."""
     data = load_yaml(emulator_yaml)
     return not (isinstance(data, dict) and data.get("protocol") == "cia408")
 

@@ -180,20 +180,31 @@ class Trial:
         return [*out, "--log", str(self.dir / f"{name}.log")] if log else out
 
     def controller(
-        self, overrides: dict[str, Any], *args: str, name: str = "controller", log: bool = True
+        self,
+        overrides: dict[str, Any],
+        *args: str,
+        name: str = "controller",
+        log: bool = True,
+        base: Path = CONTROLLER_YAML,
     ) -> Child:
-        """``ehpss-hil controller`` with ``configs/controller.yaml`` + ``overrides``, its
-        summary ``<name>.json`` and (``log``) its candump log ``<name>.log``."""
-        cfg = write_config(CONTROLLER_YAML, self.dir / f"{name}.yaml", overrides)
+        """``ehpss-hil controller`` with ``base`` (``configs/controller.yaml``) + ``overrides``,
+        its summary ``<name>.json`` and (``log``) its candump log ``<name>.log``."""
+        cfg = write_config(base, self.dir / f"{name}.yaml", overrides)
         return self.spawn(
             name, [PY, "-m", "ehpss_hil.cli", "controller", "-c", str(cfg), *self._outputs(name, log), *args]
         )
 
     def emulator(
-        self, overrides: dict[str, Any], *args: str, name: str = "emulator", log: bool = True
+        self,
+        overrides: dict[str, Any],
+        *args: str,
+        name: str = "emulator",
+        log: bool = True,
+        base: Path = EMULATOR_YAML,
     ) -> Child:
-        """``firmware-sim`` with ``configs/emulator.yaml`` + ``overrides``, summary and log."""
-        cfg = write_config(EMULATOR_YAML, self.dir / f"{name}.yaml", overrides)
+        """``firmware-sim`` with ``base`` (``configs/emulator.yaml``) + ``overrides``, summary
+        and log."""
+        cfg = write_config(base, self.dir / f"{name}.yaml", overrides)
         return self.spawn(
             name, [PY, "-m", "firmware_sim.cli", "-c", str(cfg), *self._outputs(name, log), *args]
         )

@@ -13,9 +13,27 @@ the CiA 408 device drive (control word from the newest status word,
 fail-safe reason when a node's heartbeat stops or shows another NMT state (HEARTBEAT_LOST), an
 EMCY with an error code arrives once the valve has been ACTIVE (EMCY; before, the drive resets
 the fault it reports: the valve may have missed our heartbeat during the start-up) or the
-status word leaves ACTIVE (DEVICE_FAULT); these latch, and the valve is asked for DISABLED. A
-cycle without a status word counts for the loop's watchdog as a cycle without data
-(:attr:`CyclicMaster.status_fresh`: SENSOR_TIMEOUT, with the watchdog's own recovery).
+status word leaves ACTIVE (DEVICE_FAULT) or a TPDO's length is not its mapping's (PDO_ERROR);
+these latch, and the valve is asked for DISABLED. A cycle without a status word counts for the
+loop's watchdog as a cycle without data (:attr:`CyclicMaster.status_fresh`: SENSOR_TIMEOUT,
+with the watchdog's own recovery).
+
+**Shutting the valve out.** Plain CANopen PDOs carry no sender and no E2E: while another node
+sends the valve's RPDO (or SYNC, or an NMT command), our RPDO asking for DISABLED may be
+overwritten by the next foreign one. On a second transmitter (the loop's ID_COLLISION:
+:meth:`CyclicMaster.second_transmitter`), a node leaving OPERATIONAL that we did not command or
+a lost heartbeat (HEARTBEAT_LOST), or a malformed TPDO (PDO_ERROR), the master also sends, once,
+an SDO write of the control word DISABLED (processed while the valve is still OPERATIONAL) and
+then NMT Stop of the valve: in STOPPED a CiA 301 node processes no PDO (the rogue's RPDOs are
+shut out) and a CiA 408 valve takes its fault reaction. Our own Stop is expected in the valve's
+heartbeat from then on, not a failure. With ``sync: follow`` SYNC is not ours: a second
+producer shows as more SYNCs than one producer at the loop rate sends
+(:class:`~ehpss_hil.runtime.foreign.RateWindow` over the last 40 cycles), ID_COLLISION too.
+
+**The error history.** After each EMCY with an error code the master reads the node's error
+history 0x1003 by SDO (:class:`~ehpss_hil.protocol.cia408.history.ErrorHistoryReader`: one
+expedited upload per cycle, the answers taken from the drain), logs it and reports it in the
+summary (``error_history``).
 """
 
 from __future__ import annotations
@@ -32,11 +50,22 @@ from ..errors import NodeError
 from ..protocol.cia408 import cobid
 from ..protocol.cia408.codec import Cia408Codec
 from ..protocol.cia408.configure import configure_encoder, configure_valve
-from ..protocol.cia408.cyclic import Scaling, step_of_nm, unpack_emcy, unpack_heartbeat
+from ..protocol.cia408.cyclic import Scaling, frame, step_of_nm, unpack_emcy, unpack_heartbeat
 from ..protocol.cia408.drive import DeviceDrive
 from ..protocol.cia408.eds import ENCODER_EDS, VALVE_EDS
-from ..protocol.cia408.objects import DEVICE_TYPE, EMCY_NO_ERROR, PROFILE_ENCODER, PROFILE_VALVE, NmtState
+from ..protocol.cia408.history import ErrorHistoryReader
+from ..protocol.cia408.objects import (
+    BIT_D,
+    CONTROL_WORD,
+    DEVICE_TYPE,
+    EMCY_NO_ERROR,
+    PROFILE_ENCODER,
+    PROFILE_VALVE,
+    NmtCommand,
+    NmtState,
+)
 from ..protocol.cia408.startup import SDO_TIMEOUT_S, NodeIdentity, check_identity, go_operational, stop_nodes
+from .foreign import RateWindow
 from .lifecycle import FailsafeReason
 
 log = logging.getLogger("ehpss_hil.controller")
@@ -50,6 +79,19 @@ NODE_POLL_S = 1.0
 STATUS_SLACK_CYCLES = 1
 #: the start-up notifier's read timeout (s): how long stopping it may take
 NOTIFIER_CYCLE_S = 0.05
+#: the fail-safe reasons on which the master shuts the valve out (module docstring)
+SHUT_OUT_REASONS = frozenset(
+    (FailsafeReason.ID_COLLISION, FailsafeReason.HEARTBEAT_LOST, FailsafeReason.PDO_ERROR)
+)
+#: SDO expedited download of 2 bytes (CiA 301 command specifier: ccs 1, e 1, s 1, n 2)
+SDO_DOWNLOAD_2_BYTES = 0x2B
+
+
+def sdo_write_u16(node: int, index: int, sub: int, value: int) -> can.Message:
+    """An SDO expedited download request of an UNSIGNED16 to ``node`` (its answer is not
+    awaited: the loop does not block)."""
+    data = bytes([SDO_DOWNLOAD_2_BYTES, index & 0xFF, index >> 8, sub, value & 0xFF, value >> 8, 0, 0])
+    return frame(cobid.SDO_RX + node, data)
 
 
 class MasterSession:
@@ -133,8 +175,9 @@ class CyclicMaster:
         self.codec = codec
         #: the loop sends SYNC after each command (else another node produces it)
         self.produces_sync = c.sync == "produce"
-        #: SYNC frames received from another producer (``sync: follow``)
+        #: SYNC frames received from another producer (``sync: follow``), per cycle over a window
         self.syncs_seen = 0
+        self._sync_rate = RateWindow()
         #: a valve TPDO (a status word) arrived in this cycle or the one before: the loop's
         #: watchdog counts a cycle without one as a cycle without data
         self.status_fresh = False
@@ -143,6 +186,14 @@ class CyclicMaster:
         self.drive = DeviceDrive()
         nodes = (c.valve_node, c.encoder_node) if c.position_source == "encoder" else (c.valve_node,)
         self._hb_ids = {cobid.HEARTBEAT + n: n for n in nodes}
+        self._valve_node = c.valve_node
+        #: the NMT state each node's heartbeat should show (we commanded it)
+        self._expected = dict.fromkeys(nodes, NmtState.OPERATIONAL)
+        #: frames the loop sends after this cycle's command: (name, frame)
+        self._outbox: list[tuple[str, can.Message]] = []
+        self.shut_out = False
+        #: the error history of the node that sent the last EMCY
+        self.history = ErrorHistoryReader()
         self._emcy_ids = {cobid.EMCY + n: n for n in nodes}
         #: cycles without a node's heartbeat after which it is lost
         self.hb_timeout_cycles = max(1, math.ceil(c.node_heartbeat_timeout_ms * 1e-3 * rate_hz))
@@ -166,15 +217,22 @@ class CyclicMaster:
     def on_frame(self, msg: can.Message) -> None:
         """A received frame the loop does not consume (heartbeats and EMCY of the nodes are used)."""
         fid = msg.arbitration_id
+        if cobid.SDO_TX < fid <= cobid.SDO_TX + cobid.NODE_MAX:
+            reads = self.history.reads
+            if self.history.on_response(fid, bytes(msg.data)) and self.history.reads != reads:
+                codes = ", ".join(f"0x{c:04X}" for c in self.history.codes) or "empty"
+                log.warning("node %d: error history (newest first): %s", self.history.node, codes)
+            return
         if fid == cobid.SYNC:
             self.syncs_seen += 1
+            self._sync_rate.add(self._cycle + 1)
             self.codec.sync_seen(self._cycle + 1)  # the cycle that drains it
             return
         node = self._hb_ids.get(fid)
         if node is not None:
             self._hb_cycle[node] = self._cycle + 1  # the cycle that drains it (the next update)
             state = unpack_heartbeat(bytes(msg.data))
-            if state is not NmtState.OPERATIONAL:
+            if state is not self._expected[node]:
                 shown = state.name if state is not None else bytes(msg.data).hex()
                 self._heard(FailsafeReason.HEARTBEAT_LOST, f"node {node}: heartbeat shows {shown}")
             return
@@ -184,6 +242,7 @@ class CyclicMaster:
             if e is not None and e[0] != EMCY_NO_ERROR:
                 self.emcy = (node, e[0], e[1])
                 self.emcy_frames += 1
+                self.history.start(node)
                 text = f"node {node}: EMCY 0x{e[0]:04X} (error register 0x{e[1]:02X})"
                 if self.drive.was_active:
                     self._heard(FailsafeReason.EMCY, text)
@@ -212,7 +271,39 @@ class CyclicMaster:
             )
         elif self.drive.gave_up:
             self._fail(FailsafeReason.DEVICE_FAULT, "valve fault persists after the fault resets")
+        if not self.produces_sync and self._sync_rate.total > self._sync_rate.bound():
+            self.second_transmitter(
+                f"{self._sync_rate.total} SYNCs in {len(self._sync_rate)} cycles: a second producer"
+            )
+        if self.codec.bad_length_pdos:
+            name, length = self.codec.last_bad_length
+            self._fail(FailsafeReason.PDO_ERROR, f"{name} TPDO of {length} bytes, not its mapping's")
         return self.reason
+
+    def second_transmitter(self, cause: str) -> None:
+        """The loop saw another transmitter of our frames (ID_COLLISION): shut the valve out."""
+        self._fail(FailsafeReason.ID_COLLISION, cause)
+        self._shut_out()
+
+    def take_frames(self) -> list[tuple[str, can.Message]]:
+        """The frames to send after this cycle's command (and forget them)."""
+        req = self.history.take_request()
+        out = [("SDO", req)] if req is not None else []
+        out, self._outbox = out + self._outbox, []
+        return out
+
+    def _shut_out(self) -> None:
+        """Once: SDO control word DISABLED, then NMT Stop of the valve (module docstring)."""
+        if self.shut_out:
+            return
+        self.shut_out = True
+        node = self._valve_node
+        self._expected[node] = NmtState.STOPPED
+        log.error("cycle %d: cia408 master: valve %d shut out (SDO DISABLED, NMT Stop)", self._cycle, node)
+        self._outbox += [
+            ("SDO", sdo_write_u16(node, CONTROL_WORD, 0, BIT_D)),
+            ("NMT", self.codec.encode("NMT", {"Command": NmtCommand.STOP, "Node": node})),
+        ]
 
     def _heard(self, reason: FailsafeReason, text: str) -> None:
         """A failure in a received frame, taken by the next :meth:`update` (the first one)."""
@@ -226,6 +317,8 @@ class CyclicMaster:
         log.error("cycle %d: cia408 master: %s -> %s", self._cycle, text, reason.name)
         self.drive.disable()
         self.codec.control_word = self.drive.control_word
+        if reason in SHUT_OUT_REASONS:
+            self._shut_out()
 
     def stop(self) -> None:
         """The stop sequence's control word: DISABLED (the loop then sends set-point 0)."""
@@ -258,4 +351,9 @@ class CyclicMaster:
             "emcy_frames": self.emcy_frames,
             "sync": "produced" if self.produces_sync else f"followed ({self.syncs_seen} seen)",
             "fault_resets": self.drive.fault_resets,
+            "shut_out": self.shut_out,
+            "error_history": {"node": self.history.node, "codes": self.history.codes}
+            if self.history.reads
+            else None,
+            "bad_length_pdos": self.codec.bad_length_pdos,
         }

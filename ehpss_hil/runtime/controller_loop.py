@@ -228,6 +228,8 @@ class ControllerLoop:
         st = self.life.state
         collided = self.guard.update(self.cycles)
         device = self.master.update(self.cycles) if self.master is not None else None
+        if collided and self.master is not None:  # the valve shut out (first cause only)
+            self.master.second_transmitter(self.guard.last_cause)
         if self.io.health.update(self.cycles):  # nothing reaches the valve: before any device
             device = FailsafeReason.BUS_ERROR
         if st is State.CONFIGURED:
@@ -335,8 +337,11 @@ class ControllerLoop:
         self._update_state()
         current, enable = self._command()
         self.send_command(current, enable)
-        if self.master is not None and self.master.produces_sync:
-            self.io.send("SYNC", {"Cycle": self.cycles})
+        if self.master is not None:
+            for name, msg in self.master.take_frames():
+                self.io.send_message(name, msg)
+            if self.master.produces_sync:
+                self.io.send("SYNC", {"Cycle": self.cycles})
         if self._fresh:
             self.stats.latency.add(time.time() - self._pos_ts)
         self._reset_cycle_rx()

@@ -1,7 +1,8 @@
 """What the controller does about frames from a transmitter that should not be there.
 
 A second transmitter: the controller's own VALVE_CMD received from elsewhere (an ID collision,
-:class:`~.frameio.FrameIO`), the emulator's SENSOR_AUX ``CommandConflict`` (it saw two VALVE_CMD
+:class:`~.frameio.FrameIO`), another node's SYNC or NMT frame under
+``protocol: cia408`` (one producer each), the emulator's SENSOR_AUX ``CommandConflict`` (it saw two VALVE_CMD
 sequences and centred the valve: firmware_sim/commanders.py), or a second SENSOR_POS stream
 (:class:`SensorStreams`). :class:`CollisionGuard` turns that evidence into the loop's reaction
 (``watchdog.on_collision``): fail-safe with reason ID_COLLISION, left only with ``auto_recover``
@@ -54,8 +55,9 @@ SENSOR_RATE_SLACK = 10
 #: a frame byte-identical to one of this many previous SENSOR_POS frames is a copy (the counter
 #: is 4 bits: a genuine frame repeats the bytes of one 16 frames back only at rest, noise-free)
 SENSOR_COPY_MEMORY = 8
-#: the VALVE_CMD frames (own ID) the controller sends
-COMMAND_FRAME = "VALVE_CMD"
+#: the own frames whose other transmitter is a second commander: VALVE_CMD (the valve's RPDO under
+#: cia408), and the CANopen master's SYNC and NMT (one producer each on a CANopen network)
+COMMAND_FRAMES = ("VALVE_CMD", "SYNC", "NMT")
 #: a rejected-SETPOINT warning: the first, then every this many
 SETPOINT_WARN_EVERY = 1000
 
@@ -116,6 +118,10 @@ class RateWindow:
         self._counts[cycle % n] += 1
         self.total += 1
 
+    def __len__(self) -> int:
+        """The window (periods)."""
+        return len(self._counts)
+
     def bound(self) -> float:
         """The most frames one sensor at one frame per period delivers in the window."""
         return SENSOR_RATE_FACTOR * len(self._counts) + SENSOR_RATE_SLACK
@@ -166,7 +172,7 @@ class CollisionGuard:
         self._auto_recover = wd.auto_recover
         self._recovery_cycles = wd.recovery_cycles
         self._collisions = collisions
-        self._cmd_seen = 0
+        self._seen = dict.fromkeys(COMMAND_FRAMES, 0)
         self.sensor = SensorStreams()
         self._conflict_flag = False  # CommandConflict in a SENSOR_AUX of this cycle
         #: SENSOR_AUX frames with CommandConflict 1
@@ -187,17 +193,17 @@ class CollisionGuard:
 
     def update(self, cycle: int) -> bool:
         """Account one cycle; True when the loop must be in fail-safe for ID_COLLISION now."""
-        n_cmd = self._collisions.by_name.get(COMMAND_FRAME, 0)
-        causes = [
+        counts = {n: self._collisions.by_name.get(n, 0) for n in COMMAND_FRAMES}
+        causes = [f"{n} from another transmitter" for n, k in counts.items() if k > self._seen[n]]
+        causes += [
             c
             for c, hit in (
-                (f"{COMMAND_FRAME} from another transmitter", n_cmd > self._cmd_seen),
                 ("the emulator reports CommandConflict", self._conflict_flag),
                 ("a second SENSOR_POS transmitter", self.sensor.conflict),
             )
             if hit
         ]
-        self._cmd_seen = n_cmd
+        self._seen = counts
         self._conflict_flag = False
         if causes:
             if not self.evident:
@@ -226,7 +232,9 @@ class CollisionGuard:
         return {
             "policy": "fault" if self.fault_on_collision else "warn",
             "episodes": self.episodes,
-            "valve_cmd_foreign": self._cmd_seen,
+            "valve_cmd_foreign": self._seen["VALVE_CMD"],
+            "sync_foreign": self._seen["SYNC"],
+            "nmt_foreign": self._seen["NMT"],
             "command_conflict_frames": self.conflict_frames,
             "sensor_pos_conflicts": self.sensor.conflicts,
             "sensor_pos_sequence_failures": self.sensor.failures,

@@ -176,6 +176,10 @@ class FrameIO:
         msg = self._encode(name, values)
         return msg if msg is not None and self._emit(name, msg) else None
 
+    def send_message(self, name: str, msg: can.Message) -> bool:
+        """Send, count (under ``name``) and log a frame built by the caller; True when sent."""
+        return self._emit(name, msg)
+
     def send_together(self, *frames: tuple[str, dict[str, Any]]) -> int:
         """Encode every frame first, then send them back to back (in order), so that they leave
         as close together as the bus allows (the emulator's sensor pair: the controller's cycle

@@ -42,6 +42,9 @@ class FailsafeReason(IntEnum):
     #: the bus: frames not sent for ``timeout_cycles`` cycles (interface down, transmit queue
     #: full), bus-off, error-passive, or a burst of error frames (runtime/bushealth.py)
     BUS_ERROR = 10
+    #: protocol cia408: a TPDO of a length other than its mapping (CiA 301: not processed; the
+    #: node maps it so, or another node transmits on its COB-ID)
+    PDO_ERROR = 11
 
 
 #: CiA 301 heartbeat NMT state for each lifecycle state

@@ -8,7 +8,7 @@ from ..config import SetpointPolicy, Watchdog
 
 OWN_FRAMES = ("VALVE_CMD", "CTRL_STATUS", "CTRL_INDEX", "CTRL_STATS", "HEARTBEAT_CTRL")
 #: the frames the CANopen master (``protocol: cia408``) sends besides
-CIA408_OWN_FRAMES = ("SYNC", "CTRL_DEVICE")
+CIA408_OWN_FRAMES = ("SYNC", "CTRL_DEVICE", "NMT")
 
 
 @dataclass(frozen=True)

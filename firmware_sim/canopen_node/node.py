@@ -25,8 +25,16 @@ from canopen.sdo import SdoAbortedError, SdoServer
 
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.objects import (
+    ABORT_RANGE,
     ABORT_STATE,
     CONSUMER_HEARTBEAT,
+    EMCY_PDO_LENGTH,
+    EMCY_SYNC_LENGTH,
+    ERR_REG_COMMUNICATION,
+    ERR_REG_GENERIC,
+    ERROR_BEHAVIOUR,
+    ERROR_BEHAVIOUR_COMMUNICATION,
+    ERROR_HISTORY,
     ERROR_REGISTER,
     PDO_COB_ID,
     PDO_EVENT_TIMER,
@@ -38,6 +46,7 @@ from ehpss_hil.protocol.cia408.objects import (
     RPDO_MAP,
     TPDO_COMM,
     TPDO_MAP,
+    ErrorBehaviour,
     NmtCommand,
     NmtState,
 )
@@ -89,10 +98,15 @@ class CanopenSlave:
         self._hb_lost: set[int] = set()
         self._rpdo_seen: dict[int, float] = {}  # RPDO comm index → last reception (s)
         self._rpdo_late: set[int] = set()
+        self._rpdo_short: set[int] = set()  # RPDOs whose last frame was shorter than mapped
+        self._sync_bad = False  # the last SYNC had a data length other than 0
+        #: frames refused for their length: RPDOs shorter than mapped, SYNCs with data
+        self.bad_length_frames = 0
 
     # ---- NMT ------------------------------------------------------------------------------------
     def boot(self, t_s: float) -> None:
         """Power-on: every object to its power-on value, boot-up message, PRE-OPERATIONAL."""
+        self._t_s = t_s
         self.store.reset(0x0000, 0xFFFF)
         self.reset_application()
         self._boot_up(t_s)
@@ -108,11 +122,26 @@ class CanopenSlave:
         self._next_hb_s = t_s + self._hb_period_s()
 
     def _set_nmt(self, state: NmtState) -> None:
-        if state != self.nmt:
-            log.info("node %d: NMT %s -> %s", self.node_id, self.nmt.name, state.name)
-        if state == NmtState.OPERATIONAL and self.nmt != NmtState.OPERATIONAL:
+        was = self.nmt
+        if state != was:
+            log.info("node %d: NMT %s -> %s", self.node_id, was.name, state.name)
+        if state == NmtState.OPERATIONAL and was != NmtState.OPERATIONAL:
             self._build_pdos()
         self.nmt = state
+        if was == NmtState.OPERATIONAL and state != NmtState.OPERATIONAL:
+            self.on_left_operational()
+
+    def communication_error(self) -> None:
+        """A communication error (a consumed heartbeat lost, an RPDO event timer elapsed) while
+        OPERATIONAL: the NMT state 0x1029.1 names (CiA 301; no 0x1029: no change)."""
+        key = (ERROR_BEHAVIOUR, ERROR_BEHAVIOUR_COMMUNICATION)
+        if self.nmt != NmtState.OPERATIONAL or key not in self.store.values:
+            return
+        behaviour = int(self.store.values[key])
+        if behaviour == ErrorBehaviour.PRE_OPERATIONAL:
+            self._set_nmt(NmtState.PRE_OPERATIONAL)
+        elif behaviour == ErrorBehaviour.STOPPED:
+            self._set_nmt(NmtState.STOPPED)
 
     def _on_nmt(self, data: bytes) -> None:
         if len(data) < 2 or data[1] not in (0, self.node_id):
@@ -159,7 +188,19 @@ class CanopenSlave:
         if rpdo is not None and self.nmt == NmtState.OPERATIONAL:
             comm, mapping = rpdo
             values = mapping.unpack(data)
-            if values is not None:
+            if values is None:  # not processed (CiA 301): EMCY once per run of short frames
+                self.bad_length_frames += 1
+                if comm not in self._rpdo_short:
+                    self._rpdo_short.add(comm)
+                    log.warning(
+                        "node %d: RPDO 0x%03X of %d bytes, shorter than mapped",
+                        self.node_id,
+                        can_id,
+                        len(data),
+                    )
+                    self.send_emcy(EMCY_PDO_LENGTH, ERR_REG_GENERIC | ERR_REG_COMMUNICATION)
+            else:
+                self._rpdo_short.discard(comm)
                 self.rpdos += 1
                 self._rpdo_seen[comm] = t_s
                 self._rpdo_late.discard(comm)
@@ -167,10 +208,20 @@ class CanopenSlave:
             return True
         return False
 
-    def on_sync(self) -> None:
-        """A SYNC: in OPERATIONAL, each synchronous TPDO due on this SYNC goes out now."""
+    def on_sync(self, length: int = 0) -> None:
+        """A SYNC of ``length`` data bytes: in OPERATIONAL, each synchronous TPDO due on this
+        SYNC goes out now. The nodes have no SYNC counter (0x1019): a SYNC with data is not
+        processed, and the first of a run of them is reported (EMCY 0x8240, CiA 301)."""
         if self.nmt != NmtState.OPERATIONAL:
             return
+        if length:
+            self.bad_length_frames += 1
+            if not self._sync_bad:
+                self._sync_bad = True
+                log.warning("node %d: SYNC with %d data bytes", self.node_id, length)
+                self.send_emcy(EMCY_SYNC_LENGTH, ERR_REG_GENERIC | ERR_REG_COMMUNICATION)
+            return
+        self._sync_bad = False
         self._syncs += 1
         for can_id, every, mapping in self._tpdos:
             if self._syncs % every == 0:
@@ -179,11 +230,26 @@ class CanopenSlave:
 
     def send_emcy(self, code: int, register: int) -> None:
         """An EMCY frame (0x080 + node): error code, error register (0x1001, stored), 5 zero
-        bytes; sent in PRE-OPERATIONAL and OPERATIONAL (CiA 301)."""
+        bytes; sent in PRE-OPERATIONAL and OPERATIONAL (CiA 301). An error code other than 0
+        enters the error history 0x1003 in every state."""
         self.store.set(ERROR_REGISTER, 0, register)
+        if code:
+            self._record_error(code)
         if self.nmt in (NmtState.PRE_OPERATIONAL, NmtState.OPERATIONAL):
             self._send(cobid.EMCY + self.node_id, struct.pack("<HB5x", code, register))
             self.emcy_sent += 1
+
+    def _record_error(self, code: int) -> None:
+        """The error history 0x1003: ``code`` at sub 1, the older ones one down, sub 0 the
+        number held (at most the EDS's sub-indices)."""
+        od = self.store.object_dictionary
+        if ERROR_HISTORY not in od:
+            return
+        size = len(od[ERROR_HISTORY]) - 1
+        held = [int(self.store.get(ERROR_HISTORY, s)) for s in range(1, size + 1)]
+        for sub, value in enumerate([code & 0xFFFF, *held][:size], start=1):
+            self.store.set(ERROR_HISTORY, sub, value)
+        self.store.set(ERROR_HISTORY, 0, min(size, int(self.store.get(ERROR_HISTORY, 0)) + 1))
 
     # ---- time -------------------------------------------------------------------------------
     def _hb_period_s(self) -> float:
@@ -217,9 +283,9 @@ class CanopenSlave:
                 self._hb_lost.add(node)
                 log.warning("node %d: heartbeat of node %d lost at t=%.4f s", self.node_id, node, t_s)
                 self.on_heartbeat_lost(node)
-        if self.nmt != NmtState.OPERATIONAL:
+        if self.nmt == NmtState.BOOT_UP:
             return
-        for comm in self._rpdo_comm:
+        for comm in self._rpdo_comm:  # in every NMT state: STOPPED processes no RPDO
             timer_s = int(self.store.values.get((comm, PDO_EVENT_TIMER), 0)) * 1e-3
             seen = self._rpdo_seen.get(comm)
             if timer_s > 0.0 and seen is not None and comm not in self._rpdo_late and t_s - seen > timer_s:
@@ -256,6 +322,11 @@ class CanopenSlave:
             raise SdoAbortedError(ABORT_STATE)
         if is_map and sub > 0:
             check_entry(self.store, int(value))
+        if index == ERROR_HISTORY:  # sub 0: only 0 may be written, which clears the history
+            if int(value) != 0:
+                raise SdoAbortedError(ABORT_RANGE)
+            for s in range(1, len(self.store.object_dictionary[ERROR_HISTORY])):
+                self.store.set(ERROR_HISTORY, s, 0)
         self.on_object_write(index, sub, value)
 
     # ---- profile hooks ------------------------------------------------------------------------
@@ -274,4 +345,8 @@ class CanopenSlave:
         """The heartbeat of node ``producer`` (0x1016) stopped."""
 
     def on_rpdo_timeout(self, comm_index: int) -> None:
-        """No RPDO within its event timer (0x1400 + n, sub 5) while OPERATIONAL."""
+        """No RPDO within its event timer (0x1400 + n, sub 5), in any NMT state but boot-up."""
+
+    def on_left_operational(self) -> None:
+        """The node left NMT OPERATIONAL (to STOPPED or PRE-OPERATIONAL): no RPDO is processed
+        from now on."""

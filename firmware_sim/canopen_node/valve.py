@@ -6,7 +6,10 @@ full-scale current, the actual value of the spool stroke). The cylinder position
 0x2100 (manufacturer-specific, 100 nm steps; TPDO 2 is free to map it, off by default). The plant gets
 ``set-point / 16384 × full_scale_current_a`` in ACTIVE and 0 A in every other state. Faults:
 the master's heartbeat lost (0x1016) or the set-point RPDO late (0x1400.5 event timer) while
-ACTIVE → FAULT_HOLD with EMCY 0x8130 / 0x8250; an injected device fault → FAULT with its code.
+ACTIVE → FAULT_HOLD with EMCY 0x8130 / 0x8250, then the NMT state 0x1029.1 names; the node
+leaving NMT OPERATIONAL (an NMT Stop or Enter Pre-operational, from whichever node) while enabled
+(HOLD or ACTIVE) → FAULT_HOLD with 0x8100 (no PDO set-point reaches it any more; in STOPPED the
+EMCY cannot be sent, the error register holds it); an injected device fault → FAULT with its code.
 """
 
 from __future__ import annotations
@@ -18,9 +21,13 @@ from canopen.sdo import SdoAbortedError
 
 from ehpss_hil.protocol.cia408.objects import (
     ABORT_RANGE,
+    BIT_DEVIATION,
+    BIT_LIMIT,
+    CONTROL_MODE_SPOOL_CLOSED_LOOP,
     CONTROL_WORD,
     DEVICE_CONTROL_MODE,
     DEVICE_MODE,
+    EMCY_COMMUNICATION,
     EMCY_HEARTBEAT,
     EMCY_NO_ERROR,
     EMCY_RPDO_TIMEOUT,
@@ -31,6 +38,11 @@ from ehpss_hil.protocol.cia408.objects import (
     VALVE_POSITION,
     VALVE_POSITION_STEP_NM,
     VPOC_ACTUAL,
+    VPOC_DEMAND,
+    VPOC_DEVIATION,
+    VPOC_MONITORING_DELAY,
+    VPOC_MONITORING_THRESHOLD,
+    VPOC_MONITORING_TYPE,
     VPOC_SETPOINT,
     VPOC_SUB,
     DeviceState,
@@ -38,6 +50,8 @@ from ehpss_hil.protocol.cia408.objects import (
 
 from .device import ValveStateMachine
 from .node import CanopenSlave, Send
+from .setpoint import SetpointPath
+from .spoolloop import DeviationMonitor, SpoolLoop
 from .store import Key
 
 log = logging.getLogger("firmware_sim")
@@ -63,23 +77,53 @@ class ValveNode(CanopenSlave):
         self._actual_per_m = SCALE_100_PERCENT / stroke_m
         self.spool_actual = 0
         self.position_value = 0
+        self._spool_m = 0.0  # the spool measured last (m)
+        self._stroke_m = stroke_m
+        self.spool_loop = SpoolLoop(full_scale_current_a)
+        self.monitor = DeviationMonitor()
+        self._tick_s: float | None = None
         super().__init__(node_id, od, send, overrides)
-        self.store.live[(STATUS_WORD, 0)] = lambda: self.device.status_word
+        self.setpoint = SetpointPath(self.store)
+        self.store.live[(STATUS_WORD, 0)] = self.status_word
+        self.store.live[(VPOC_DEMAND, VPOC_SUB)] = lambda: round(self.setpoint.demand(self.device.state))
+        self.store.live[(VPOC_DEVIATION, 0)] = self.deviation
         self.store.live[(VPOC_ACTUAL, VPOC_SUB)] = lambda: self.spool_actual
         self.store.live[(VALVE_POSITION, 0)] = lambda: self.position_value
 
     # ---- process values ---------------------------------------------------------------------
+    @property
+    def closed_loop(self) -> bool:
+        """Device control mode 0x6043 = 2: the valve closes its own spool position loop."""
+        return int(self.store.get(DEVICE_CONTROL_MODE, 0)) == CONTROL_MODE_SPOOL_CLOSED_LOOP
+
     def current_a(self) -> float:
-        """The coil current the amplifier applies (A): the set-point's share of full scale in
-        ACTIVE, else 0."""
-        if self.device.state != DeviceState.ACTIVE:
-            return 0.0
-        return int(self.store.get(VPOC_SETPOINT, VPOC_SUB)) / SCALE_100_PERCENT * self.full_scale_current_a
+        """The coil current the amplifier applies (A). Open loop: the demand value's share of
+        full scale (the set-point in ACTIVE, the hold set-point in HOLD, after limits and ramp),
+        else 0; closed loop: the spool loop's current for the demand as a spool position."""
+        if self.closed_loop:
+            return self.spool_loop.current_a
+        return self.setpoint.demand(self.device.state) / SCALE_100_PERCENT * self.full_scale_current_a
+
+    def deviation(self) -> int:
+        """0x6350: demand − spool actual value (set-point units), clipped to INTEGER16."""
+        d = round(self.setpoint.demand(self.device.state)) - self.spool_actual
+        return max(-_INT16_MAX, min(_INT16_MAX, d))
+
+    def status_word(self) -> int:
+        """0x6041: the device state's bits, bit 10 while the limits clip the set-point, bit 11
+        while the deviation monitoring alarms."""
+        _, limited = self.setpoint.target(self.device.state)
+        return (
+            self.device.status_word
+            | (BIT_LIMIT if limited else 0)
+            | (BIT_DEVIATION if self.monitor.alarm else 0)
+        )
 
     def measure(self, spool_m: float) -> None:
         """The spool position measured this period (m) → the actual value (0x6301.1)."""
         v = round(spool_m * self._actual_per_m)
         self.spool_actual = max(-_INT16_MAX, min(_INT16_MAX, v))
+        self._spool_m = spool_m
 
     def measure_position(self, position_m: float) -> None:
         """The cylinder position measured this period (m) → 0x2100 (steps of
@@ -90,7 +134,29 @@ class ValveNode(CanopenSlave):
     # ---- hooks ------------------------------------------------------------------------------
     def reset_application(self) -> None:
         self.device = ValveStateMachine()
-        self.device.power_on()
+        self.device.power_on(self._t_s)
+
+    def tick(self, t_s: float) -> None:
+        """The device's timed states (power-on, fault reaction), then the node's clocks."""
+        was = self.device.state
+        self.device.tick(t_s)
+        if self.device.state != was:
+            log.info("valve %d: %s -> %s", self.node_id, was.name, self.device.state.name)
+        super().tick(t_s)
+        state = self.device.state
+        self.setpoint.tick(state, t_s)
+        dt = 0.0 if self._tick_s is None else max(0.0, t_s - self._tick_s)
+        self._tick_s = t_s
+        demand = self.setpoint.demand(state)
+        if self.closed_loop and state in (DeviceState.ACTIVE, DeviceState.HOLD):
+            self.spool_loop.step(demand / SCALE_100_PERCENT * self._stroke_m, self._spool_m, dt)
+        else:
+            self.spool_loop.reset()
+        st = self.store
+        on = int(st.values.get((VPOC_MONITORING_TYPE, 0), 0)) == 1
+        threshold = int(st.values.get((VPOC_MONITORING_THRESHOLD, 0), SCALE_100_PERCENT))
+        delay_s = int(st.values.get((VPOC_MONITORING_DELAY, 0), 0)) * 1e-3
+        self.monitor.update(on, self.deviation(), threshold, delay_s, t_s)
 
     def _control_word(self, word: int) -> None:
         was = self.device.state
@@ -115,10 +181,16 @@ class ValveNode(CanopenSlave):
 
     def on_heartbeat_lost(self, producer: int) -> None:
         self._fault(EMCY_HEARTBEAT, ERR_REG_GENERIC | ERR_REG_COMMUNICATION, hold=True)
+        self.communication_error()
 
     def on_rpdo_timeout(self, comm_index: int) -> None:
         if self.device.state == DeviceState.ACTIVE:
             self._fault(EMCY_RPDO_TIMEOUT, ERR_REG_GENERIC | ERR_REG_COMMUNICATION, hold=True)
+            self.communication_error()
+
+    def on_left_operational(self) -> None:
+        if self.device.state in (DeviceState.HOLD, DeviceState.ACTIVE):
+            self._fault(EMCY_COMMUNICATION, ERR_REG_GENERIC | ERR_REG_COMMUNICATION, hold=True)
 
     def inject_fault(self, code: int) -> None:
         """A device fault with EMCY ``code`` (a scenario's ``device_fault`` event) → FAULT."""

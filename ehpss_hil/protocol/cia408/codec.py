@@ -18,6 +18,11 @@ on the PDOs of a CiA 408 valve and a CiA 406 encoder, everything else native.
   second TPDO under the same newest SYNC (a node that fell behind answers the SYNCs it missed
   all at once, with one sample) is classified OK without values: no new sample.
 * SYNC (0x080, no data) is the master's, sent by the loop after each command.
+* NMT (0x000: command, node) is the master's alone; the loop sends one when it shuts a valve
+  out (``encode("NMT", {"Command": 2, "Node": n})``), so another node's NMT frame is a frame on
+  an own ID (a second transmitter).
+* A TPDO whose length is not its mapping's is BAD_DLC and counted in
+  :attr:`Cia408Codec.bad_length_pdos` (the master's PDO_ERROR).
 * VALVE_CMD is the valve's RPDO 1: the control word (:attr:`Cia408Codec.control_word`, set each
   cycle by the master's :class:`~.drive.DeviceDrive`) and ``CurrentSetpoint`` as the ±16384
   set-point (0 without ``Enable`` or when the control word asks for less than ACTIVE).
@@ -42,6 +47,7 @@ from ...errors import ConfigError, FrameError, FrameIdError
 from . import cobid
 from .cyclic import (
     ENCODER_TPDO,
+    NMT_FRAME,
     VALVE_RPDO,
     VALVE_TPDO,
     Scaling,
@@ -88,12 +94,14 @@ class Cia408Codec(FrameCodec):
             "SENSOR_AUX": cobid.TPDO1 + valve_node,
             "VALVE_CMD": cobid.RPDO1 + valve_node,
             "SYNC": cobid.SYNC,
+            "NMT": cobid.NMT,
         }
         self._lengths = {
             "SENSOR_POS": ENCODER_TPDO.size,
             "SENSOR_AUX": VALVE_TPDO.size,
             "VALVE_CMD": VALVE_RPDO.size,
             "SYNC": 0,
+            "NMT": NMT_FRAME.size,
         }
         self._names = {i: n for n, i in self._ids.items()}
         for name in MAPPED:  # the native IDs of the replaced frames are no longer read
@@ -104,6 +112,9 @@ class Cia408Codec(FrameCodec):
         #: the newest status word of the valve (0: none yet) and the valve TPDOs that carried one
         self.status_word = 0
         self.valve_tpdos = 0
+        #: TPDOs received with a length other than their mapping's: (name, length) of the last
+        self.bad_length_pdos = 0
+        self.last_bad_length: tuple[str, int] = ("", 0)
         self._spool_m = 0.0
         self._applied: deque[float] = deque([0.0] * ECHO_DELAY_COMMANDS, maxlen=ECHO_DELAY_COMMANDS)
         #: the cycles (mod 16) of the SYNCs not answered yet, oldest first
@@ -118,8 +129,8 @@ class Cia408Codec(FrameCodec):
 
     @property
     def names(self) -> list[str]:
-        """The native DBC's frame names and ``SYNC`` (the master's, sent each cycle)."""
-        return [*super().names, "SYNC"]
+        """The native DBC's frame names, ``SYNC`` (the master's, sent each cycle) and ``NMT``."""
+        return [*super().names, "SYNC", "NMT"]
 
     def can_id(self, name: str) -> int:
         i = self._ids.get(name)
@@ -136,7 +147,7 @@ class Cia408Codec(FrameCodec):
         return None if name in self._ids else super().data_ids(name)
 
     def signal_bounds(self, name: str) -> dict[str, tuple[float | None, float | None]]:
-        if name == "SYNC":
+        if name in ("SYNC", "NMT"):
             return {}
         return self._bounds[name] if name in self._bounds else super().signal_bounds(name)
 
@@ -171,6 +182,9 @@ class Cia408Codec(FrameCodec):
         if name == "SYNC":
             self.sync_seen(int(values.get("Cycle", self._next_sync())))
             return sync_frame(timestamp_s)
+        if name == "NMT":
+            command, node = int(values.get("Command", 0)), int(values.get("Node", 0))
+            return frame(cobid.NMT, NMT_FRAME.pack(command & 0xFF, node & 0x7F), timestamp_s)
         sc = self.scaling
         if name == "VALVE_CMD":
             current = self._finite(name, values, "CurrentSetpoint")
@@ -218,7 +232,12 @@ class Cia408Codec(FrameCodec):
 
     def _classify_pdo(self, name: str, data: bytes, ts: float) -> Decoded:
         if len(data) != self._lengths[name]:
+            if name in ("SENSOR_POS", "SENSOR_AUX"):
+                self.bad_length_pdos += 1
+                self.last_bad_length = (name, len(data))
             return Decoded(Verdict.BAD_DLC, name, None, ts)
+        if name in ("SYNC", "NMT"):
+            return Decoded(Verdict.OK, name, {}, ts)
         sc = self.scaling
         if name == "SENSOR_AUX":
             status, spool_raw = unpack_valve_tpdo(data) or (0, 0)

@@ -10,6 +10,9 @@ What it writes (node n; the PDO layouts of :mod:`.cyclic`):
   open loop); RPDO 1: 0x1600 = [0x6040 (16 bit), 0x6300.1 (16 bit)], 0x1400.2 = 1 (synchronous:
   the set-point applies at the SYNC the master sends after it), 0x1400.5 event timer =
   ``setpoint_timeout_ms``; TPDO 1: 0x1A00 = [0x6041, 0x6301.1], 0x1800.2 = 1 (every SYNC);
+  the set-point path the controller relies on, where the valve's EDS has it (a valve may come
+  with limits or a ramp set, which would shape our commands): limits 0x6320.1 = +100 %, 0x6321.1
+  = −100 %, ramp type 0x6330 = 0 (none), hold set-point 0x6314.1 = 0;
 * with ``position_source: valve``, the valve's TPDO 2: 0x1A01 = [``valve_position_object``
   (32 bit)], 0x1801.2 = 1, COB-ID 0x280+n (and no encoder);
 * the encoder: TPDO 1: 0x1A00 = [0x6004 (32 bit)], 0x1800.2 = 1; 0x6005.1 read.
@@ -42,14 +45,20 @@ from .objects import (
     PDO_TRANSMISSION,
     POSITION_VALUE,
     PRODUCER_HEARTBEAT,
+    RAMP_NONE,
     RPDO_COMM,
     RPDO_MAP,
+    SCALE_100_PERCENT,
     STATUS_WORD,
     TPDO_COMM,
     TPDO_MAP,
     VPOC_ACTUAL,
+    VPOC_HOLD_SETPOINT,
+    VPOC_LOWER_LIMIT,
+    VPOC_RAMP_TYPE,
     VPOC_SETPOINT,
     VPOC_SUB,
+    VPOC_UPPER_LIMIT,
 )
 
 #: transmission type of every PDO the master configures: synchronous, every SYNC
@@ -58,6 +67,13 @@ SYNC_EVERY = 1
 VALVE_RPDO_MAP = ((CONTROL_WORD, 0, 16), (VPOC_SETPOINT, VPOC_SUB, 16))
 VALVE_TPDO_MAP = ((STATUS_WORD, 0, 16), (VPOC_ACTUAL, VPOC_SUB, 16))
 ENCODER_TPDO_MAP = ((POSITION_VALUE, 0, 32),)
+#: the valve's set-point path as the controller relies on it: (index, sub-index or None, value)
+VALVE_SETPOINT_PATH = (
+    (VPOC_UPPER_LIMIT, VPOC_SUB, SCALE_100_PERCENT),
+    (VPOC_LOWER_LIMIT, VPOC_SUB, -SCALE_100_PERCENT),
+    (VPOC_RAMP_TYPE, None, RAMP_NONE),
+    (VPOC_HOLD_SETPOINT, VPOC_SUB, 0),
+)
 
 
 def write(node: Any, index: int, sub: int | None, value: int, role: str) -> None:
@@ -109,6 +125,9 @@ def configure_valve(node: Any, c: Cia408Config) -> None:
     write(node, CONSUMER_HEARTBEAT, 1, c.master_node << 16 | c.master_heartbeat_timeout_ms, role)
     write(node, DEVICE_MODE, None, DEVICE_MODE_SETPOINT_VIA_BUS, role)
     write(node, DEVICE_CONTROL_MODE, None, CONTROL_MODE_SPOOL_OPEN_LOOP, role)
+    for index, sub, value in VALVE_SETPOINT_PATH:
+        if index in node.object_dictionary:
+            write(node, index, sub, value, role)
     n = node.id
     map_pdo(node, RPDO_COMM, RPDO_MAP, cobid.RPDO1 + n, VALVE_RPDO_MAP, role, c.setpoint_timeout_ms)
     map_pdo(node, TPDO_COMM, TPDO_MAP, cobid.TPDO1 + n, VALVE_TPDO_MAP, role)

@@ -29,6 +29,8 @@ VALVE_RPDO = struct.Struct("<Hh")
 VALVE_TPDO = struct.Struct("<Hh")
 ENCODER_TPDO = struct.Struct("<i")
 EMCY = struct.Struct("<HB5x")
+#: NMT (COB-ID 0x000): command specifier, node id (0: all)
+NMT_FRAME = struct.Struct("<BB")
 _INT16_MAX = 32767
 _NM = 1e-9
 
