@@ -149,6 +149,7 @@ def test_vcan0_down_for_a_second_is_a_bus_error_and_recovers(vcan0: str, tmp_pat
         subprocess.run(["ip", "link", "set", vcan0, "down"], check=True)
         time.sleep(1.0)
         subprocess.run(["ip", "link", "set", vcan0, "up"], check=True)
+        assert ctl.wait_for("bus healthy for", STARTUP_LIMIT_S), ctl.text
         assert ctl.wait_for("ACTIVE again", STARTUP_LIMIT_S), ctl.text
         ctl.terminate()
         assert ctl.wait() == 0, ctl.text
