@@ -46,3 +46,22 @@ MAX_RATE_HZ = 10000.0
 MAX_CAMPAIGN_RUNS = 1_000_000
 #: most faults injected at once in one campaign run (one per fault kind at most)
 MAX_FAULTS_PER_RUN = 7
+
+#: most frames of the DBC a report decodes from one log (all files of a rotation set): the
+#: report keeps every decoded frame as columns of float64 (about 0.4 kB per 1 kHz controller
+#: cycle with its sensor, truth and status frames) and every sample as arrays, so this bounds
+#: a report to a few hundred MB; a longer log is refused with one line (report its rotated
+#: files one by one)
+MAX_LOG_FRAMES = 2_000_000
+#: most controller samples (``CycleCount`` span) a report lays out: a counter that jumps or
+#: runs backwards must not become an array of millions of empty samples
+MAX_LOG_SAMPLES = 1_000_000
+#: largest sidecar ``<log>.json`` (or ``run.json``) read (bytes); ours are a few kB, with a
+#: scenario's reference table inline at most that table (:data:`MAX_REFERENCE_BYTES`)
+MAX_SIDECAR_BYTES = 32 * 2**20
+#: deepest nesting of objects/arrays in a sidecar (ours use 4)
+MAX_SIDECAR_DEPTH = 32
+#: a log's sample time (s) read from its metadata or timing is within these: the inverses of
+#: the loop rates (:data:`MAX_RATE_HZ`, :data:`MIN_RATE_HZ`)
+MIN_LOG_SAMPLE_TIME_S = 1.0 / MAX_RATE_HZ
+MAX_LOG_SAMPLE_TIME_S = 1.0 / MIN_RATE_HZ

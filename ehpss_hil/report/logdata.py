@@ -40,6 +40,7 @@ from ..physics.params import Params, load_params
 from ..physics.reference import ReferenceModel
 from ..runtime.status_frames import MODE_CODE
 from ..scenario import Scenario
+from .logbounds import check_sample_time, check_span
 from .logclock import undo_clock_steps, unwrap_counter
 from .logmeta import RunInfo, reference_of, run_info
 from .metrics import RunMetrics, compute_metrics
@@ -92,7 +93,7 @@ def _sorted(frames: dict[str, dict[str, np.ndarray]], name: str) -> dict[str, np
 
 
 def _rows(
-    frames: dict[str, dict[str, np.ndarray]], notes: list[str]
+    log: Path, frames: dict[str, dict[str, np.ndarray]], notes: list[str]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(k, wall time (s), commanded current (A))`` of every sample 0…K (module docstring).
 
@@ -107,6 +108,7 @@ def _rows(
             notes.append("no VALVE_CMD with Enable=1: the controller never went ACTIVE")
         start = int(enabled[0]) if len(enabled) else 0
         k = cyc[start:] - cyc[start]
+        check_span(log, int(k[-1]) + 1, len(k))
         k_all = np.arange(int(k[-1]) + 1)
         missing = len(k_all) - len(np.unique(k))
         if missing:
@@ -211,10 +213,13 @@ def load_log_run(
     sc, ref, ts = info.scenario, info.reference, info.ts_s
     if ref is not None and info.sources and info.sources[0] not in ("--scenario", "sidecar"):
         notes.append(f"reference taken from {', '.join(info.sources)} beside the log")
-    k, t_rows, i_cmd = _rows(frames, notes)
+    k, t_rows, i_cmd = _rows(log, frames, notes)
     if ts is None:
         ts = _median_period(t_rows) or 1e-3
         notes.append(f"sample time not in the metadata: {ts * 1e3:.4g} ms from the log's timing")
+        check_sample_time(log, ts, "from the log's timing")
+    else:
+        check_sample_time(log, ts, "from the metadata")
     k, t_rows, i_cmd = _within_truth(frames, k, t_rows, i_cmd, ts, notes)
     empty = _why_empty(frames, verdicts, bad) if len(k) == 0 else ""
     prm = params if params is not None else load_params(info.params_path)
