@@ -47,15 +47,15 @@ MAX_CAMPAIGN_RUNS = 1_000_000
 #: most faults injected at once in one campaign run (one per fault kind at most)
 MAX_FAULTS_PER_RUN = 7
 
-#: most frames of the DBC a report decodes from one log (all files of a rotation set): the
-#: report keeps every decoded frame as columns of float64 (about 0.4 kB per 1 kHz controller
-#: cycle with its sensor, truth and status frames) and every sample as arrays, so this bounds
-#: a report to a few hundred MB; a longer log is refused with one line (report its rotated
-#: files one by one)
-MAX_LOG_FRAMES = 2_000_000
-#: most controller samples (``CycleCount`` span) a report lays out: a counter that jumps or
-#: runs backwards must not become an array of millions of empty samples
-MAX_LOG_SAMPLES = 1_000_000
+#: most decoded signal values a report holds (float64 cells, 8 bytes each, over all frame
+#: names; a multiplexed frame counts every signal of its name): a bench log at 1 kHz decodes
+#: about 49 per controller cycle (its sensor, truth, command, index and status frames)
+MAX_LOG_VALUES = 16_000_000
+#: most controller samples a report lays out (about 0.5 kB each with the metrics and the
+#: reference model): 6.7 min at 1 kHz. With :data:`MAX_LOG_VALUES` a report stays below
+#: ≈ 450 MB; a log beyond either is refused with one line. It also stops a ``CycleCount`` that
+#: jumps or runs backwards from becoming an array of millions of empty samples.
+MAX_LOG_SAMPLES = 400_000
 #: largest sidecar ``<log>.json`` (or ``run.json``) read (bytes); ours are a few kB, with a
 #: scenario's reference table inline at most that table (:data:`MAX_REFERENCE_BYTES`)
 MAX_SIDECAR_BYTES = 32 * 2**20

@@ -3,9 +3,9 @@
 :func:`decode_log` never holds more than one frame of the file as Python objects: each decoded
 frame is appended to compact float64 columns (:class:`Columns`, 8 bytes per value), the log's
 time order is checked on the way through a bounded window (:class:`~.order.TimeOrder`: a file
-out of time order is one line, not a sort in memory), and a log with more than ``max_frames``
-frames of the DBC is refused with one line before its columns grow further
-(:data:`~ehpss_hil.limits.MAX_LOG_FRAMES`).
+out of time order is one line, not a sort in memory), and a log with more than ``max_values``
+decoded values is refused with one line before its columns grow further
+(:data:`~ehpss_hil.limits.MAX_LOG_VALUES`).
 """
 
 from __future__ import annotations
@@ -19,10 +19,13 @@ from typing import Any
 import numpy as np
 
 from ..codec import FrameCodec, Verdict
-from ..limits import MAX_LOG_FRAMES
+from ..limits import MAX_LOG_VALUES
 from .files import LogError
 from .order import TimeOrder
 from .reader import FRAME_INDEX, BadLines, read_frames
+
+#: decoded values per 1 kHz controller cycle of a bench log (for the message only)
+_VALUES_PER_BENCH_CYCLE = 49
 
 
 class TooLongError(LogError):
@@ -35,6 +38,8 @@ class Columns:
 
     def __init__(self) -> None:
         self.n = 0
+        #: values held (rows × columns, NaN fill included)
+        self.cells = 0
         self.cols: dict[str, array[float]] = {"t_s": array("d")}
 
     def add(self, t_s: float, values: dict[str, Any]) -> None:
@@ -47,6 +52,7 @@ class Columns:
                 col = cols[k] = array("d", [math.nan]) * self.n
             col.append(_num(v))
         self.n += 1
+        self.cells = self.n * len(cols)
         for col in cols.values():
             if len(col) < self.n:
                 col.append(math.nan)
@@ -72,7 +78,7 @@ def decode_log(
     rotated: bool = True,
     bad: BadLines | None = None,
     order: bool = False,
-    max_frames: int = MAX_LOG_FRAMES,
+    max_values: int = MAX_LOG_VALUES,
 ) -> dict[str, dict[str, np.ndarray]]:
     """Decode a log (any format :func:`~.reader.read_frames` reads) with the DBC into
     per-frame-name arrays, in file order.
@@ -88,14 +94,15 @@ def decode_log(
     names were logged whatever their timestamps say.
 
     A log whose lines are not in time order beyond the reorder window is an
-    :class:`~.order.OutOfOrderError`; one with more than ``max_frames`` decoded frames a
+    :class:`~.order.OutOfOrderError`; one with more than ``max_values`` decoded values
+    (:attr:`Columns.cells`) a
     :class:`TooLongError` (both one line, exit 2).
     """
     codec = codec if codec is not None else FrameCodec()
     p = Path(path)
     timeline: TimeOrder[None] = TimeOrder(p)
     rows: dict[str, Columns] = {}
-    kept = 0
+    held = 0
     for i, msg in enumerate(read_frames(path, bad, rotated)):
         timeline.push(msg.timestamp, None)
         d = codec.classify(msg)
@@ -108,14 +115,16 @@ def decode_log(
             continue
         if values is None:
             continue
-        kept += 1
-        if kept > max_frames:
-            raise TooLongError(
-                f"{p}: more than {max_frames} frames of the DBC: a report holds every sample in "
-                "memory and stops there (report the files of a rotation set one by one, or cut "
-                "the log)"
-            )
         if order:
             values = {**values, FRAME_INDEX: i}
-        rows.setdefault(d.name, Columns()).add(msg.timestamp, values)
+        cols = rows.setdefault(d.name, Columns())
+        held -= cols.cells
+        cols.add(msg.timestamp, values)
+        held += cols.cells
+        if held > max_values:
+            raise TooLongError(
+                f"{p}: too long to report: more than {max_values} decoded signal values (about "
+                f"{max_values // _VALUES_PER_BENCH_CYCLE} controller cycles of a bench log; a report "
+                "holds every sample in memory): cut the log (candump lines stand alone: head -n)"
+            )
     return {name: c.arrays() for name, c in rows.items()}

@@ -16,15 +16,17 @@ from ..canlog.decode import TooLongError
 from ..limits import MAX_LOG_SAMPLE_TIME_S, MAX_LOG_SAMPLES, MIN_LOG_SAMPLE_TIME_S
 
 
-def check_span(log: Path, samples: int, commands: int) -> None:
-    """A :class:`TooLongError` when the commands' ``CycleCount`` spans more samples than a
-    report lays out (:data:`MAX_LOG_SAMPLES`): a counter that runs backwards or jumps in file
-    order would otherwise become an array of millions of empty samples."""
+def check_span(log: Path, samples: int, frames: int, name: str) -> None:
+    """A :class:`TooLongError` when ``frames`` frames of ``name`` span more samples than a
+    report lays out (:data:`MAX_LOG_SAMPLES`): a run too long, or a ``CycleCount`` that jumps
+    or runs backwards in file order, which would otherwise become an array of millions of empty
+    samples."""
     if samples > MAX_LOG_SAMPLES:
         raise TooLongError(
-            f"{log}: its {commands} VALVE_CMD frames span {samples} controller samples by their "
-            f"CycleCount (at most {MAX_LOG_SAMPLES}): the counter jumps or runs backwards in file "
-            "order (lines out of order, logs of several runs joined) or the run is too long to report"
+            f"{log}: too long to report: its {frames} {name} frames span {samples} controller "
+            f"samples (at most {MAX_LOG_SAMPLES}; a report holds every sample in memory): cut the "
+            "log (candump lines stand alone: head -n), or its CycleCount jumps (logs of several "
+            "runs joined)"
         )
 
 
