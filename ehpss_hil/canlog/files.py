@@ -99,10 +99,14 @@ def read_json_capped(path: str | os.PathLike[str]) -> dict[str, Any] | None:
     if not os.path.lexists(p):
         return None
     try:
+        st = os.stat(p)
+    except OSError:
+        return None  # a dangling link: no sidecar
+    if stat.S_ISREG(st.st_mode) and st.st_size > MAX_SIDECAR_BYTES:
+        raise LogError(f"{p}: sidecar refused: {st.st_size} bytes, more than {MAX_SIDECAR_BYTES}")
+    try:
         raw = read_capped(p, MAX_SIDECAR_BYTES)
     except ConfigError as exc:
-        if not p.exists():  # a dangling link: no sidecar
-            return None
         raise LogError(f"{p}: sidecar refused: {exc.reason}") from exc
     try:
         data = json.loads(raw)
