@@ -43,9 +43,11 @@ CLOCK_STEP_S = 0.5
 CLOCK_STEP_MIN_S = 0.01
 #: a backward jump in file order smaller than a step but larger than this (s) is noted, not
 #: undone: a logger's own reordering of send and receive stamps stays below
-SMALL_STEP_NOTE_S = 0.002
+SMALL_STEP_NOTE_S = 0.003
 #: commands on each side of a step whose offsets (median) give its size: jitter averages out
 STEP_WINDOW = 16
+#: commands a small step (below :data:`CLOCK_STEP_S`) needs on each side to be confirmed
+STEP_MIN_SIDE = 4
 #: a step's size is rounded to the log's resolution (candump -L: 1 µs)
 STEP_RESOLUTION_S = 1e-6
 #: a log without lockstep/realtime metadata is taken as realtime when its median wall time per
@@ -189,19 +191,26 @@ def _steps_from_cycle_count(
 
 
 def _persistent_cuts(off: np.ndarray) -> list[tuple[int, float]]:
-    """``(j, size)`` for each change of the offset ``off`` between commands ``j`` and ``j + 1``
-    larger than :data:`CLOCK_STEP_MIN_S` that persists: the median of up to
-    :data:`STEP_WINDOW` offsets after it (up to the next candidate) differs from the median
-    before it by more than that too (one late command is not a step)."""
-    cand = np.flatnonzero(np.abs(np.diff(off)) > CLOCK_STEP_MIN_S)
-    bounds = np.concatenate(([0], cand + 1, [len(off)]))
+    """``(j, size)`` for each clock step between commands ``j`` and ``j + 1``: a change of the
+    offset ``off`` larger than :data:`CLOCK_STEP_S` (sized on the medians of up to
+    :data:`STEP_WINDOW` offsets each side, up to the neighbouring steps), or one larger than
+    :data:`CLOCK_STEP_MIN_S` that persists — the medians of :data:`STEP_WINDOW` offsets each
+    side (at least :data:`STEP_MIN_SIDE`) differ by as much: a few late commands are no step."""
+    d = np.abs(np.diff(off))
+    big = np.flatnonzero(d > CLOCK_STEP_S)
+    bounds = np.concatenate(([0], big + 1, [len(off)]))
     out = []
-    for n, j in enumerate(cand):
-        before = off[max(bounds[n], j + 1 - STEP_WINDOW) : j + 1]
-        after = off[j + 1 : min(bounds[n + 2], j + 1 + STEP_WINDOW)]
+    for j in np.flatnonzero(d > CLOCK_STEP_MIN_S):
+        n = int(np.searchsorted(big, j))  # big steps before j: j lies in segment n
+        lo = int(bounds[n])
+        hi = int(bounds[n + 2] if n < len(big) and big[n] == j else bounds[n + 1])
+        before = off[max(lo, j + 1 - STEP_WINDOW) : j + 1]
+        after = off[j + 1 : min(hi, j + 1 + STEP_WINDOW)]
         size = float(np.median(after) - np.median(before))
-        if abs(size) > CLOCK_STEP_MIN_S:
-            out.append((int(j), round(size / STEP_RESOLUTION_S) * STEP_RESOLUTION_S))
+        is_big = d[j] > CLOCK_STEP_S
+        if not is_big and (min(len(before), len(after)) < STEP_MIN_SIDE or abs(size) <= CLOCK_STEP_MIN_S):
+            continue
+        out.append((int(j), round(size / STEP_RESOLUTION_S) * STEP_RESOLUTION_S))
     return out
 
 
