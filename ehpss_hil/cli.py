@@ -51,12 +51,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``ehpss-hil`` console script."""
     limit_blas_env()
     args_in = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(command_of(args_in))
+    command = command_of(args_in)
+    # importing the command's module (numpy, …) may already run out of memory: one line too
+    return run_console(f"ehpss-hil {command}" if command else "ehpss-hil", lambda: _run(args_in, command))
+
+
+def _run(args_in: list[str], command: str | None) -> int:
+    """Parse ``args_in`` (``command``'s module imported) and run the command."""
+    parser = build_parser(command)
     args = parser.parse_args(args_in)
     if not hasattr(args, "_run"):
         parser.print_help()
         return 2
-    return run_console(f"ehpss-hil {args.command}", lambda: int(args._run(args) or 0))
+    return int(args._run(args) or 0)
 
 
 if __name__ == "__main__":

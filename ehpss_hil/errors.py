@@ -6,6 +6,7 @@ matching builtin so callers may catch either (the pattern of python-can's ``CanE
 
 from __future__ import annotations
 
+import errno
 import os
 import reprlib
 import resource  # loaded now: under a small ``ulimit -v`` it may not load when memory runs out
@@ -137,6 +138,8 @@ class ControlTimeoutError(EhpssError, TimeoutError):
 
 #: exit code of a program that ran out of memory (the environment's limit, not bad input)
 EXIT_OUT_OF_MEMORY = 1
+#: exit code of a program that ran out of file descriptors (``ulimit -n``, not bad input)
+EXIT_OUT_OF_FILES = 1
 #: the address space a program needs with a multi-threaded OpenBLAS (bytes): `ehpss-hil sim`
 #: peaks at 287 MB with 2 or more BLAS threads (205 MB with one), plus headroom. Below it, where
 #: the first allocation fails is chance (a MemoryError, a library's parse error, or a library
@@ -147,8 +150,10 @@ THREADED_BLAS_MIN_ADDRESS_SPACE = 512 * 2**20
 def run_console(prog: str, fn: Callable[[], int]) -> int:
     """Run a console command's body: an :class:`EhpssError` becomes one line on stderr
     (``<prog>: error: …``) and its class's exit code; Ctrl-C exits 130; running out of memory
-    (a small ``ulimit -v``) is one line naming the limit, exit :data:`EXIT_OUT_OF_MEMORY`; so is
-    a multi-threaded OpenBLAS under an address-space limit it cannot fit, before anything runs."""
+    (a small ``ulimit -v``) is one line naming the limit, exit :data:`EXIT_OUT_OF_MEMORY`, and
+    so is a multi-threaded OpenBLAS under an address-space limit it cannot fit, before anything
+    runs; running out of file descriptors (``ulimit -n``) is one line naming the limit, exit
+    :data:`EXIT_OUT_OF_FILES`."""
     if _threaded_blas_does_not_fit():
         print(f"{prog}: error: out of memory (refused at start){_memory_limits()}", file=sys.stderr)
         return EXIT_OUT_OF_MEMORY
@@ -160,13 +165,25 @@ def run_console(prog: str, fn: Callable[[], int]) -> int:
     except KeyboardInterrupt:
         return 130
     except MemoryError as exc:
-        print(f"{prog}: error: out of memory ({one_line(str(exc))}){_memory_limits()}", file=sys.stderr)
+        what = f" ({one_line(str(exc))})" if str(exc) else ""
+        print(f"{prog}: error: out of memory{what}{_memory_limits()}", file=sys.stderr)
         return EXIT_OUT_OF_MEMORY
+    except OSError as exc:  # the environment's limit on open files (ulimit -n), not bad input
+        if exc.errno not in (errno.EMFILE, errno.ENFILE):
+            raise
+        print(f"{prog}: error: {exc.strerror or exc}{_file_limits()}", file=sys.stderr)
+        return EXIT_OUT_OF_FILES
     except ImportError as exc:  # a shared library that no longer fits the address space
         if "failed to map segment" not in str(exc):
             raise
         print(f"{prog}: error: out of memory ({one_line(str(exc))}){_memory_limits()}", file=sys.stderr)
         return EXIT_OUT_OF_MEMORY
+
+
+def _file_limits() -> str:
+    """``; open-file limit 8 (ulimit -n)`` — what bounds the open files here, or empty."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    return "" if soft == resource.RLIM_INFINITY else f"; open-file limit {soft} (ulimit -n)"
 
 
 def _threaded_blas_does_not_fit() -> bool:

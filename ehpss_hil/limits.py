@@ -50,3 +50,22 @@ MAX_DBC_BYTES = 2 * 2**20
 MAX_CAMPAIGN_RUNS = 1_000_000
 #: most faults injected at once in one campaign run (one per fault kind at most)
 MAX_FAULTS_PER_RUN = 7
+
+#: most decoded signal values a report holds (float64 cells, 8 bytes each, over all frame
+#: names; a multiplexed frame counts every signal of its name): a bench log at 1 kHz decodes
+#: about 49 per controller cycle (its sensor, truth, command, index and status frames)
+MAX_LOG_VALUES = 16_000_000
+#: most controller samples a report lays out (about 0.5 kB each with the metrics and the
+#: reference model): 6.7 min at 1 kHz. With :data:`MAX_LOG_VALUES` a report stays below
+#: ≈ 450 MB; a log beyond either is refused with one line. It also stops a ``CycleCount`` that
+#: jumps or runs backwards from becoming an array of millions of empty samples.
+MAX_LOG_SAMPLES = 400_000
+#: largest sidecar ``<log>.json`` (or ``run.json``) read (bytes); ours are a few kB, with a
+#: scenario's reference table inline at most that table (:data:`MAX_REFERENCE_BYTES`)
+MAX_SIDECAR_BYTES = 32 * 2**20
+#: deepest nesting of objects/arrays in a sidecar (ours use 4)
+MAX_SIDECAR_DEPTH = 32
+#: a log's sample time (s) read from its metadata or timing is within these: the inverses of
+#: the loop rates (:data:`MAX_RATE_HZ`, :data:`MIN_RATE_HZ`)
+MIN_LOG_SAMPLE_TIME_S = 1.0 / MAX_RATE_HZ
+MAX_LOG_SAMPLE_TIME_S = 1.0 / MIN_RATE_HZ

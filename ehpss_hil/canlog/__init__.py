@@ -8,14 +8,17 @@ Log lines are exactly what ``candump -L`` writes (``(sec.usec) iface ID#DATA``),
 ``<log>.json`` beside it.
 """
 
+from .decode import decode_log
+from .files import LogError
 from .lineformat import format_line
-from .reader import BadLines, decode_log, log_files, read_frames, read_log, read_sidecar
+from .reader import BadLines, log_files, read_frames, read_log, read_sidecar
 from .sidecar import lockstep_of
 from .writer import CandumpLogger
 
 __all__ = [
     "BadLines",
     "CandumpLogger",
+    "LogError",
     "decode_log",
     "format_line",
     "lockstep_of",

@@ -11,8 +11,6 @@ with a ValueError; every other format python-can reads (``.asc``, ``.blf``, ``.t
 
 from __future__ import annotations
 
-import json
-import math
 import os
 import re
 from collections.abc import Iterator
@@ -21,10 +19,8 @@ from pathlib import Path
 from typing import Any
 
 import can
-import numpy as np
 
-from ..codec import FrameCodec, Verdict
-from ..errors import EhpssError
+from .files import LogError, check_regular, open_log, read_json_capped
 from .lineformat import CAN_ERR_BUSERROR, CAN_ERR_FLAG
 from .sidecar import sidecar_path
 
@@ -99,12 +95,6 @@ def parse_line(line: str) -> can.Message | None:
 FRAME_INDEX = "frame_index"
 
 
-class LogError(EhpssError, OSError):
-    """A log file or directory cannot be found or read."""
-
-    exit_code = 2
-
-
 #: suffixes of the logs python-can's :func:`can.LogReader` reads besides candump ``.log``
 #: (looked for in a directory that holds no ``*.log``)
 OTHER_LOG_SUFFIXES = (".asc", ".blf", ".trc", ".mf4")
@@ -115,7 +105,7 @@ def resolve_log(path: str | os.PathLike[str]) -> Path:
     with one of :data:`OTHER_LOG_SUFFIXES`."""
     p = Path(path)
     if p.is_dir():
-        logs = sorted(p.glob("*.log"), key=lambda f: f.stat().st_mtime)
+        logs = sorted((f for f in p.glob("*.log") if f.is_file()), key=lambda f: f.stat().st_mtime)
         if not logs:
             logs = sorted(
                 (f for f in p.iterdir() if f.suffix.lower() in OTHER_LOG_SUFFIXES and f.is_file()),
@@ -126,7 +116,7 @@ def resolve_log(path: str | os.PathLike[str]) -> Path:
         return logs[-1]
     if not p.exists():
         raise LogError(f"{p}: no such log file")
-    return p
+    return check_regular(p)
 
 
 def log_files(path: str | os.PathLike[str]) -> list[Path]:
@@ -152,13 +142,21 @@ def read_log(
     """Frames of a candump ``-L`` log (timestamps in s), as python-can's reader gives them.
 
     With ``rotated`` the whole rotation set is read, oldest file first. Lines that are no frame
-    are skipped and counted in ``bad``.
+    are skipped and counted in ``bad``. Each file is read up to the size it had when it was
+    opened (a log still being written: the lines written so far), and only a regular file is
+    read (a FIFO or a device is a :class:`LogError`).
     """
     files = log_files(path) if rotated else [Path(path)]
     bad = bad if bad is not None else BadLines()
     for f in files:
-        with open(f, encoding="ascii", errors="replace", newline="") as fh:
-            for number, line in enumerate(fh, start=1):
+        fh, size = open_log(f)
+        with fh:
+            left = size
+            for number, raw in enumerate(fh, start=1):
+                if left <= 0:
+                    break
+                left -= len(raw)
+                line = raw[: len(raw) + min(left, 0)].decode("ascii", errors="replace")
                 if not line.strip():
                     continue
                 msg = parse_line(line)
@@ -185,7 +183,7 @@ def read_frames(
     if is_candump(path):
         yield from read_log(path, rotated, bad)
         return
-    p = Path(path)
+    p = check_regular(path)
     try:
         reader = can.LogReader(p)
     except Exception as exc:  # a foreign file: unknown suffix, or a header its reader rejects
@@ -199,65 +197,7 @@ def read_frames(
 
 
 def read_sidecar(path: str | os.PathLike[str]) -> dict[str, Any] | None:
-    """The ``<log>.json`` sidecar of a log, or None when there is none (or it is unreadable)."""
-    side = sidecar_path(path)
-    try:
-        data = json.loads(side.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return data if isinstance(data, dict) else None
-
-
-def decode_log(
-    path: str | os.PathLike[str],
-    codec: FrameCodec | None = None,
-    rotated: bool = True,
-    bad: BadLines | None = None,
-    order: bool = False,
-) -> dict[str, dict[str, np.ndarray]]:
-    """Decode a log (any format :func:`read_frames` reads) with the DBC into per-frame-name
-    arrays, in file order.
-
-    Each frame name maps to ``{"t_s": timestamps (s), <signal>: physical values (SI), …}``.
-    Kept: frames with a good CRC and plausible values, including those a live receiver would
-    drop as WRONG_SEQUENCE (after lost frames the data itself is intact); REPEATED frames and
-    bad CRC/DLC/range are left out. ``codec.counts_by_name`` holds every verdict, so rejected
-    frames are counted, not hidden. A multiplexed frame (CTRL_INDEX) has one array per signal
-    with NaN where a row did not carry it. Lines that are no frame are counted in ``bad``.
-    With ``order`` each name also has :data:`FRAME_INDEX`: the frame's position among all the
-    frames of the log (0, 1, … in file order), which tells in what order frames of different
-    names were logged whatever their timestamps say.
-    """
-    codec = codec if codec is not None else FrameCodec()
-    rows: dict[str, list[tuple[float, dict[str, Any]]]] = {}
-    for i, msg in enumerate(read_frames(path, bad, rotated)):
-        d = codec.classify(msg)
-        if d.name is None:
-            continue
-        values: Any = d.values
-        if d.verdict is Verdict.WRONG_SEQUENCE:
-            values = codec.message(d.name).decode(bytes(msg.data), decode_choices=False)
-        elif not d.verdict.usable:
-            continue
-        if values is not None:
-            if order:
-                values = {**values, FRAME_INDEX: i}
-            rows.setdefault(d.name, []).append((msg.timestamp, values))
-    return {name: _to_arrays(r) for name, r in rows.items()}
-
-
-def _to_arrays(rows: list[tuple[float, dict[str, Any]]]) -> dict[str, np.ndarray]:
-    keys: dict[str, None] = {}
-    for _, v in rows:
-        keys.update(dict.fromkeys(v))
-    out: dict[str, np.ndarray] = {"t_s": np.fromiter((t for t, _ in rows), float, len(rows))}
-    for k in keys:
-        out[k] = np.fromiter((_num(v.get(k, math.nan)) for _, v in rows), float, len(rows))
-    return out
-
-
-def _num(v: Any) -> float:
-    try:
-        return float(v)
-    except (TypeError, ValueError):
-        return math.nan
+    """The ``<log>.json`` sidecar of a log, or None when there is none (or it is no JSON
+    object); a sidecar that is no regular file, too large or too deep is a :class:`LogError`
+    (:func:`~ehpss_hil.canlog.files.read_json_capped`)."""
+    return read_json_capped(sidecar_path(path))

@@ -1,19 +1,21 @@
 """``ehpss-hil replay LOG [--mode M]``: the logged sensor frames through the controller, offline.
 
 Any log python-can reads: candump ``-L`` (ours, ``candump -L`` of can-utils, rotated sets),
-``.asc``, ``.blf`` and the rest (:func:`~ehpss_hil.canlog.reader.read_frames`). The frames are
-taken in receive-time order and grouped into the daemon's cycles by content: each VALVE_CMD
-closes one, and the sensor frames it used are those up to the SENSOR_POS whose E2E counter it
-echoes (``SensorCounterEcho``); CycleCount gaps are periods the daemon slept through, or, in a
-lockstep log, commands lost on the bus (``--gaps``). Each cycle runs through the same
-:class:`~ehpss_hil.driver.ControllerDriver` as the daemon: superseded samples observed, the
-sample count from the E2E counter, catch-up, fail-safe and the reset after it, the ±1 A clip.
-From the first VALVE_CMD with ``Enable = 1`` (the daemon's first ACTIVE cycle, reference sample
-0) the replayed current, quantized by the DBC (:meth:`FrameCodec.quantize`), is compared with
-the logged setpoint. Same configuration → bit-identical; otherwise the first divergence is
-printed (exit 1). A logged ``Enable = 0`` after the start is the daemon's fail-safe (FAULT,
-``failsafe: zero``): not stepped, the reference runs on, and the controller is reset when
-commands are enabled again. The ``oracle`` mode needs the true faults and is not replayable.
+``.asc``, ``.blf`` and the rest (:func:`~ehpss_hil.canlog.reader.read_frames`), streamed. The
+frames are taken in receive-time order through a bounded reorder window
+(:class:`~ehpss_hil.canlog.order.TimeOrder`: a file out of time order is one line, exit 2) and
+grouped into the daemon's cycles by content: each VALVE_CMD closes one, and the sensor frames it
+used are those up to the SENSOR_POS whose E2E counter it echoes (``SensorCounterEcho``); CycleCount
+gaps are periods the daemon slept through, or, in a lockstep log, commands lost on the bus
+(``--gaps``). Each cycle runs through the same :class:`~ehpss_hil.driver.ControllerDriver` as the
+daemon: superseded samples observed, the sample count from the E2E counter, catch-up, fail-safe and
+the reset after it, the ±1 A clip. From the first VALVE_CMD with ``Enable = 1`` (the daemon's first
+ACTIVE cycle, reference sample 0) the replayed current, quantized by the DBC
+(:meth:`FrameCodec.quantize`), is compared with the logged setpoint. Same configuration →
+bit-identical; otherwise the first divergence is printed (exit 1). A logged ``Enable = 0`` after
+the start is the daemon's fail-safe (FAULT, ``failsafe: zero``): not stepped, the reference runs
+on, and the controller is reset when commands are enabled again. The ``oracle`` mode needs the true
+faults and is not replayable.
 
 Configuration: ``--config controller.yaml`` (mode, rate, reference, tuning, params), else the
 sidecar (``config``/``scenario``/``reference``, ``rate_hz``, ``mode``), else the defaults; ``--mode``
@@ -28,7 +30,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import can
+
 from ..canlog import BadLines, read_sidecar
+from ..canlog.order import TimeOrder
 from ..canlog.reader import read_frames, resolve_log
 from ..codec import FrameCodec
 from ..config import SetpointPolicy, load_controller_config
@@ -92,6 +97,8 @@ class ReplayResult:
     first: list[Divergence] = field(default_factory=list)
     #: log lines that are no frame (skipped)
     bad_lines: BadLines = field(default_factory=BadLines)
+    #: frames further back in time than the reorder window (the wall clock was set back)
+    clock_steps_back: int = 0
 
     @property
     def identical(self) -> bool:
@@ -341,10 +348,13 @@ def replay_log(
     setup = resolve_setup(log, mode, config, scenario)
     lost = gaps == "lost" or (gaps == "auto" and _is_lockstep_log(read_sidecar(log)))
     r = _Replayer(setup, keep, lost)
-    numbered = list(enumerate(read_frames(log, bad=r.res.bad_lines), start=1))
-    numbered.sort(key=lambda nm: nm[1].timestamp)  # receive time; stable for equal stamps
-    for number, msg in numbered:
-        r.frame(msg, number)
+    timeline: TimeOrder[tuple[int, can.Message]] = TimeOrder(log)
+    for number, msg in enumerate(read_frames(log, bad=r.res.bad_lines), start=1):
+        for n, m in timeline.push(msg.timestamp, (number, msg)):  # receive time, bounded window
+            r.frame(m, n)
+    for n, m in timeline.drain():
+        r.frame(m, n)
+    r.res.clock_steps_back = timeline.behind
     if r.res.cycles == 0:
         raise ReplayError(f"{log}: no VALVE_CMD with Enable=1: nothing to compare")
     return r.res
@@ -371,6 +381,11 @@ def run(args: argparse.Namespace) -> int:
     )
     if res.bad_lines.count:
         print(f"{res.bad_lines.text()} (not frame lines: a cut last line or garbage)")
+    if res.clock_steps_back:
+        print(
+            f"note: the log's clock went back {res.clock_steps_back} time(s) by more than its "
+            "reorder window: the frames before each step are replayed first (file order)"
+        )
     if res.skipped_periods:
         print(
             f"{res.skipped_periods} periods skipped by the daemon's overruns (CycleCount gaps) "

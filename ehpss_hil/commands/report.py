@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..canlog.reader import LogError
 from ..extras import require
+from ..report.decimate import thinned
 from ..report.logdata import LogRun, load_log_run, log_metrics
 from ..report.markdown import metrics_row, write_markdown
 from ..scenario import load_scenario
@@ -70,8 +71,14 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_figures:
         from ..report.logfigures import draw_all, fig_compare
 
-        figures = draw_all(lr, out_dir / "figures")
-        both = fig_compare([lr, *others], out_dir / "figures")
+        drawn = thinned(lr)
+        if drawn is not lr:
+            lr.notes.append(
+                f"figures drawn from {len(drawn.result.t_s)} of {len(lr.result.t_s)} samples (the "
+                "largest |error| of each bucket); metrics use every sample"
+            )
+        figures = draw_all(drawn, out_dir / "figures")
+        both = fig_compare([drawn, *(thinned(o) for o in others)], out_dir / "figures")
         figures = [both, *figures] if both is not None else figures
     compare = [(lr, m), *((o, log_metrics(o)) for o in others)] if others else None
     md = write_markdown(lr, m, figures, out_dir, compare)

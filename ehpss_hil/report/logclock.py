@@ -5,9 +5,10 @@ a ``date -s`` in the middle of a run moves every later timestamp by the step, an
 pairs frames by timestamp then pairs the wrong ones. In a realtime run the controller's
 VALVE_CMD ``CycleCount`` counts its periods whatever the wall clock does (an overrun's skipped
 periods are counted too), so ``t − CycleCount·Ts`` stays within a few periods for a whole run:
-where it changes by more than :data:`CLOCK_STEP_S` between two consecutive commands the wall
-clock disagrees with the cycle clock, and that is a clock step — a mere gap in the timestamps is
-not (the counter runs on through a pause). :func:`undo_clock_steps` finds each step, where in
+where it changes by more than :data:`CLOCK_STEP_MIN_S` between two consecutive commands and
+stays changed (the medians of the commands each side differ by as much) the wall clock disagrees
+with the cycle clock, and that is a clock step — a mere gap in the timestamps is not (the
+counter runs on through a pause), nor is one late command. :func:`undo_clock_steps` finds each step, where in
 the file it happened (the largest timestamp jump between those two commands, in file order) and
 moves every frame logged after it back by the step, so that frames of all names line up again.
 
@@ -17,9 +18,11 @@ just a pause and never a step. A run is lockstep when its metadata says so (the 
 ``lockstep``/``mode``, ``run.json``), or, when the metadata does not say, when the wall time per
 counted cycle is off the sample time by more than :data:`REALTIME_RATE_TOLERANCE` (a candump
 of a lockstep run has no sidecar). There, as in a log without VALVE_CMD, only file order is
-left: a backward jump of more than :data:`CLOCK_STEP_S` (time never runs backwards) is undone;
-a forward one is kept — reported only when there is no VALVE_CMD at all (it cannot be told
-from a pause of every sender).
+left: a backward jump of more than :data:`CLOCK_STEP_MIN_S` (time never runs backwards) is
+undone; a forward one (of more than :data:`CLOCK_STEP_S`) is kept — reported only when there is
+no VALVE_CMD at all (it cannot be told from a pause of every sender). A backward jump too small
+to be a step but larger than :data:`SMALL_STEP_NOTE_S` is noted and left as logged: a step of
+any size back leaves a note.
 """
 
 from __future__ import annotations
@@ -30,12 +33,21 @@ import numpy as np
 
 from ..canlog.reader import FRAME_INDEX
 
-#: a change of ``t − CycleCount·Ts`` between two consecutive VALVE_CMDs, or a backward jump in
-#: file order, larger than this (s) is a clock step; a controller's jitter and its counted
-#: overruns stay far below, the log's own reordering (receive vs send stamps) is milliseconds
+#: a forward jump in file order larger than this (s) is reported where no VALVE_CMD counter can
+#: tell a clock step from a pause of every sender
 CLOCK_STEP_S = 0.5
+#: a change of ``t − CycleCount·Ts`` larger than this (s) that persists (the medians of
+#: :data:`STEP_WINDOW` commands each side differ by as much), or a backward jump in file order
+#: larger than this, is a clock step: a controller's jitter moves single commands and its
+#: overruns are counted, the log's own reordering (receive vs send stamps) is a few ms
+CLOCK_STEP_MIN_S = 0.01
+#: a backward jump in file order smaller than a step but larger than this (s) is noted, not
+#: undone: a logger's own reordering of send and receive stamps stays below
+SMALL_STEP_NOTE_S = 0.003
 #: commands on each side of a step whose offsets (median) give its size: jitter averages out
 STEP_WINDOW = 16
+#: commands a small step (below :data:`CLOCK_STEP_S`) needs on each side to be confirmed
+STEP_MIN_SIDE = 4
 #: a step's size is rounded to the log's resolution (candump -L: 1 µs)
 STEP_RESOLUTION_S = 1e-6
 #: a log without lockstep/realtime metadata is taken as realtime when its median wall time per
@@ -108,7 +120,29 @@ def undo_clock_steps(
             + ": timestamps after each step corrected "
             + how,
         )
+    small = _small_steps_back(t_all, steps)
+    if small:
+        notes.append(small)
     return steps, notes
+
+
+def _small_steps_back(t_all: np.ndarray, steps: list[ClockStep]) -> str:
+    """A note on the backward jumps in file order larger than :data:`SMALL_STEP_NOTE_S` that
+    were not undone as steps (too small to tell from jitter), or empty."""
+    known = np.flatnonzero(np.isfinite(t_all))
+    d = np.diff(t_all[known])
+    back = np.flatnonzero(d < -SMALL_STEP_NOTE_S)
+    undone = {s.frame_index for s in steps}
+    back = np.array([j for j in back if int(known[j + 1]) not in undone], dtype=np.int64)
+    if len(back) == 0:
+        return ""
+    first = int(back[0])
+    return (
+        f"the log's timestamps run back by up to {-float(np.min(d[back])) * 1e3:.3f} ms at "
+        f"{len(back)} place(s) (the first after t={float(t_all[known[first]]):.6f}, frame "
+        f"{int(known[first + 1])}): left as logged, a step must exceed "
+        f"{CLOCK_STEP_MIN_S * 1e3:g} ms to be told from jitter and reordering"
+    )
 
 
 def _clock_follows_cycles(
@@ -149,16 +183,35 @@ def _steps_from_cycle_count(
     if ts is None:
         return []
     off = t - k * ts
-    cuts = np.flatnonzero(np.abs(np.diff(off)) > CLOCK_STEP_S)
-    bounds = np.concatenate(([0], cuts + 1, [len(off)]))
     steps = []
-    for n, j in enumerate(cuts):
-        before = off[max(bounds[n], j + 1 - STEP_WINDOW) : j + 1]
-        after = off[j + 1 : min(bounds[n + 2], j + 1 + STEP_WINDOW)]
-        size = round(float(np.median(after) - np.median(before)) / STEP_RESOLUTION_S) * STEP_RESOLUTION_S
+    for j, size in _persistent_cuts(off):
         where = _largest_jump(t_all, int(at[j]), int(at[j + 1]), size)
         steps.append(ClockStep(where, float(t_all[_known_before(t_all, where)]), size))
     return steps
+
+
+def _persistent_cuts(off: np.ndarray) -> list[tuple[int, float]]:
+    """``(j, size)`` for each clock step between commands ``j`` and ``j + 1``: a change of the
+    offset ``off`` larger than :data:`CLOCK_STEP_S` (sized on the medians of up to
+    :data:`STEP_WINDOW` offsets each side, up to the neighbouring steps), or one larger than
+    :data:`CLOCK_STEP_MIN_S` that persists — the medians of :data:`STEP_WINDOW` offsets each
+    side (at least :data:`STEP_MIN_SIDE`) differ by as much: a few late commands are no step."""
+    d = np.abs(np.diff(off))
+    big = np.flatnonzero(d > CLOCK_STEP_S)
+    bounds = np.concatenate(([0], big + 1, [len(off)]))
+    out = []
+    for j in np.flatnonzero(d > CLOCK_STEP_MIN_S):
+        n = int(np.searchsorted(big, j))  # big steps before j: j lies in segment n
+        lo = int(bounds[n])
+        hi = int(bounds[n + 2] if n < len(big) and big[n] == j else bounds[n + 1])
+        before = off[max(lo, j + 1 - STEP_WINDOW) : j + 1]
+        after = off[j + 1 : min(hi, j + 1 + STEP_WINDOW)]
+        size = float(np.median(after) - np.median(before))
+        is_big = d[j] > CLOCK_STEP_S
+        if not is_big and (min(len(before), len(after)) < STEP_MIN_SIDE or abs(size) <= CLOCK_STEP_MIN_S):
+            continue
+        out.append((int(j), round(size / STEP_RESOLUTION_S) * STEP_RESOLUTION_S))
+    return out
 
 
 def _steps_from_file_order(t_all: np.ndarray) -> tuple[list[ClockStep], list[ClockStep]]:
@@ -167,7 +220,7 @@ def _steps_from_file_order(t_all: np.ndarray) -> tuple[list[ClockStep], list[Clo
     d = np.diff(t_all[known])
     usual = float(np.median(d[d >= 0])) if np.any(d >= 0) else 0.0
     back, fwd = [], []
-    for j in np.flatnonzero(np.abs(d) > CLOCK_STEP_S):
+    for j in np.flatnonzero((d > CLOCK_STEP_S) | (d < -CLOCK_STEP_MIN_S)):
         step = ClockStep(int(known[j + 1]), float(t_all[known[j]]), float(d[j]))
         if d[j] < 0:
             size = round((float(d[j]) - usual) / STEP_RESOLUTION_S) * STEP_RESOLUTION_S

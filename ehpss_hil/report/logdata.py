@@ -40,6 +40,7 @@ from ..physics.params import Params, load_params
 from ..physics.reference import ReferenceModel
 from ..runtime.status_frames import MODE_CODE
 from ..scenario import Scenario
+from .logbounds import check_sample_time, check_span
 from .logclock import undo_clock_steps, unwrap_counter
 from .logmeta import RunInfo, reference_of, run_info
 from .metrics import RunMetrics, compute_metrics
@@ -49,6 +50,9 @@ __all__ = ["LogMetrics", "LogRun", "load_log_run", "log_metrics", "reference_of"
 
 MODE_NAMES = {code: mode for mode, code in MODE_CODE.items()}  # CTRL_STATUS Mode → mode
 _NO_MODEL = 15  # CTRL_STATUS nibble of "no bank" (−1 & 0xF)
+#: frames a :class:`LogRun` keeps whole for the views (status intervals, counters); the others
+#: keep their timestamps only once laid out per sample
+_VIEWED = frozenset({"VALVE_CMD", "CTRL_STATUS", "CTRL_STATS", "PLANT_FAULTS"})
 
 
 @dataclass
@@ -62,6 +66,7 @@ class LogRun:
     has_reference: bool
     scenario: Scenario | None
     commanded_current_a: np.ndarray
+    #: decoded frames by name: whole for :data:`_VIEWED`, the others their ``t_s`` only
     frames: dict[str, dict[str, np.ndarray]]
     verdicts: dict[str, dict[str, int]]
     notes: list[str] = field(default_factory=list)
@@ -92,7 +97,7 @@ def _sorted(frames: dict[str, dict[str, np.ndarray]], name: str) -> dict[str, np
 
 
 def _rows(
-    frames: dict[str, dict[str, np.ndarray]], notes: list[str]
+    log: Path, frames: dict[str, dict[str, np.ndarray]], notes: list[str]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(k, wall time (s), commanded current (A))`` of every sample 0…K (module docstring).
 
@@ -107,6 +112,7 @@ def _rows(
             notes.append("no VALVE_CMD with Enable=1: the controller never went ACTIVE")
         start = int(enabled[0]) if len(enabled) else 0
         k = cyc[start:] - cyc[start]
+        check_span(log, int(k[-1]) + 1, len(k), "VALVE_CMD")
         k_all = np.arange(int(k[-1]) + 1)
         missing = len(k_all) - len(np.unique(k))
         if missing:
@@ -126,6 +132,7 @@ def _rows(
             "assumed to start at the first one"
         )
         n = len(truth["t_s"])
+        check_span(log, n, n, "PLANT_TRUTH")
         return np.arange(n), truth["t_s"] + 1e-9, np.full(n, np.nan)
     return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
 
@@ -211,10 +218,13 @@ def load_log_run(
     sc, ref, ts = info.scenario, info.reference, info.ts_s
     if ref is not None and info.sources and info.sources[0] not in ("--scenario", "sidecar"):
         notes.append(f"reference taken from {', '.join(info.sources)} beside the log")
-    k, t_rows, i_cmd = _rows(frames, notes)
+    k, t_rows, i_cmd = _rows(log, frames, notes)
     if ts is None:
         ts = _median_period(t_rows) or 1e-3
         notes.append(f"sample time not in the metadata: {ts * 1e3:.4g} ms from the log's timing")
+        check_sample_time(log, ts, "from the log's timing")
+    else:
+        check_sample_time(log, ts, "from the metadata")
     k, t_rows, i_cmd = _within_truth(frames, k, t_rows, i_cmd, ts, notes)
     empty = _why_empty(frames, verdicts, bad) if len(k) == 0 else ""
     prm = params if params is not None else load_params(info.params_path)
@@ -231,6 +241,8 @@ def load_log_run(
             "unavailable; pass --scenario to recompute them"
         )
     result, has_truth = _assemble(frames, sc, info, k, t_rows, ts, x_d, y_m, notes)
+    for name in set(frames) - _VIEWED:  # laid out per sample: only the count is still read
+        frames[name] = {"t_s": frames[name]["t_s"]}
     has_ref = ref is not None
     return LogRun(log, result, side, has_truth, has_ref, sc, i_cmd, frames, verdicts, notes, empty)
 
