@@ -11,7 +11,7 @@ STAMP := $(VENV)/.installed
 #: and the emulator alone (a bench PC), the same versions. `make lock` is the only way they move.
 LOCK := requirements/dev.lock
 BASE_LOCK := requirements/base.lock
-EXTRAS := test plot monitor campaign identify
+EXTRAS := test plot monitor campaign identify mf4
 UV_VERSION := 0.13.9
 UV_VENV := .venv-uv
 LOCK_PYTHON := 3.11

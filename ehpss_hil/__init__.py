@@ -7,6 +7,8 @@ supervisor), ``frames`` (DBC codec + AUTOSAR E2E), ``bus`` (python-can factory),
 
 from pathlib import Path
 
+from . import _mf4import
+
 __version__ = "0.1.0"
 
 #: Repository root (holds ``configs/``, ``scenarios/``, ``campaigns/``) of a source/editable
@@ -18,3 +20,6 @@ PROJECT_ROOT = Path(__file__).resolve().parent.parent
 #: are symbolic links to them.
 DATA_DIR = Path(__file__).resolve().parent / "data"
 DEFAULT_DBC = DATA_DIR / "dbc" / "ehpss.dbc"
+
+
+_mf4import.install()

@@ -87,9 +87,12 @@ class CanIds:
 
 @dataclass(frozen=True)
 class LogConfig:
-    """candump ``-L`` log: empty path = no log. Rotation by size; writer queue bound (lines)."""
+    """The process's CAN log: empty path = no log. ``format``: ``candump`` (``-L``), ``blf`` or
+    ``mf4`` (``ehpss_hil.canlog.formats``), ``auto`` = by the path's suffix (``.blf``, ``.mf4``,
+    else candump). Rotation by size (candump only); writer queue bound (frames)."""
 
     path: str = ""
+    format: Literal["auto", "candump", "blf", "mf4"] = "auto"
     max_bytes: int = field(default=256 * 2**20, metadata=rng(4096, 2**40))
     backups: int = field(default=5, metadata=rng(0, 1000))
     queue_lines: int = field(default=200_000, metadata=rng(1000, 10_000_000))

@@ -55,6 +55,8 @@ class DaemonArgs:
     log: str | None = None
     #: replace a file at ``log`` that is no log of ours (``--overwrite``)
     overwrite_log: bool = False
+    #: ``--log-format``: candump, blf, mf4 (None: ``log.format``, by default the suffix's)
+    log_format: str | None = None
     duration_s: float | None = None
     lockstep: bool = False
     summary_json: Path | None = None
@@ -194,6 +196,7 @@ def run_daemon(a: DaemonArgs) -> int:
                 "lockstep": a.lockstep,
             },
             overwrite=a.overwrite_log,
+            fmt=a.log_format,
         )
     except BaseException:
         bus.shutdown()

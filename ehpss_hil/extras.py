@@ -16,6 +16,7 @@ from .errors import MissingExtraError
 EXTRAS: dict[str, tuple[str, ...]] = {
     "campaign": ("dask", "distributed", "pyarrow", "scipy"),
     "identify": ("scipy",),
+    "mf4": ("asammdf",),
     "monitor": ("aiohttp",),
     "plot": ("matplotlib",),
 }

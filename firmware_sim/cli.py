@@ -1,7 +1,7 @@
 """``firmware-sim``: the plant emulator process.
 
 ``firmware-sim -c configs/emulator.yaml [--interface I --channel C] [--scenario S] [--rate HZ]
-[--mode realtime|lockstep] [--truth] [--log FILE] [--duration S]``
+[--mode realtime|lockstep] [--truth] [--log FILE [--log-format candump|blf|mf4]] [--duration S]``
 
 Realtime, a scenario given with ``--scenario`` ends at its duration (a run); the config's own
 ``scenario:`` runs until SIGTERM/SIGINT (the stand-in valve's background); ``--duration`` sets
@@ -22,6 +22,7 @@ from pathlib import Path
 
 from ehpss_hil.blas import limit_blas_threads
 from ehpss_hil.bus import open_bus
+from ehpss_hil.canlog.formats import add_log_format_argument
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import EmulatorConfig, apply_overrides, load_emulator_config
 from ehpss_hil.emulation import PlantEmulation
@@ -62,7 +63,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fault-inject", action="store_true", help="accept FAULT_INJECT frames")
     p.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority 1..99 (0 = none)")
     p.add_argument("--cpu", type=int, help="pin to this CPU")
-    p.add_argument("--log", help="candump -L log of every frame sent and received")
+    p.add_argument("--log", help="log of every frame sent and received (candump -L; *.blf: BLF, *.mf4: MF4)")
+    add_log_format_argument(p)
     p.add_argument(
         "--overwrite",
         action="store_true",
@@ -213,7 +215,14 @@ def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenari
     logging.getLogger("canopen").setLevel(logging.WARNING)  # its SDO server logs every transfer
     bus = open_bus(cfg.bus)
     logger = open_process_logger(
-        args.log, cfg.log, cfg.bus, bus, str(args.config), _sidecar(args, cfg, scenario), args.overwrite
+        args.log,
+        cfg.log,
+        cfg.bus,
+        bus,
+        str(args.config),
+        _sidecar(args, cfg, scenario),
+        args.overwrite,
+        args.log_format,
     )
     io = RawFrameIO(bus, logger)
     valve, encoder = build_nodes(cfg.nodes, valve_od, encoder_od, io, params.plant.spool_stroke_m)
@@ -269,6 +278,7 @@ def run(args: argparse.Namespace) -> int:
             str(args.config),
             sidecar=_sidecar(args, cfg, scenario),
             overwrite=args.overwrite,
+            fmt=args.log_format,
         )
     except BaseException:
         bus.shutdown()

@@ -184,6 +184,10 @@ def read_frames(
         yield from read_log(path, rotated, bad)
         return
     p = check_regular(path)
+    if p.suffix.lower() == ".mf4":
+        from .binary import enable_mf4
+
+        enable_mf4(f"{p}: reading an MF4 log")
     try:
         reader = can.LogReader(p)
     except Exception as exc:  # a foreign file: unknown suffix, or a header its reader rejects

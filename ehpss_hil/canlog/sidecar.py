@@ -1,9 +1,10 @@
-"""The JSON sidecar ``<log>.json``: what produced a candump log and what it holds.
+"""The JSON sidecar ``<log>.json``: what produced a log and what it holds.
 
-Keys: ``format``, ``log``, ``iface``, ``versions`` (ehpss-hil, python-can, cantools, python),
-``dbc`` (path, sha256), ``start_time_utc``/``start_time_s``, ``clock`` (what ``msg.timestamp``
-is), ``rotation``, ``status`` (open/closed), ``counts`` (written, dropped, discarded_by_rotation, and
-when lines were dropped ``dropped_by_reason``: queue full, after close, disk full, write error),
+Keys: ``format`` (``candump -L``, ``BLF`` or ``MF4``), ``log``, ``iface``, ``versions``
+(ehpss-hil, python-can, cantools, python), ``dbc`` (path, sha256), ``start_time_utc`` /
+``start_time_s``, ``clock`` (what ``msg.timestamp`` is), ``rotation``, ``status``
+(open/closed), ``counts`` (written, dropped, discarded_by_rotation, and when lines were dropped
+``dropped_by_reason``: queue full, after close, disk full, write error),
 ``files`` (oldest first: name, lines, bytes, first/last timestamp), ``error``, plus every key the
 caller passed (``config``, ``scenario``, ``process``, …). Whether the run was lockstep is in
 ``lockstep`` (the controller daemon, ``run.json``) or ``mode`` / ``config.mode`` (firmware-sim:
@@ -25,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import DEFAULT_DBC, __version__
+from .formats import SIDECAR_FORMATS
 
 DEFAULT_CLOCK = (
     "msg.timestamp as given by python-can: wall clock, seconds since the Unix epoch "
@@ -193,13 +195,14 @@ def _write_in_place(path: Path, raw: bytes) -> bool:
 
 def owned_names(log_path: Path) -> set[str]:
     """The names (in the log's folder) of the files the sidecar ``<log>.json`` proves a
-    :class:`~ehpss_hil.canlog.writer.CandumpLogger` wrote: the log, the sidecar and the rotated
-    files it lists (``<log>.N`` only, whatever else it says); empty without such a sidecar."""
+    :class:`~ehpss_hil.canlog.writer.CandumpLogger` wrote (in any of its formats): the log, the
+    sidecar and the rotated files it lists (``<log>.N`` only, whatever else it says); empty
+    without such a sidecar."""
     from ..outputs import read_record
 
     side = sidecar_path(log_path)
     data = read_record(side)
-    if data is None or data.get("format") != "candump -L" or data.get("log") != log_path.name:
+    if data is None or data.get("format") not in SIDECAR_FORMATS.values() or data.get("log") != log_path.name:
         return set()
     names = {log_path.name, side.name}
     files = data.get("files")

@@ -1,4 +1,10 @@
-"""Non-blocking candump ``-L`` writer: bounded queue, one writer thread, size rotation, sidecar.
+"""Non-blocking CAN log writer: bounded queue, one writer thread, size rotation, sidecar.
+
+It writes candump ``-L`` (the default), BLF or MF4 (:mod:`~ehpss_hil.canlog.formats`: from the
+``fmt`` asked for, else the file's suffix). Everything below holds for every format but
+rotation, which is candump's only: a BLF or MF4 file is complete only when closed (header,
+index), so it never rotates (``backups`` is 0 for them); their frames are written through
+:class:`~ehpss_hil.canlog.formats.FrameFile` (python-can's writers).
 
 The caller's hot path (:meth:`CandumpLogger.log`) only appends a small tuple to a bounded deque;
 formatting, writing and rotating happen in one writer thread. When the queue is full the line is
@@ -36,8 +42,11 @@ from typing import Any
 
 import can
 
+from ..extras import require
 from ..outputs import foreign, refuse_foreign
+from .candumpfile import CandumpFile, numbered
 from .diskspace import DISK_RESERVE_BYTES, DiskRoom, LineDrops
+from .formats import SIDECAR_FORMATS, FrameFile, log_format
 from .lineformat import MAX_LINE_BYTES, FrameItem, format_line
 from .sidecar import (
     SIDECAR_RESERVE_BYTES,
@@ -58,7 +67,9 @@ _POLL_S = 0.02
 
 
 class CandumpLogger:
-    """Log CAN frames to ``path`` in ``candump -L`` format without ever blocking the caller.
+    """Log CAN frames to ``path`` without ever blocking the caller: in ``candump -L`` format,
+    or BLF or MF4 (``fmt``: ``candump``, ``blf``, ``mf4``; None: by the suffix, ``*.blf``,
+    ``*.mf4``, else candump; a name that disagrees with ``fmt`` is an OutputError).
 
     ``max_bytes``: rotate before a file would exceed this size (``run.log`` → ``run.log.1`` …,
     whole lines only); ``backups``: rotated files kept (0: never rotate, like
@@ -89,7 +100,11 @@ class CandumpLogger:
         sidecar: dict[str, Any] | None = None,
         disk_reserve_bytes: int = DISK_RESERVE_BYTES,
         overwrite: bool = False,
+        fmt: str | None = None,
     ) -> None:
+        self.format = log_format(path, fmt)
+        if self.format != "candump":
+            backups = 0  # a binary log is complete only when closed: no rotation
         if not iface or any(c.isspace() for c in iface):
             raise ValueError(f"iface must be a non-empty name without spaces, got {iface!r}")
         if max_bytes < 4 * MAX_LINE_BYTES:
@@ -115,22 +130,32 @@ class CandumpLogger:
         self._closed = False
         self._summary: LogSummary | None = None
         self._records: list[FileRecord] = [FileRecord()]  # [0] = current file, [i] = path.i
+        if self.format == "mf4":
+            require("mf4", f"{self.path}: an MF4 log")  # before any file is touched
         self._claim(overwrite)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._room = DiskRoom(self.path.parent, disk_reserve_bytes)
         self._drops = LineDrops(self.path)
         existed = self.path.exists()
-        self._fh = open(self.path, "wb", buffering=0)  # unbuffered: a failed write is known now
+        self._fh: CandumpFile | None = None
+        self._binary: FrameFile | None = None
+        if self.format == "candump":
+            self._fh = CandumpFile(self.path)
+        else:
+            from .binary import open_frame_file  # python-can's binary writers, asammdf for MF4
+
+            self._binary = open_frame_file(self.path, self.format)
         self._file_open = True
         self._meta = build_sidecar(self.path, iface, sidecar, max_bytes, backups, queue_lines)
+        self._meta["format"] = SIDECAR_FORMATS[self.format]
         try:
             self._write_sidecar("open", strict=True)
         except OSError:
-            self._fh.close()
+            self._close_file()
             if not existed:
                 self.path.unlink(missing_ok=True)
             raise
-        self._thread = threading.Thread(target=self._run, name=f"candump:{self.path.name}", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"canlog:{self.path.name}", daemon=True)
         self._thread.start()
         atexit.register(self.close)
 
@@ -216,6 +241,9 @@ class CandumpLogger:
 
     def _write_batch(self, batch: list[FrameItem]) -> None:
         """Write whole lines; rotate first whenever the next line would overflow the file."""
+        if self._binary is not None:
+            self._write_frames(self._binary, batch)
+            return
         rec = self._records[0]
         chunk: list[bytes] = []
         size = rec.bytes
@@ -241,11 +269,12 @@ class CandumpLogger:
             self._error = f"disk full: {kept}"
             self._drops.add("disk full", len(chunk), kept)
             return
-        done, exc = self._write_all(data)
+        assert self._fh is not None
+        done, exc = self._fh.write_all(data)
         keep = done if exc is None else data.rfind(b"\n", 0, done) + 1
         rec = self._records[0]
         if keep < done:
-            self._cut(rec.bytes + keep)
+            self._error = self._fh.cut(rec.bytes + keep) or self._error
         lines = len(chunk) if exc is None else data.count(b"\n", 0, keep)
         if lines:
             rec.add(lines, keep, items[0][0], items[lines - 1][0])
@@ -257,63 +286,47 @@ class CandumpLogger:
         full = isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT)
         self._drops.add("disk full" if full else "write error", len(chunk) - lines, str(exc))
 
-    def _write_all(self, data: bytes) -> tuple[int, Exception | None]:
-        """Write ``data`` to the (unbuffered) file; (bytes written, the error that stopped it)."""
-        view = memoryview(data)
-        done = 0
+    def _write_frames(self, out: FrameFile, batch: list[FrameItem]) -> None:
+        """Hand a batch to a binary log; beyond the disk reserve, or when the file fails, its
+        frames are dropped and counted (a failed batch may be written in part)."""
+        if not self._room.fits(len(batch) * out.frame_bytes):
+            kept = f"{self._room.reserve_bytes // 1024} KiB kept free"
+            self._error = f"disk full: {kept}"
+            self._drops.add("disk full", len(batch), kept)
+            return
         try:
-            while done < len(data):
-                n = self._fh.write(view[done:])
-                if not n:
-                    raise OSError(errno.ENOSPC, "short write")
-                done += n
+            out.write(batch)
         except (OSError, ValueError) as exc:
-            return done, exc
-        return done, None
-
-    def _cut(self, size: int) -> None:
-        """Truncate the current file to ``size`` bytes (its last complete line) and write on
-        from there."""
-        try:
-            os.ftruncate(self._fh.fileno(), size)
-            self._fh.seek(size)
-        except (OSError, ValueError) as exc:
-            self._error = f"cannot cut back a partial line: {exc}"
+            self._error = str(exc)
+            full = isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT)
+            self._drops.add("disk full" if full else "write error", len(batch), str(exc))
+            return
+        self._records[0].add(len(batch), 0, batch[0][0], batch[-1][0])
+        self._written += len(batch)
+        self._drops.resumed()
 
     def _rotate(self) -> None:
         """``path`` → ``path.1`` → … → ``path.<backups>``; the oldest beyond that is deleted."""
-        try:
-            self._fh.close()
-            # only this log's rotated files move: path.1 … path.<len(records) - 1>
-            for i in range(min(len(self._records), self.backups) - 1, 0, -1):
-                src = self._numbered(i)
-                if src.exists():
-                    os.replace(src, self._numbered(i + 1))
-            os.replace(self.path, self._numbered(1))
-            self._fh = open(self.path, "wb", buffering=0)
+        assert self._fh is not None
+        try:  # only this log's rotated files move: path.1 … path.<len(records) - 1>
+            self._fh.rotate(min(len(self._records), self.backups))
         except OSError as exc:
             self._error = f"rotation failed: {exc}"
-            try:
-                self._fh = open(self.path, "ab", buffering=0)
-            except OSError:
-                pass  # writes to the closed file fail and are counted
             return
         self._records.insert(0, FileRecord())
         while len(self._records) > self.backups + 1:
             self._discarded += self._records.pop().lines
         self._write_sidecar("open")
 
-    def _numbered(self, i: int) -> Path:
-        return self.path.with_name(f"{self.path.name}.{i}")
-
     def _claim(self, overwrite: bool) -> None:
         """Refuse a foreign target unless ``overwrite``; remove the earlier log's rotated files
         (those its sidecar lists, nothing else)."""
         root = self.path.parent
         ours = owned_names(self.path)
-        names = [self.path, sidecar_path(self.path), *(self._numbered(i) for i in range(1, self.backups + 1))]
+        rotated = (numbered(self.path, i) for i in range(1, self.backups + 1))
+        names = [self.path, sidecar_path(self.path), *rotated]
         if not overwrite:
-            refuse_foreign(self.path, foreign(names, ours, root), "a candump log")
+            refuse_foreign(self.path, foreign(names, ours, root), f"a {self.format} log")
         for name in sorted(ours):
             p = root / name
             if is_rotation_of(self.path.name, name) and (p.is_symlink() or p.is_file()):
@@ -353,24 +366,25 @@ class CandumpLogger:
             self._summary = summary
             atexit.unregister(self.close)
         if summary.dropped:
-            _log.warning("candump log %s", summary)
+            _log.warning("%s log %s", self.format, summary)
         return summary
 
     def _close_file(self) -> None:
         if not self._file_open:
             return
         self._file_open = False
-        try:
-            os.fsync(self._fh.fileno())
-        except (OSError, ValueError) as exc:
-            self._error = self._error or str(exc)
-        try:
-            self._fh.close()
-        except OSError as exc:
-            self._error = self._error or str(exc)
+        if self._binary is not None:
+            try:
+                self._binary.close()
+                self._records[0].bytes = self.path.stat().st_size
+            except (OSError, ValueError) as exc:
+                self._error = self._error or f"cannot finish the {self.format} file: {exc}"
+            return
+        if self._fh is not None:
+            self._error = self._error or self._fh.close()
 
     def _file_name(self, i: int) -> Path:
-        return self.path if i == 0 else self._numbered(i)
+        return self.path if i == 0 else numbered(self.path, i)
 
     def _write_sidecar(self, status: str, strict: bool = False) -> None:
         """Write the sidecar (keeping room for its later updates); an error is raised when

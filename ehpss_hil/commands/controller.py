@@ -7,6 +7,7 @@ import logging
 import sys
 from pathlib import Path
 
+from ..canlog.formats import add_log_format_argument
 from ..control.registry import DAEMON_MODES
 from ..daemon import DaemonArgs, run_daemon
 
@@ -23,7 +24,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rate", type=float, help="cycle rate (Hz), overrides rate_hz")
     p.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority 1..99 (0 = none)")
     p.add_argument("--cpu", type=int, help="pin to this CPU")
-    p.add_argument("--log", help="candump -L log of every frame sent and received")
+    p.add_argument("--log", help="log of every frame sent and received (candump -L; *.blf: BLF, *.mf4: MF4)")
+    add_log_format_argument(p)
     p.add_argument(
         "--overwrite",
         action="store_true",
@@ -63,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
             cpu=args.cpu,
             log=args.log,
             overwrite_log=args.overwrite,
+            log_format=args.log_format,
             duration_s=args.duration,
             lockstep=args.lockstep,
             summary_json=args.summary_json,

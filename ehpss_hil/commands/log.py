@@ -1,6 +1,8 @@
-"""``ehpss-hil log -i INTERFACE -c CHANNEL -o FILE``: a candump ``-L`` logger on any python-can bus.
+"""``ehpss-hil log -i INTERFACE -c CHANNEL -o FILE``: a CAN logger on any python-can bus.
 
-Writes ``FILE`` (rotated by size) and ``FILE.json`` (sidecar). Stops on SIGINT/SIGTERM or after
+Writes ``FILE`` — candump ``-L`` (rotated by size), or BLF / MF4 (``--log-format``, or the
+suffix ``.blf`` / ``.mf4``; not rotated; MF4 needs the ``mf4`` extra) — and ``FILE.json``
+(sidecar). Stops on SIGINT/SIGTERM or after
 ``--duration`` seconds, flushes everything and prints the counts (exit 0). A bus that cannot be
 opened exits 3 with the reason, a log that cannot be written (read-only or full folder) exits 2
 with the reason and leaves no file behind. An existing ``FILE`` (or ``FILE.json``, ``FILE.1`` …)
@@ -24,6 +26,7 @@ import can
 
 from ..bus import datagram_rejects, open_listener_bus
 from ..canlog import CandumpLogger
+from ..canlog.formats import add_log_format_argument
 from ..errors import OutputError
 
 NAME = "log"
@@ -44,7 +47,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="python-can interface: udp_multicast, socketcan, virtual, or any other",
     )
     p.add_argument("-c", "--channel", required=True, help="channel (vcan0, can0, 239.74.163.2, …)")
-    p.add_argument("-o", "--output", required=True, type=Path, help="log file (candump -L)")
+    p.add_argument(
+        "-o", "--output", required=True, type=Path, help="log file (candump -L; *.blf: BLF, *.mf4: MF4)"
+    )
+    add_log_format_argument(p)
     p.add_argument(
         "--overwrite",
         action="store_true",
@@ -63,7 +69,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="interface name written in each line (default: the channel for socketcan, else can0)",
     )
     p.add_argument("--port", type=int, default=None, help="udp_multicast port (default: config's)")
-    p.add_argument("--max-bytes", type=int, default=256 * 2**20, help="rotate above this size")
+    p.add_argument("--max-bytes", type=int, default=256 * 2**20, help="rotate above this size (candump only)")
     p.add_argument("--backups", type=int, default=5, help="rotated files kept (0: never rotate)")
     p.add_argument("--queue-lines", type=int, default=200_000, help="writer queue bound (frames)")
 
@@ -132,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
                 queue_lines=args.queue_lines,
                 sidecar=meta,
                 overwrite=args.overwrite,
+                fmt=args.log_format,
             )
         except OutputError:
             raise

@@ -33,7 +33,7 @@ from ..bus import (
 from ..codec import FrameCodec
 from ..codec.ratelimit import RateLimit, position_step_bound_m
 from ..config import BusConfig, CanIds, Cia408Config, DbcMap, LogConfig
-from ..errors import ConfigError, FrameError, OutputError
+from ..errors import ConfigError, FrameError, MissingExtraError, OutputError
 from ..protocol import make_codec
 from .bushealth import BusHealth
 from .collisions import IdCollisions, SentFrames
@@ -42,7 +42,7 @@ log = logging.getLogger(__name__)
 
 
 class FrameLogger(Protocol):
-    """What a loop needs of ``ehpss_hil.canlog.CandumpLogger``."""
+    """What a loop needs of ``ehpss_hil.canlog.CandumpLogger`` (any of its formats)."""
 
     def log(self, msg: can.Message) -> None: ...
 
@@ -59,9 +59,11 @@ def open_can_logger(
     bus: BusConfig,
     sidecar: dict[str, Any] | None = None,
     overwrite: bool = False,
+    fmt: str | None = None,
 ) -> FrameLogger | None:
-    """A candump logger for ``path`` (None when ``path`` is empty or canlog is unavailable);
-    ``overwrite``: replace a file at ``path`` that is no log of ours (``--overwrite``)."""
+    """A CAN logger for ``path`` (None when ``path`` is empty) in ``fmt`` (``candump``, ``blf``,
+    ``mf4``; None: ``cfg.format``, whose ``auto`` goes by the suffix); ``overwrite``: replace a
+    file at ``path`` that is no log of ours (``--overwrite``)."""
     if not path:
         return None
     from ..canlog import CandumpLogger
@@ -75,6 +77,7 @@ def open_can_logger(
         queue_lines=cfg.queue_lines,
         sidecar=sidecar,
         overwrite=overwrite,
+        fmt=fmt or cfg.format,
     )
     return logger
 
@@ -111,13 +114,21 @@ def open_process_logger(
     config_path: str,
     sidecar: dict[str, Any],
     overwrite: bool = False,
+    fmt: str | None = None,
 ) -> FrameLogger | None:
     """:func:`open_can_logger` for a process whose bus is open (``--log`` wins over
-    ``log.path``): a log that cannot be written, or a file there that is no log of ours (unless
-    ``overwrite``), shuts the bus (nothing was sent yet) and is a :class:`ConfigError` naming
-    the option or key it came from (exit 2)."""
+    ``log.path``, ``--log-format`` (``fmt``) over ``log.format``): a log that cannot be
+    written, a name that disagrees with its format, or a file there that is no log of ours
+    (unless ``overwrite``) shuts the bus (nothing was sent yet) and is a :class:`ConfigError`
+    naming the option or key it came from (exit 2); MF4 without asammdf is a
+    :class:`~ehpss_hil.errors.MissingExtraError` (exit 2)."""
     try:
-        return open_can_logger(cli_path or cfg.path, cfg, bus_cfg, sidecar=sidecar, overwrite=overwrite)
+        return open_can_logger(
+            cli_path or cfg.path, cfg, bus_cfg, sidecar=sidecar, overwrite=overwrite, fmt=fmt
+        )
+    except MissingExtraError:
+        bus.shutdown()
+        raise
     except OutputError as exc:
         bus.shutdown()
         raise ConfigError(config_path, "--log" if cli_path else "log.path", str(exc)) from exc
