@@ -48,8 +48,18 @@ class Child:
 
 def cli(args: list[str], tmp: Path, prelude: str = "", rlimits: dict[int, int] | None = None) -> Child:
     """``ehpss-hil ARGS`` in a child process (``prelude`` runs first, e.g. caps scaled down;
-    ``rlimits`` set in the child): exit code, output and the child's own peak RSS (``wait4``)."""
-    code = f"import sys\n{prelude}\nfrom ehpss_hil.cli import main\nsys.exit(main(sys.argv[1:]))"
+    ``rlimits`` set in the child): exit code, output and the child's own peak RSS — its VmHWM
+    written at exit (``wait4``'s ru_maxrss carries the forking parent's high-water mark across
+    exec: a child of a large pytest process would report the parent's); ru_maxrss only when the
+    child died before it could write it."""
+    hwm = tmp / "child.hwm"
+    hwm.unlink(missing_ok=True)
+    code = (
+        "import atexit, re, sys\n"
+        f"atexit.register(lambda: open({str(hwm)!r}, 'w').write("
+        "re.search(r'VmHWM:\\s*(\\d+)', open('/proc/self/status').read()).group(1)))\n"
+        f"{prelude}\nfrom ehpss_hil.cli import main\nsys.exit(main(sys.argv[1:]))"
+    )
     out, err = tmp / "child.out", tmp / "child.err"
 
     def limit() -> None:
@@ -67,7 +77,8 @@ def cli(args: list[str], tmp: Path, prelude: str = "", rlimits: dict[int, int] |
             alarm.kill()
             alarm.wait()
         p.returncode = os.waitstatus_to_exitcode(status)
-    return Child(p.returncode, out.read_text(), err.read_text(), usage.ru_maxrss / 1024)
+    own_kb = int(hwm.read_text()) if hwm.exists() and hwm.read_text().strip() else usage.ru_maxrss
+    return Child(p.returncode, out.read_text(), err.read_text(), own_kb / 1024)
 
 
 @pytest.fixture(scope="module")
