@@ -22,7 +22,7 @@ from pathlib import Path
 
 from ehpss_hil.blas import limit_blas_threads
 from ehpss_hil.bus import open_bus
-from ehpss_hil.canlog.formats import add_log_format_argument
+from ehpss_hil.canlog.formats import add_process_log_arguments
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import EmulatorConfig, apply_overrides, load_emulator_config
 from ehpss_hil.emulation import PlantEmulation
@@ -63,13 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fault-inject", action="store_true", help="accept FAULT_INJECT frames")
     p.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority 1..99 (0 = none)")
     p.add_argument("--cpu", type=int, help="pin to this CPU")
-    p.add_argument("--log", help="log of every frame sent and received (candump -L; *.blf: BLF, *.mf4: MF4)")
-    add_log_format_argument(p)
-    p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="replace a file at the --log path that is no log of ours (and its numbered files)",
-    )
+    add_process_log_arguments(p)
     p.add_argument(
         "--duration",
         type=float,

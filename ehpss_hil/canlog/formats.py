@@ -63,6 +63,18 @@ def add_log_format_argument(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_process_log_arguments(p: argparse.ArgumentParser) -> None:
+    """``--log``, ``--log-format`` and ``--overwrite`` of the processes that log every frame
+    they send and receive (``controller``, ``firmware-sim``)."""
+    p.add_argument("--log", help="log of every frame sent and received (candump -L; *.blf: BLF, *.mf4: MF4)")
+    add_log_format_argument(p)
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a file at the --log path that is no log of ours (and its numbered files)",
+    )
+
+
 class FrameFile(Protocol):
     """A binary log file the logger's writer thread fills: :meth:`write` a batch of queued
     frames (raises OSError when the file cannot take them), :meth:`close` once (writes what is

@@ -7,7 +7,7 @@ import logging
 import sys
 from pathlib import Path
 
-from ..canlog.formats import add_log_format_argument
+from ..canlog.formats import add_process_log_arguments
 from ..control.registry import DAEMON_MODES
 from ..daemon import DaemonArgs, run_daemon
 
@@ -24,13 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rate", type=float, help="cycle rate (Hz), overrides rate_hz")
     p.add_argument("--rt-priority", type=int, help="SCHED_FIFO priority 1..99 (0 = none)")
     p.add_argument("--cpu", type=int, help="pin to this CPU")
-    p.add_argument("--log", help="log of every frame sent and received (candump -L; *.blf: BLF, *.mf4: MF4)")
-    add_log_format_argument(p)
-    p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="replace a file at the --log path that is no log of ours (and its numbered files)",
-    )
+    add_process_log_arguments(p)
     p.add_argument("--duration", type=float, help="stop after this many seconds (cycles)")
     p.add_argument(
         "--lockstep",
