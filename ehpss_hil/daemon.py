@@ -25,7 +25,8 @@ from .config import (
 )
 from .control.base import Controller
 from .errors import ConfigError
-from .physics.params import Params, load_params
+from .physics.load import load_params
+from .physics.params import Params
 from .runtime.controller_loop import CIA408_OWN_FRAMES, OWN_FRAMES, ControllerLoop, LoopOptions
 from .runtime.frameio import FrameIO, limit_sensor_rate, open_process_logger, process_codec
 from .runtime.rt import apply_rt_options, freeze_gc

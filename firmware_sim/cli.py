@@ -27,7 +27,7 @@ from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import EmulatorConfig, apply_overrides, load_emulator_config
 from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.errors import ConfigError, run_console
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.runtime.frameio import FrameIO, open_process_logger, process_codec
 from ehpss_hil.runtime.rt import apply_rt_options, freeze_gc
 from ehpss_hil.runtime.signals import install_stop_handlers, restore_handlers

@@ -19,7 +19,7 @@ import canopen
 from ehpss_hil.canlog import CandumpLogger
 from ehpss_hil.config import Cia408Config
 from ehpss_hil.emulation import PlantEmulation
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.protocol.cia408.check import check_nodes
 from ehpss_hil.protocol.cia408.eds import ENCODER_EDS, VALVE_EDS
 from ehpss_hil.runtime.rawio import RawFrameIO

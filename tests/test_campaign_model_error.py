@@ -16,7 +16,7 @@ from ehpss_hil.campaign.session import run_campaign
 from ehpss_hil.campaign.spec import load_campaign
 from ehpss_hil.campaign.table import PARQUET_NAME
 from ehpss_hil.errors import ConfigError
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.report.metrics import compute_metrics
 from ehpss_hil.scenario import load_scenario
 from ehpss_hil.sim.lockstep import run_scenario

@@ -12,7 +12,7 @@ import pytest
 from ehpss_hil.codec import Verdict
 from ehpss_hil.config import CanIds, Cia408Config, ControllerConfig
 from ehpss_hil.errors import ConfigError
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.protocol import make_codec
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.check import check_nodes

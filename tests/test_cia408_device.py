@@ -11,7 +11,7 @@ import pytest
 
 from ehpss_hil.config import Cia408Config
 from ehpss_hil.emulation import PlantEmulation
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.check import check_nodes
 from ehpss_hil.protocol.cia408.objects import DeviceState, NmtCommand, NmtState

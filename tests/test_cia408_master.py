@@ -14,7 +14,7 @@ from _cia408 import Cia408Rig, emcy_codes, heartbeat_state, wait_until
 
 from ehpss_hil.bus import af_can_available
 from ehpss_hil.canlog import read_log
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.objects import (
     ABORT_LENGTH,

@@ -16,7 +16,7 @@ from ehpss_hil.codec import Verdict
 from ehpss_hil.config import CanIds, Cia408Config
 from ehpss_hil.control.registry import make_controller
 from ehpss_hil.emulation import PlantEmulation
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.protocol import make_codec
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.check import check_nodes

@@ -23,7 +23,7 @@ from ehpss_hil.bus.netns import netns_unavailable_reason
 from ehpss_hil.canlog import read_log
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.orchestrate import RunPlan, check_exit_codes, execute
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.runtime.lifecycle import FailsafeReason, State
 from ehpss_hil.sim.lockstep import reference_output

@@ -14,7 +14,7 @@ from _cia408 import Cia408Rig, wait_until
 
 from ehpss_hil.config import CanIds, Cia408Config
 from ehpss_hil.errors import NodeError
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.protocol import make_codec
 from ehpss_hil.protocol.cia408.codec import Cia408Codec
 from ehpss_hil.protocol.cia408.objects import NmtState

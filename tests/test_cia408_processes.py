@@ -13,7 +13,7 @@ from _proc import FIRMWARE_SIM, PY, ROOT, Proc
 
 from ehpss_hil.bus.netns import PrivateNetns, netns_unavailable_reason
 from ehpss_hil.canlog import read_log
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.objects import SCALE_100_PERCENT, DeviceState, state_of_status
 

@@ -135,7 +135,7 @@ def test_the_daemon_builds_and_steps_every_mode_without_scipy() -> None:
         "from ehpss_hil.config import load_controller_config\n"
         "from ehpss_hil.control.base import Measurement\n"
         "from ehpss_hil.control.registry import DAEMON_MODES\n"
-        "from ehpss_hil.physics.params import load_params\n"
+        "from ehpss_hil.physics.load import load_params\n"
         "cfg = load_controller_config('configs/controller.yaml')\n"
         "params = load_params(cfg.params)\n"
         "for mode in DAEMON_MODES:\n"

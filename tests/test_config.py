@@ -11,7 +11,7 @@ import pytest
 from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.config import load_controller_config, load_emulator_config
 from ehpss_hil.errors import ConfigError, EhpssError
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.scenario import load_scenario
 
 SCENARIOS = sorted((PROJECT_ROOT / "scenarios").glob("*.yaml"))

@@ -47,7 +47,8 @@ from ehpss_hil.config import ControllerConfig, EmulatorConfig, load_controller_c
 from ehpss_hil.control.base import Measurement
 from ehpss_hil.control.registry import make_controller
 from ehpss_hil.errors import ConfigError
-from ehpss_hil.physics.params import Params, load_params
+from ehpss_hil.physics.load import load_params
+from ehpss_hil.physics.params import Params
 from ehpss_hil.scenario import Scenario, load_scenario
 from ehpss_hil.sim.lockstep import run_scenario
 

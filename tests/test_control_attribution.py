@@ -9,7 +9,7 @@ import numpy as np
 
 from ehpss_hil.control.attribution import JUMP_HOLD_S, SensorAttribution
 from ehpss_hil.control.flowgain import FlowGainMonitor
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 
 PARAMS = load_params()
 TS = 1e-3

@@ -12,7 +12,7 @@ from ehpss_hil.control.base import Measurement
 from ehpss_hil.control.compensation import compensated_current, sensor_trusted
 from ehpss_hil.control.registry import make_controller
 from ehpss_hil.emulation import PlantEmulation
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.scenario import load_scenario
 
 PARAMS = load_params()

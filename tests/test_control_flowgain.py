@@ -8,7 +8,7 @@ import pytest
 from ehpss_hil.control.flowgain import FlowGainMonitor
 from ehpss_hil.control.tuning import ControlTuning
 from ehpss_hil.physics.faults import FaultState
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.physics.plant import PlantStepper
 
 PARAMS = load_params()

@@ -17,7 +17,7 @@ from ehpss_hil.control.registry import MODES, make_controller
 from ehpss_hil.control.sampleclock import bridge_bound_m, bridge_spool, span_currents
 from ehpss_hil.errors import ModelError
 from ehpss_hil.physics.faults import FaultState
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.physics.plant import PlantStepper
 from ehpss_hil.report.result import SimResult
 from ehpss_hil.scenario import Noise, load_scenario

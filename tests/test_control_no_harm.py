@@ -17,7 +17,7 @@ import pytest
 
 from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.control.monitor import FallbackReason, HarmMonitor
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.report.metrics import RunMetrics, compute_metrics
 from ehpss_hil.report.result import SimResult
 from ehpss_hil.scenario import load_scenario

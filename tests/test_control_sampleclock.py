@@ -11,7 +11,7 @@ import pytest
 from ehpss_hil.control.base import Measurement
 from ehpss_hil.control.predictors import ModelPosition, ValvePredictor
 from ehpss_hil.control.sampleclock import RESYNC_SAMPLES, SampleClock, resync_span
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.physics.plant import PlantStepper
 
 PARAMS = load_params()

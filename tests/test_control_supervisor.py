@@ -11,7 +11,7 @@ from ehpss_hil.control.base import Measurement
 from ehpss_hil.control.registry import make_controller
 from ehpss_hil.control.supervisor import Supervisor
 from ehpss_hil.control.tuning import ControlTuning
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 
 TS = 1e-3
 

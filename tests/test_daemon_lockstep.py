@@ -13,7 +13,7 @@ import pytest
 from _daemon_rig import Rig
 
 from ehpss_hil.codec import FrameCodec, Verdict
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.runtime.lifecycle import State

@@ -13,7 +13,7 @@ from _proc import EHPSS_HIL, ENV, FIRMWARE_SIM, ROOT
 from ehpss_hil.config import load_controller_config
 from ehpss_hil.errors import ConfigError
 from ehpss_hil.limits import MAX_DBC_BYTES
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.protocol import make_codec
 
 VENDOR_DBC = ROOT / "dbc" / "vendor-example.dbc"

@@ -12,7 +12,7 @@ from _virtual import VirtualPair
 from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.codec.e2e import protect
 from ehpss_hil.emulation import PlantEmulation
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.scenario import Scenario
 from firmware_sim.process import OWN_FRAMES, EmulatorOptions, EmulatorProcess

@@ -13,7 +13,7 @@ import pytest
 
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.emulation import PlantEmulation
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.runtime.signals import StopFlag
 from ehpss_hil.scenario import Event, Noise, Scenario

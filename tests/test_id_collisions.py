@@ -16,7 +16,8 @@ from _virtual import VirtualPair
 from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.config import SetpointPolicy, Watchdog
 from ehpss_hil.control.base import Controller, ControllerStatus, Measurement, ValveCommand
-from ehpss_hil.physics.params import Params, load_params
+from ehpss_hil.physics.load import load_params
+from ehpss_hil.physics.params import Params
 from ehpss_hil.runtime.collisions import SentFrames
 from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.foreign import SensorStreams

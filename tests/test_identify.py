@@ -13,7 +13,7 @@ from _proc import EHPSS_HIL, ENV, ROOT
 from ehpss_hil.identify.engine import Identification, identify_lockstep
 from ehpss_hil.identify.paramsfile import write_params
 from ehpss_hil.identify.report import truth_of
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.scenario import load_scenario
 
 #: flow gain +20 % (K_c), hydraulic natural frequency −20 %: the plant the issue names

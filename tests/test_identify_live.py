@@ -20,7 +20,7 @@ from ehpss_hil.identify.experiment import ExperimentAborted, Record, experiment_
 from ehpss_hil.identify.fit import fit
 from ehpss_hil.identify.live import ExcitationController
 from ehpss_hil.identify.report import truth_of
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.runtime.signals import StopFlag

@@ -20,7 +20,7 @@ from ehpss_hil.monitor.listener import BusListener
 from ehpss_hil.monitor.reference import CHUNK_SAMPLES, ReferenceTrack
 from ehpss_hil.monitor.state import FRAME_OVERHEAD_BITS, MonitorState, choice_names
 from ehpss_hil.monitor.tui import render
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.physics.reference import ReferenceModel
 from ehpss_hil.scenario import Reference
 

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 from collections.abc import Hashable
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.signal import cont2discrete
 
+from ehpss_hil.errors import ConfigError
 from ehpss_hil.physics import FaultState, load_params
 from ehpss_hil.physics.discretize import Matrix, ZohCache, zoh
+from ehpss_hil.physics.load import check_closed_loop_stable
 from ehpss_hil.physics.model import closed_loop_matrices, plant_matrices
 from ehpss_hil.physics.plant import PlantStepper
 from ehpss_hil.physics.reference import ReferenceModel
@@ -117,3 +120,15 @@ def test_errata_checks() -> None:
     # Table 1's K_sv·ω_sv² would miss eq 39's 4.263e8 at the 4th digit
     g = PARAMS.controller
     assert 16.5 * 2430**2 * g.k_a * g.k_p * g.k_f == pytest.approx(4.265e8, rel=2e-4)
+
+
+def test_a_params_file_whose_closed_loop_is_unstable_is_refused_naming_the_section(
+    tmp_path: Path,
+) -> None:
+    """load_params checks the file against the model (eq 39 with K_p = 1000 has poles in the
+    right half plane); the shipped file passes the same check."""
+    bad = tmp_path / "params.yaml"
+    bad.write_text("plant: {}\ncontroller: {k_p: 1000.0}\n")
+    with pytest.raises(ConfigError, match=r"params\.yaml: controller: .* unstable \(pole at 3184"):
+        load_params(bad)
+    assert check_closed_loop_stable(PARAMS) is PARAMS

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from ehpss_hil.physics.hydraulics import NonlinearPlant, derive
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.physics.plant import LinearPlant, make_plant
 from ehpss_hil.physics.plantspec import PlantSpec
 from ehpss_hil.report.metrics import compute_metrics

@@ -15,7 +15,7 @@ from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.errors import ConfigError
 from ehpss_hil.physics.hydraulics import NonlinearPlant
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.physics.plant import LinearPlant
 from ehpss_hil.physics.plantspec import PlantSpec
 from ehpss_hil.report.metrics import compute_metrics

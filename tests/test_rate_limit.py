@@ -8,7 +8,7 @@ import random
 
 from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.codec.ratelimit import K_DFT_MAX, RateLimit, position_step_bound_m
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 
 SPEED = load_params().plant.piston_speed_max_m_s
 STEP = position_step_bound_m(SPEED, 1e-3)

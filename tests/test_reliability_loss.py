@@ -15,7 +15,7 @@ from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.bus.netns import netns_unavailable_reason
 from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.errors import ConfigError
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.reliability.loss import process_loss, sim_loss
 from ehpss_hil.scenario import FrameLoss, load_scenario
 from ehpss_hil.sim import run_scenario

@@ -80,7 +80,7 @@ def test_skipped_periods_replay_bit_identical(tmp_path: Path) -> None:
 
     from ehpss_hil.control.registry import make_controller
     from ehpss_hil.emulation import PlantEmulation
-    from ehpss_hil.physics.params import load_params
+    from ehpss_hil.physics.load import load_params
     from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
     from ehpss_hil.runtime.frameio import FrameIO
     from firmware_sim.process import OWN_FRAMES as EMU_FRAMES

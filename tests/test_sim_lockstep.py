@@ -9,7 +9,7 @@ import pytest
 
 from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.errors import ConfigError
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.scenario import Event, load_scenario
 from ehpss_hil.sim import run_scenario
 from ehpss_hil.sim.jobs import Job, run_jobs

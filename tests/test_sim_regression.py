@@ -12,7 +12,7 @@ import pytest
 
 from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.bench.control import UNSEEN
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.report.metrics import RunMetrics, compute_metrics
 from ehpss_hil.scenario import load_scenario
 from ehpss_hil.sim import run_scenario

@@ -21,7 +21,7 @@ from typing import Any
 from ..codec import FrameCodec
 from ..control.base import Measurement
 from ..control.registry import make_controller
-from ..physics.params import load_params
+from ..physics.load import load_params
 from ..runtime.stats import Ring
 from ..scenario import Reference
 

@@ -20,7 +20,8 @@ from dataclasses import replace
 
 from .. import PROJECT_ROOT
 from ..blas import limit_blas_threads
-from ..physics.params import Params, load_params
+from ..physics.load import load_params
+from ..physics.params import Params
 from ..report.metrics import COMPENSATED_RMS_M, NO_HARM_RATIO, NO_HARM_RMS_M, RunMetrics, compute_metrics
 from ..scenario import Event, Scenario, load_scenario
 from .common import Scorecard, write_json

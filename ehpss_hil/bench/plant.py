@@ -12,7 +12,7 @@ import time
 from dataclasses import replace
 
 from ..blas import limit_blas_threads
-from ..physics.params import load_params
+from ..physics.load import load_params
 from ..physics.plant import Plant, make_plant
 from ..physics.plantspec import PlantSpec
 from ..report.metrics import compute_metrics

@@ -12,7 +12,8 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from ..physics.params import Params, load_params
+from ..physics.load import load_params
+from ..physics.params import Params
 from ..report.metrics import RunMetrics, compute_metrics
 from ..scenario import Scenario
 from ..sim.lockstep import run_scenario

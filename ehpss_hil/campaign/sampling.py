@@ -24,7 +24,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from ..errors import ConfigError
-from ..physics.params import load_params
+from ..physics.load import load_params
 from ..physics.plantspec import PlantSpec
 from ..scenario import Event, Noise, Reference, Scenario
 from .scenario_file import scenario_data

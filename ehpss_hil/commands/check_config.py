@@ -14,7 +14,8 @@ from typing import Any
 
 from ..config import ControllerConfig, DbcMap, EmulatorConfig, load_controller_config, load_emulator_config
 from ..errors import ConfigError, EhpssError, one_line
-from ..physics.params import Params, load_params
+from ..physics.load import load_params
+from ..physics.params import Params
 from ..scenario import Scenario, load_scenario
 from ..schema import load_yaml
 

@@ -42,7 +42,8 @@ from ..control.sampleclock import RESYNC_SAMPLES
 from ..control.tuning import ControlTuning
 from ..driver import ControllerDriver
 from ..errors import EhpssError
-from ..physics.params import Params, load_params
+from ..physics.load import load_params
+from ..physics.params import Params
 from ..report.logdata import MODE_NAMES
 from ..report.logmeta import run_info
 from ..runtime.foreign import SetpointGate

@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         config_codec(args.protocol)  # a bad config or map: exit 2 before any run
     params = plant = None
     if args.params:
-        from ..physics.params import load_params
+        from ..physics.load import load_params
 
         params, plant = load_params(args.params), load_params().plant  # bad file: exit 2
     jobs = [

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import EhpssError
-from ..physics.params import Params, PlantParams, load_params
+from ..physics.load import load_params
+from ..physics.params import Params, PlantParams
 from ..scenario import Scenario, load_scenario
 from .excitation import Excitation
 from .experiment import Record, run_experiment

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..physics.discretize import zoh
+from ..physics.load import check_closed_loop_stable
 from ..physics.model import ACC, POS, SPOOL, plant_matrices
 from ..physics.params import Params, PlantParams
 from .experiment import Record
@@ -229,4 +230,5 @@ def _result(prob: _Problem, start: Params, theta: Array, cov: Array, evals: int)
     zero = Estimate("position_zero_m", y0, Z95 * sd_y0, "m (± absolute)")
     resid = prob.y - prob.outputs(theta)
     rms = {c: _rms(resid[prob.mask[:, i], i]) for i, c in enumerate(CHANNELS)}
-    return FitResult(replace(start, plant=plant), keys, tuple(derived), null, zero, rms, evals)
+    fitted = check_closed_loop_stable(replace(start, plant=plant))
+    return FitResult(fitted, keys, tuple(derived), null, zero, rms, evals)

@@ -84,7 +84,7 @@ def run_live(config: Path, exc: Excitation, lockstep: bool = False) -> tuple[Rec
     (its params, protocol, rate); returns the record and the config's params."""
     from ..config import ControllerConfig
     from ..daemon import DaemonArgs, resolve_config, run_daemon
-    from ..physics.params import load_params
+    from ..physics.load import load_params
 
     cfg = resolve_config(DaemonArgs(config=config))
     params = load_params(cfg.params or None)

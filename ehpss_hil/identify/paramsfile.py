@@ -1,5 +1,5 @@
 """Write an identification result as a params file in ``params.yaml``'s format (the one
-:func:`~ehpss_hil.physics.params.load_params` reads): every plant key (the fitted ones with
+:func:`~ehpss_hil.physics.load.load_params` reads): every plant key (the fitted ones with
 their 95 % interval as a comment) and the controller gains of the start params."""
 
 from __future__ import annotations

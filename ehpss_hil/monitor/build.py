@@ -8,7 +8,7 @@ from pathlib import Path
 import can
 
 from ..config import CanIds, ControllerConfig
-from ..physics.params import load_params
+from ..physics.load import load_params
 from ..runtime.frameio import process_codec
 from .listener import BusListener
 from .reference import ReferenceTrack

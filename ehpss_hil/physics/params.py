@@ -1,15 +1,14 @@
-"""Physical and controller parameters (SI), loaded once from a YAML file (default: the shipped
-``ehpss_hil/data/params.yaml``, linked as ``configs/params.yaml`` in the repository)."""
+"""Physical and controller parameters (SI) as dataclasses; :mod:`.load` reads them from a YAML
+file (default: the shipped ``ehpss_hil/data/params.yaml``, linked as ``configs/params.yaml`` in
+the repository) and checks them against :mod:`.model`."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from .. import DATA_DIR
-from ..errors import ConfigError
-from ..schema import build, load_yaml, rng
+from ..schema import rng
 
 #: the shipped parameters (package data; ``configs/params.yaml`` in the repository links to it)
 DEFAULT_PARAMS = DATA_DIR / "params.yaml"
@@ -75,30 +74,8 @@ class ControllerGains:
 
 @dataclass(frozen=True)
 class Params:
-    """Everything ``configs/params.yaml`` holds."""
+    """Everything ``configs/params.yaml`` holds (read and checked by
+    :func:`~ehpss_hil.physics.load.load_params`)."""
 
     plant: PlantParams = field(default_factory=PlantParams)
     controller: ControllerGains = field(default_factory=ControllerGains)
-
-    def __post_init__(self) -> None:
-        """The fault-free closed loop (eq 39) must be stable: its reference model y_m and the
-        simulated plant diverge otherwise (an integrator at rest, K_i = 0, is accepted)."""
-        import numpy as np
-
-        from .model import closed_loop_matrices
-
-        poles = np.linalg.eigvals(closed_loop_matrices(self)[0])
-        worst = poles[np.argmax(poles.real)]
-        if not np.isfinite(poles).all() or worst.real > 1e-9 * max(1.0, float(abs(poles).max())):
-            raise ConfigError(
-                "",
-                "controller",
-                "the fault-free closed loop (eq 39) with these "
-                f"plant and gain values is unstable (pole at {worst:.4g} 1/s)",
-            )
-
-
-def load_params(path: str | Path | None = None) -> Params:
-    """Load parameters from YAML (default: the shipped :data:`DEFAULT_PARAMS`)."""
-    p = Path(path) if path is not None else DEFAULT_PARAMS
-    return build(Params, load_yaml(p), str(p))

@@ -26,7 +26,7 @@ import can
 
 from ..codec import FrameCodec, Verdict
 from ..control.registry import make_controller
-from ..physics.params import load_params
+from ..physics.load import load_params
 from ..runtime.controller_loop import OWN_FRAMES as CTRL_OWN
 from ..runtime.controller_loop import ControllerLoop, LoopOptions
 from ..runtime.frameio import FrameIO

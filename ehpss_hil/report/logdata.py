@@ -36,7 +36,8 @@ import numpy as np
 from ..canlog import BadLines, decode_log, read_sidecar
 from ..canlog.reader import FRAME_INDEX, resolve_log
 from ..codec import FrameCodec, Verdict
-from ..physics.params import Params, load_params
+from ..physics.load import load_params
+from ..physics.params import Params
 from ..physics.reference import ReferenceModel
 from ..runtime.status_frames import MODE_CODE
 from ..scenario import Scenario

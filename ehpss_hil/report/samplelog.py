@@ -22,7 +22,8 @@ from ..control.registry import make_controller
 from ..control.tuning import ControlTuning
 from ..driver import ControllerDriver
 from ..emulation import PlantEmulation, SensorSample
-from ..physics.params import Params, load_params
+from ..physics.load import load_params
+from ..physics.params import Params
 from ..runtime.status_frames import MODE_CODE, MODE_UNKNOWN
 from ..scenario import Scenario
 

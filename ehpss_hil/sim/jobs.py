@@ -11,7 +11,8 @@ from pathlib import Path
 from ..blas import limit_blas_threads
 from ..control.tuning import ControlTuning
 from ..errors import ConfigError
-from ..physics.params import Params, PlantParams, load_params
+from ..physics.load import load_params
+from ..physics.params import Params, PlantParams
 from ..report.metrics import RunMetrics, compute_metrics
 from ..report.result import SimResult
 from ..scenario import Scenario, load_scenario

@@ -28,7 +28,8 @@ from ..driver import ControllerDriver
 from ..emulation import PlantEmulation
 from ..errors import ConfigError
 from ..physics.faults import FaultState
-from ..physics.params import Params, PlantParams, load_params
+from ..physics.load import load_params
+from ..physics.params import Params, PlantParams
 from ..physics.reference import ReferenceModel
 from ..protocol.cia408.codec import Cia408Codec
 from ..report.result import N_SLOTS, SimResult
