@@ -29,6 +29,7 @@ from .physics.load import load_params
 from .physics.params import Params
 from .runtime.controller_loop import CIA408_OWN_FRAMES, OWN_FRAMES, ControllerLoop, LoopOptions
 from .runtime.frameio import FrameIO, limit_sensor_rate, open_process_logger, process_codec
+from .runtime.loop_run import loop_summary, run_lockstep, run_realtime
 from .runtime.rt import apply_rt_options, freeze_gc
 from .runtime.signals import install_stop_handlers, restore_handlers
 from .runtime.stats import publish_summary, rejects_text
@@ -229,9 +230,9 @@ def run_daemon(a: DaemonArgs) -> int:
             " (lockstep)" if a.lockstep else "",
         )
         if a.lockstep:
-            loop.run_lockstep(stop, n)
+            run_lockstep(loop, stop, n)
         else:
-            loop.run_realtime(stop, n)
+            run_realtime(loop, stop, n)
     finally:
         try:
             loop.shutdown()
@@ -241,7 +242,7 @@ def run_daemon(a: DaemonArgs) -> int:
             restore_handlers(previous)
             io.close()
             bus.shutdown()
-    summary = {**loop.summary(), "rejected_datagrams": io.rejected_datagrams()}
+    summary = {**loop_summary(loop), "rejected_datagrams": io.rejected_datagrams()}
     publish_summary(format_summary, summary, a.summary_json)
     return 0
 

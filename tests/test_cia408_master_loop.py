@@ -33,6 +33,7 @@ from ehpss_hil.runtime.cia408_master import CyclicMaster
 from ehpss_hil.runtime.controller_loop import CIA408_OWN_FRAMES, OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.runtime.lifecycle import FailsafeReason, State
+from ehpss_hil.runtime.loop_run import loop_summary
 from ehpss_hil.runtime.rawio import RawFrameIO
 from ehpss_hil.scenario import Reference, Scenario
 from firmware_sim.canopen_process import CanopenEmulatorProcess, CanopenOptions, build_nodes
@@ -125,7 +126,7 @@ def test_an_emcy_puts_the_loop_into_failsafe_and_the_valve_gets_zero(rig: Rig) -
     assert (rig.loop.life.state, rig.loop.life.reason) == (State.FAULT, FailsafeReason.EMCY)
     rig.step(1)
     assert _applied_setpoint(rig) == 0 and int(rig.proc.valve.store.get(CONTROL_WORD, 0)) == 0x0001
-    assert rig.loop.summary()["cia408"]["emcy"] == {"node": 32, "code": 0x5000, "register": 1}  # type: ignore[index]
+    assert loop_summary(rig.loop)["cia408"]["emcy"] == {"node": 32, "code": 0x5000, "register": 1}  # type: ignore[index]
 
 
 def test_an_emcy_while_already_in_failsafe_becomes_the_reason(rig: Rig) -> None:

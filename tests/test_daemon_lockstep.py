@@ -17,6 +17,7 @@ from ehpss_hil.physics.load import load_params
 from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.runtime.lifecycle import State
+from ehpss_hil.runtime.loop_run import run_lockstep
 from ehpss_hil.runtime.signals import StopFlag
 from ehpss_hil.scenario import Reference, Scenario
 
@@ -49,7 +50,7 @@ def test_lockstep_with_emulator_and_mmac() -> None:
             sc.reference,
             LoopOptions(lockstep_idle_s=0.5),
         )
-        th = threading.Thread(target=loop.run_lockstep, args=(StopFlag(), sc.n_samples))
+        th = threading.Thread(target=run_lockstep, args=(loop, StopFlag(), sc.n_samples))
         th.start()
         assert emu.run_lockstep(StopFlag(), sc.n_samples)
         th.join()
@@ -68,7 +69,7 @@ def _lockstep_run(rig: Rig, feed: Any) -> list[dict[str, Any]]:
         rig.ctrl, rig.loop.io, Reference(kind="step", amplitude_m=1e-3), LoopOptions(lockstep_idle_s=0.3)
     )
     rig.loop = loop
-    th = threading.Thread(target=loop.run_lockstep, args=(StopFlag(),))
+    th = threading.Thread(target=run_lockstep, args=(loop, StopFlag()))
     th.start()
     feed()
     th.join(timeout=30)

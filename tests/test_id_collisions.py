@@ -23,6 +23,7 @@ from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOp
 from ehpss_hil.runtime.foreign import SensorStreams
 from ehpss_hil.runtime.frameio import FrameIO, limit_sensor_rate
 from ehpss_hil.runtime.lifecycle import FailsafeReason, State
+from ehpss_hil.runtime.loop_run import loop_summary
 from ehpss_hil.scenario import Reference
 
 
@@ -170,7 +171,7 @@ def test_a_foreign_valve_cmd_is_a_fault(rig: Rig) -> None:
     cmd = rig.cycle()
     assert rig.state == (State.FAULT, FailsafeReason.ID_COLLISION)
     assert cmd["Enable"] == 0 and cmd["CurrentSetpoint"] == 0.0
-    s = rig.loop.summary()
+    s = loop_summary(rig.loop)
     assert s["id_collisions"]["VALVE_CMD"] == 1  # type: ignore[index]
     assert s["second_transmitter"]["episodes"] == 1  # type: ignore[index]
     for _ in range(100):  # latched without auto_recover, though the rogue has gone
@@ -330,7 +331,7 @@ def test_setpoint_only_when_enabled_and_within_limits() -> None:
         assert setpoint(on, 1, 0.0115) == pytest.approx(0.010)  # beyond ±10 mm: rejected
         assert setpoint(on, 0, 0.0) is None  # back to the configured trajectory
         assert (on.loop.setpoints.accepted, on.loop.setpoints.rejected) == (6, 2)
-        assert on.loop.summary()["setpoints"] == {"accepted": 6, "rejected": 2}
+        assert loop_summary(on.loop)["setpoints"] == {"accepted": 6, "rejected": 2}
     finally:
         off.close()
         on.close()

@@ -23,6 +23,7 @@ from ehpss_hil.identify.report import truth_of
 from ehpss_hil.physics.load import load_params
 from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
+from ehpss_hil.runtime.loop_run import run_lockstep
 from ehpss_hil.runtime.signals import StopFlag
 from ehpss_hil.scenario import load_scenario
 from firmware_sim.process import OWN_FRAMES as EMU_FRAMES
@@ -45,7 +46,7 @@ def _run_in_process(exc: Excitation, channel: str) -> ExcitationController:
         loop = ControllerLoop(
             ctrl, FrameIO(cb, FrameCodec(), OWN_FRAMES), sc.reference, LoopOptions(lockstep_idle_s=0.5)
         )
-        th = threading.Thread(target=loop.run_lockstep, args=(StopFlag(), sc.n_samples))
+        th = threading.Thread(target=run_lockstep, args=(loop, StopFlag(), sc.n_samples))
         th.start()
         assert emu.run_lockstep(StopFlag(), sc.n_samples)
         th.join()

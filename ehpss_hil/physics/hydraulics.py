@@ -33,12 +33,8 @@ from .discretize import zoh
 from .faults import FaultState
 from .model import valve_matrices
 from .params import PlantParams
-from .plantspec import PlantSpec
+from .plantspec import RETURN_PRESSURE_PA, SUPPLY_PRESSURE_PA, PlantSpec
 
-#: supply pressure P_S when the scenario gives none (Pa): a common industrial 210 bar
-SUPPLY_PRESSURE_PA = 21e6
-#: return pressure P_T when the scenario gives none (Pa, gauge)
-RETURN_PRESSURE_PA = 0.0
 #: piston end stops at ± this from the centre (m) when the scenario gives none
 PISTON_STROKE_M = 0.05
 #: oil beyond an end stop as a length of the bore (m) when the scenario gives none

@@ -18,6 +18,14 @@ from ..errors import ConfigError
 from ..schema import build, rng
 from .params import PlantParams
 
+# the nonlinear plant's two pressure defaults live here, below :mod:`.hydraulics` (which reads
+# them too): the spec's own check needs them
+
+#: supply pressure P_S when the scenario gives none (Pa): a common industrial 210 bar
+SUPPLY_PRESSURE_PA = 21e6
+#: return pressure P_T when the scenario gives none (Pa, gauge)
+RETURN_PRESSURE_PA = 0.0
+
 #: the lumped keys of params.yaml's ``plant:`` section
 LUMPED_KEYS = tuple(f.name for f in dataclasses.fields(PlantParams))
 
@@ -73,8 +81,6 @@ class PlantSpec:
             for key in NONLINEAR_KEYS:
                 if getattr(self, key) is not None:
                     raise ConfigError("", key, "a key of the nonlinear plant: needs model: nonlinear")
-        from .hydraulics import RETURN_PRESSURE_PA, SUPPLY_PRESSURE_PA  # (it imports this module)
-
         ps = SUPPLY_PRESSURE_PA if self.supply_pressure_pa is None else self.supply_pressure_pa
         pt = RETURN_PRESSURE_PA if self.return_pressure_pa is None else self.return_pressure_pa
         if pt >= ps:

@@ -36,9 +36,7 @@ from .foreign import CollisionGuard, SetpointGate
 from .frameio import FrameIO
 from .lifecycle import FailsafeReason, Lifecycle, State
 from .loop_options import CIA408_OWN_FRAMES, OWN_FRAMES, LoopOptions
-from .loop_run import catch_up, loop_summary, run_lockstep, run_realtime
 from .periodic import PeriodicFrames
-from .signals import StopFlag
 from .stats import LoopStats
 from .status_frames import StatusReporter
 from .watchdog import SensorWatchdog
@@ -121,7 +119,8 @@ class ControllerLoop:
         self.last_enable = False
         self.reporter = StatusReporter(io)
         self._rx_ids = frozenset((self.id_pos, self.id_aux, self._id_setpoint))
-        #: one cycle per received sensor pair (set by :func:`.loop_run.run_lockstep`)
+        #: one cycle per received sensor pair (set by :func:`.loop_run.run_lockstep`, which drives
+        #: this loop as :func:`.loop_run.run_realtime` does on the deadline grid)
         self.lockstep = False
         self._last_pos_counter = 0  # counter of the newest usable SENSOR_POS (lockstep gaps)
         self._reset_cycle_rx()
@@ -312,9 +311,34 @@ class ControllerLoop:
         return self.check_age and not self.lockstep and time.time() - self._rx_now > self.stale_after_s
 
     def catch_up(self, periods: int, overrun: bool = True) -> None:
-        """Grid periods the loop slept through (``overrun``) or lockstep's lost sensor samples,
-        each a cycle without data and without a frame sent (:func:`.loop_run.catch_up`)."""
-        catch_up(self, periods, overrun)
+        """Grid periods the loop slept through (``overrun``: the deadline timer skipped them;
+        else lockstep's lost sensor samples): the controller's clock stays on the grid. Each one
+        is a cycle without a sensor frame (``fresh`` False: the predictors advance, the PI
+        integrates, the reference moves on) and without a frame sent (``command_sent`` False:
+        the valve holds the previous command); ``cycles`` and so VALVE_CMD's CycleCount count
+        them, so the reference index and CycleCount keep matching the emulator's sample clock.
+
+        Overrun periods count for the watchdog as cycles without data
+        (:meth:`~.watchdog.SensorWatchdog.skip`): more than ``RESYNC_SAMPLES`` at once,
+        ``timeout_cycles`` at once, or starvation is LOOP_OVERRUN, and then the law is not stepped
+        at all (leaving FAULT resets it). So the law steps here at most ``RESYNC_SAMPLES`` times:
+        lockstep's gaps come from the 4-bit E2E counter."""
+        if periods <= 0:
+            return
+        self.skipped_periods += periods
+        self.cycles += periods
+        st = self.life.state
+        if overrun and st in (State.ACTIVE, State.FAULT):
+            tripped = self.wd.skip(periods)
+            if tripped and st is State.ACTIVE:
+                self.enter_fault()
+        if self.life.state is State.FAULT:
+            self.driver.k += periods
+            self.failsafe_cycles += periods
+            return
+        if self.life.state is not State.ACTIVE:
+            return
+        self.driver.catch_up(periods)
 
     def poll_cycle(self, skipped: int = 0, drain: bool = True, late: bool = False) -> float | None:
         """One realtime cycle without waiting: the ``skipped`` grid periods before it
@@ -376,14 +400,6 @@ class ControllerLoop:
         """Announce boot-up (CiA 301 heartbeat state 0)."""
         self.io.send("HEARTBEAT_CTRL", {"NmtState": 0})
 
-    def run_realtime(self, stop: StopFlag, n_cycles: int | None = None) -> None:
-        """Cycles on the deadline grid until ``stop`` or ``n_cycles`` (:func:`.loop_run.run_realtime`)."""
-        run_realtime(self, stop, n_cycles)
-
-    def run_lockstep(self, stop: StopFlag, n_cycles: int | None = None) -> None:
-        """One cycle per received sensor pair (:func:`.loop_run.run_lockstep`)."""
-        run_lockstep(self, stop, n_cycles)
-
     @property
     def wake_lateness_s(self) -> float:
         """A cycle woken by its sensor pair: how long after the pair's SENSOR_AUX (s) it woke."""
@@ -416,7 +432,3 @@ class ControllerLoop:
         self.life.to(State.STOPPED)
         self.send_status(all_index=True)
         self.io.send("HEARTBEAT_CTRL", {"NmtState": self.life.nmt_state})
-
-    def summary(self) -> dict[str, object]:
-        """Counters and loop statistics (JSON-able; :func:`.loop_run.loop_summary`)."""
-        return loop_summary(self)

@@ -1,21 +1,18 @@
-"""Driving a :class:`~.controller_loop.ControllerLoop`: the realtime deadline grid, lockstep
-(one cycle per received sensor pair), and the counters it reports at exit."""
+"""Driving a :class:`~.controller_loop.ControllerLoop` (this module sits above it): the
+realtime deadline grid, lockstep (one cycle per received sensor pair), and the counters it
+reports at exit."""
 
 from __future__ import annotations
 
 import logging
 import time
-from typing import TYPE_CHECKING
 
 from ..codec import Verdict
+from .controller_loop import ControllerLoop
 from .deadline import DeadlineTimer, socket_wake
-from .lifecycle import State
 from .phaselock import PhaseLock
 from .signals import StopFlag
 from .stats import peak_rss_bytes
-
-if TYPE_CHECKING:
-    from .controller_loop import ControllerLoop
 
 log = logging.getLogger("ehpss_hil.controller")
 
@@ -127,34 +124,3 @@ def loop_summary(loop: ControllerLoop) -> dict[str, object]:
         "max_rss_bytes": peak_rss_bytes(),
         **({"cia408": loop.master.summary()} if loop.master is not None else {}),
     }
-
-
-def catch_up(loop: ControllerLoop, periods: int, overrun: bool = True) -> None:
-    """Grid periods the loop slept through (``overrun``: the deadline timer skipped them;
-    else lockstep's lost sensor samples): the controller's clock stays on the grid. Each one
-    is a cycle without a sensor frame (``fresh`` False: the predictors advance, the PI
-    integrates, the reference moves on) and without a frame sent (``command_sent`` False:
-    the valve holds the previous command); the loop's ``cycles`` and so VALVE_CMD's CycleCount count
-    them, so the reference index and CycleCount keep matching the emulator's sample clock.
-
-    Overrun periods count for the watchdog as cycles without data
-    (:meth:`~.watchdog.SensorWatchdog.skip`): more than ``RESYNC_SAMPLES`` at once, ``timeout_cycles``
-    at once, or starvation is LOOP_OVERRUN, and then the law is not stepped at all (leaving
-    FAULT resets it). So the law steps here at most ``RESYNC_SAMPLES`` times: lockstep's
-    gaps come from the 4-bit E2E counter."""
-    if periods <= 0:
-        return
-    loop.skipped_periods += periods
-    loop.cycles += periods
-    st = loop.life.state
-    if overrun and st in (State.ACTIVE, State.FAULT):
-        tripped = loop.wd.skip(periods)
-        if tripped and st is State.ACTIVE:
-            loop.enter_fault()
-    if loop.life.state is State.FAULT:
-        loop.driver.k += periods
-        loop.failsafe_cycles += periods
-        return
-    if loop.life.state is not State.ACTIVE:
-        return
-    loop.driver.catch_up(periods)

@@ -5,17 +5,45 @@ decides which is due), and the counter line of the log every ``stats_interval_s`
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING
+from typing import Protocol
 
-from .status_frames import FrameSchedule
-
-if TYPE_CHECKING:
-    from .controller_loop import ControllerLoop, LoopOptions
+from ..codec import FrameCodec
+from .foreign import CollisionGuard
+from .frameio import FrameIO
+from .lifecycle import Lifecycle
+from .loop_options import LoopOptions
+from .status_frames import FrameSchedule, StatusReporter
 
 log = logging.getLogger("ehpss_hil.controller")
 
 #: CTRL_STATS CycleTimeMax's largest value (s): its 16-bit field in µs
 CYCLE_TIME_MAX_S = 0.065535
+
+
+class CycleView(Protocol):
+    """What :meth:`PeriodicFrames.after_cycle` reads of the loop it serves (the daemon's
+    :class:`~.controller_loop.ControllerLoop`, which owns a :class:`PeriodicFrames`), and the
+    one call it makes back: this module stays below the loop."""
+
+    @property
+    def cycles(self) -> int: ...
+    @property
+    def overruns(self) -> int: ...
+    @property
+    def stale_frames(self) -> int: ...
+    @property
+    def failsafe_cycles(self) -> int: ...
+    @property
+    def reporter(self) -> StatusReporter: ...
+    @property
+    def io(self) -> FrameIO: ...
+    @property
+    def codec(self) -> FrameCodec: ...
+    @property
+    def life(self) -> Lifecycle: ...
+    @property
+    def guard(self) -> CollisionGuard: ...
+    def send_status(self, all_index: bool = False) -> None: ...
 
 
 class PeriodicFrames:
@@ -38,7 +66,7 @@ class PeriodicFrames:
         self.compute_max_s = max(self.compute_max_s, compute_s)
         self.interval_compute_max_s = max(self.interval_compute_max_s, compute_s)
 
-    def after_cycle(self, loop: ControllerLoop) -> None:
+    def after_cycle(self, loop: CycleView) -> None:
         """The periodic frames due now (at most one of CTRL_STATUS, CTRL_STATS, heartbeat,
         CTRL_INDEX) and the counter line of the log."""
         c = loop.cycles
@@ -65,7 +93,7 @@ class PeriodicFrames:
         if self._log_every and c // self._log_every > prev // self._log_every:
             self._log_counters(loop)
 
-    def _log_counters(self, loop: ControllerLoop) -> None:
+    def _log_counters(self, loop: CycleView) -> None:
         """Cheap counters only (no percentiles in the cycle: they would cost an overrun)."""
         log.info(
             "cycles %d, state %s, overruns %d, rejected frames %d, stale frames %d, "
