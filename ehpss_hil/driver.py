@@ -3,8 +3,10 @@
 The daemon's loop, ``replay``, the lockstep simulator and the sample logs all run a controller the
 same way, and this class is that way:
 
-* the sensor frames of a cycle are offered as they arrive (:meth:`ControllerDriver.position`,
-  :meth:`ControllerDriver.aux`); a SENSOR_POS superseded by a newer one in the same cycle is kept
+* the frames of a cycle are offered as they arrive, classified by the codec
+  (:meth:`ControllerDriver.take`: the one mapping of decoded SENSOR_POS, SENSOR_AUX and SETPOINT
+  frames onto :meth:`ControllerDriver.position`, :meth:`ControllerDriver.aux` and
+  :meth:`ControllerDriver.setpoint`); a SENSOR_POS superseded by a newer one in the same cycle is kept
   and handed to the controller's ``observe`` before the cycle's step, so its predictors stay on
   the sensor's sample clock; the samples between those stepped on come from the SENSOR_POS E2E
   counter (``Measurement.samples``);
@@ -25,12 +27,16 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from .codec import SampleCount
+from .codec import Decoded, SampleCount
 from .control.base import Controller, HeldSample, Measurement, hold_sample, observe_held
 from .control.sampleclock import RESYNC_SAMPLES
 
 #: the largest number of periods :meth:`ControllerDriver.catch_up` steps without data
 MAX_CATCH_UP = RESYNC_SAMPLES
+
+#: a SETPOINT policy: ``admit(override, position_m, x_d_m)`` → the SETPOINT takes effect
+#: (``x_d_m``: the x_d in force, m; :meth:`ehpss_hil.runtime.foreign.SetpointGate.admit`)
+SetpointAdmit = Callable[[bool, float, float], bool]
 
 
 class ControllerDriver:
@@ -58,6 +64,27 @@ class ControllerDriver:
         self._counter = 0
 
     # ---- the frames of a cycle --------------------------------------------------------------
+    def take(self, d: Decoded, admit: SetpointAdmit | None = None) -> None:
+        """One usable classified frame (``d.values`` set) onto the driver: the one mapping of
+        decoded frames onto it, for the daemon's loop, replay, the sample logs and the
+        simulator's frame transports. SENSOR_POS → :meth:`position` (Position, Spool, and the
+        E2E counter the codec decoded, ``d.counter``); SENSOR_AUX → :meth:`aux` (CoilCurrent,
+        LoadPressure); SETPOINT → :meth:`setpoint` (Position with Override 1, else None) when
+        ``admit(override, position_m, x_d in force)`` says so (None: SETPOINT ignored). Other
+        frames, and frames without values, are ignored."""
+        v = d.values
+        if v is None:
+            return
+        name = d.name
+        if name == "SENSOR_POS":
+            self.position(float(v["Position"]), float(v["Spool"]), d.counter or 0)
+        elif name == "SENSOR_AUX":
+            self.aux(float(v["CoilCurrent"]), float(v["LoadPressure"]))
+        elif name == "SETPOINT" and admit is not None:
+            override, position_m = bool(v["Override"]), float(v["Position"])
+            if admit(override, position_m, self._x_d()):
+                self.setpoint(position_m if override else None)
+
     def position(self, position_m: float, spool_m: float, counter: int) -> None:
         """A usable SENSOR_POS (m, m; ``counter`` its E2E counter); a newer one in the same cycle
         supersedes it (kept for ``observe``)."""

@@ -35,7 +35,7 @@ import can
 from ..canlog import BadLines, read_sidecar
 from ..canlog.order import TimeOrder
 from ..canlog.reader import read_frames, resolve_log
-from ..codec import FrameCodec
+from ..codec import Decoded, FrameCodec
 from ..config import SetpointPolicy, load_controller_config
 from ..control.registry import DAEMON_MODES, make_controller
 from ..control.sampleclock import RESYNC_SAMPLES
@@ -182,18 +182,6 @@ def _make(setup: ReplaySetup) -> Any:
     return make_controller(setup.mode, setup.params, setup.ts_s, setup.tuning, setup.reference)
 
 
-@dataclass
-class _Rx:
-    """A usable sensor or SETPOINT frame not yet taken by a cycle (SI values)."""
-
-    kind: str  # SENSOR_POS, SENSOR_AUX or SETPOINT
-    t_s: float
-    a: float
-    b: float
-    counter: int = 0
-    override: bool = False
-
-
 class _Replayer:
     """The daemon's cycles rebuilt from a log, each run through the one controller driver.
 
@@ -219,7 +207,8 @@ class _Replayer:
         self.started = False
         self.in_failsafe = False
         self.cycle_count = 0
-        self.pending: list[_Rx] = []
+        #: usable sensor and SETPOINT frames not yet taken by a cycle, in receive order
+        self.pending: list[Decoded] = []
         self._names = {self.codec.can_id(n): n for n in ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD", "SETPOINT")}
 
     def frame(self, msg: Any, number: int) -> None:
@@ -231,12 +220,8 @@ class _Replayer:
         if d.values is None or not d.verdict.usable:
             return
         v, t = d.values, float(msg.timestamp)
-        if name == "SENSOR_POS":
-            self.pending.append(_Rx(name, t, float(v["Position"]), float(v["Spool"]), msg.data[1] & 0x0F))
-        elif name == "SENSOR_AUX":
-            self.pending.append(_Rx(name, t, float(v["CoilCurrent"]), float(v["LoadPressure"])))
-        elif name == "SETPOINT":
-            self.pending.append(_Rx(name, t, float(v["Position"]), 0.0, override=bool(v["Override"])))
+        if name != "VALVE_CMD":
+            self.pending.append(d)
         elif self.started or v["Enable"]:
             cc = int(v["CycleCount"])
             gap = 0 if not self.started else (cc - self.cycle_count - 1) % 65536
@@ -251,7 +236,7 @@ class _Replayer:
 
     # ---- which frames a cycle took ------------------------------------------------------------
     def _leading_non_position(self) -> int:
-        return next((i for i, r in enumerate(self.pending) if r.kind == "SENSOR_POS"), len(self.pending))
+        return next((i for i, r in enumerate(self.pending) if r.name == "SENSOR_POS"), len(self.pending))
 
     def _split(self, echo: int) -> int:
         """How many pending frames the cycle that echoes ``echo`` took: up to the last pending
@@ -259,31 +244,24 @@ class _Replayer:
         none of the SENSOR_POS frames when none has it (a cycle without a fresh sample)."""
         last = None
         for i, r in enumerate(self.pending):
-            if r.kind == "SENSOR_POS" and r.counter == echo:
+            if r.name == "SENSOR_POS" and r.counter == echo:
                 last = i
         if last is None:
             return self._leading_non_position()
         n = last + 1
-        while n < len(self.pending) and self.pending[n].kind != "SENSOR_POS":
+        while n < len(self.pending) and self.pending[n].name != "SENSOR_POS":
             n += 1
         return n
 
     def _before(self, t_s: float) -> int:
         """How many pending frames were received before ``t_s`` (s)."""
-        return next((i for i, r in enumerate(self.pending) if r.t_s >= t_s), len(self.pending))
+        return next((i for i, r in enumerate(self.pending) if r.timestamp_s >= t_s), len(self.pending))
 
     def _feed(self, n: int) -> None:
-        """The first ``n`` pending frames, as the daemon's drain hands them to the driver."""
-        drv = self.driver
-        for r in self.pending[:n]:
-            if r.kind == "SENSOR_POS":
-                drv.position(r.a, r.b, r.counter)
-            elif r.kind == "SENSOR_AUX":
-                drv.aux(r.a, r.b)
-            else:  # the daemon's SETPOINT gate, with x_d as the daemon had it then
-                x_d = drv.reference(drv.k) if drv.override_m is None else drv.override_m
-                if self.setpoints.admit(r.override, r.a, x_d):
-                    drv.setpoint(r.a if r.override else None)
+        """The first ``n`` pending frames, as the daemon's drain hands them to the driver (the
+        daemon's SETPOINT gate, with x_d as the daemon had it then)."""
+        for d in self.pending[:n]:
+            self.driver.take(d, self.setpoints.admit)
         del self.pending[:n]
 
     # ---- cycles -----------------------------------------------------------------------------

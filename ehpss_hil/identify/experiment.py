@@ -78,20 +78,20 @@ def run_experiment(scenario: Scenario, exc: Excitation, params: Params) -> Recor
     held = 0.0
     for k in range(n):
         s = emu.measure()
-        vals = tr.sensor(
+        if tr.sensor(
+            drv,
+            k,
             s.position_m,
             s.spool_m,
             s.load_pressure_pa,
             s.coil_current_a,
             s.current_saturated,
             emu.frame_lost(0),
-        )
-        if vals is not None:
-            _check(vals[0], exc.travel_limit_m, "travel |y_s|", k, ts)
-            _check(vals[1], exc.spool_limit_m, "spool |x_v|", k, ts)
-            drv.position(vals[0], vals[1], k & 0x0F)
-            drv.aux(vals[3], vals[2])
-            out[k, :4] = vals
+        ):
+            m = drv.meas
+            _check(m.position_m, exc.travel_limit_m, "travel |y_s|", k, ts)
+            _check(m.spool_m, exc.spool_limit_m, "spool |x_v|", k, ts)
+            out[k, :4] = m.position_m, m.spool_m, m.load_pressure_pa, m.coil_current_a
         current, enable = drv.step()
         _check(current, exc.current_limit_a, "current |I|", k, ts)
         cmd = current if enable else 0.0

@@ -86,8 +86,8 @@ class _Bench:
         self.log.log(f2)
         d1, d2 = self.rx_ctrl.classify(f1), self.rx_ctrl.classify(f2)
         if d1.values and d2.values:
-            self.drv.position(float(d1.values["Position"]), float(d1.values["Spool"]), f1.data[1] & 0x0F)
-            self.drv.aux(float(d2.values["CoilCurrent"]), float(d2.values["LoadPressure"]))
+            self.drv.take(d1)
+            self.drv.take(d2)
 
     def status(self, t: float) -> None:
         st = self.ctrl.status()

@@ -189,21 +189,14 @@ class ControllerLoop:
             if self.lockstep and d.verdict is Verdict.OK_SOME_LOST:
                 self.catch_up((counter - self._last_pos_counter - 1) & 0x0F, overrun=False)
             self._last_pos_counter = counter
-            self.driver.position(float(v["Position"]), float(v["Spool"]), counter)
             self._fresh = True
             self._pos_counter = counter
             self._pos_ts = msg.timestamp
         elif fid == self.id_aux:
             self._aux_fresh = True
             self._aux_ts = msg.timestamp
-            self.driver.aux(float(v["CoilCurrent"]), float(v["LoadPressure"]))
             self.guard.command_conflict(bool(v.get("CommandConflict", 0)))
-        else:
-            override, x_d = bool(v["Override"]), self.driver.override_m
-            if self.setpoints.admit(
-                override, float(v["Position"]), self.ref.at(self.k_active) if x_d is None else x_d
-            ):
-                self.driver.setpoint(float(v["Position"]) if override else None)
+        self.driver.take(d, self.setpoints.admit)
         return d.verdict
 
     # ---- the driver's state, as the loop's --------------------------------------------------

@@ -142,8 +142,9 @@ def _loop(
     rows: list[tuple],
 ) -> None:
     """The per-sample loop (locals bound once: this is the simulator's hot path), the controller
-    run by the same :class:`ControllerDriver` as the daemon and replay: sample k's frames carry
-    the E2E counter k mod 16, a lost sample is a cycle without data.
+    run by the same :class:`ControllerDriver` as the daemon and replay, the transport handing it
+    the decoded sensor frames: sample k's frames carry the E2E counter k mod 16, a lost sample
+    is a cycle without data.
 
     One row per sample: (x_true, y_s, spool, applied current, probe, faults, fresh, J list,
     nominal fallback).
@@ -153,19 +154,22 @@ def _loop(
     held = 0.0
     measure, lost, advance = emu.measure, emu.frame_lost, emu.advance
     sensor, command = tr.sensor, tr.command
-    position, aux, step = drv.position, drv.aux, drv.step
+    step = drv.step
     probe, index_values, push = ctrl.probe, ctrl.index_values, rows.append
     for k in range(len(x_d)):
         s = measure()
-        vals = sensor(
-            s.position_m, s.spool_m, s.load_pressure_pa, s.coil_current_a, s.current_saturated, lost(0)
+        fresh = sensor(
+            drv,
+            k,
+            s.position_m,
+            s.spool_m,
+            s.load_pressure_pa,
+            s.coil_current_a,
+            s.current_saturated,
+            lost(0),
         )
-        if vals is not None:
-            position(vals[0], vals[1], k & 0x0F)
-            aux(vals[3], vals[2])
         if set_truth is not None:
             set_truth(s.faults)
-        fresh = vals is not None
         current, enable = step()
         queue.append(command(current if enable else 0.0, k, lost(1)))
         arrived = queue.popleft()

@@ -1,10 +1,13 @@
 """The frame layer between the emulated plant and the controller in a lockstep run.
 
 ``quantize``: each value goes through :meth:`FrameCodec.quantize` (the DBC scaling a receiver
-decodes) — fast. ``frames``: every frame is built with :meth:`FrameCodec.encode` (bytes, E2E CRC and
-counter) and checked with :meth:`FrameCodec.classify` on the receiving side — slow, but the real
-thing. Both give bit-identical values (a test checks it). Frame loss is decided by the caller; a
-lost frame is simply never delivered (the receiver's E2E counter then reports OK_SOME_LOST).
+decodes) into the values of a decoded frame, without the bytes — fast. ``frames``: every frame
+is built with :meth:`FrameCodec.encode` (bytes, E2E CRC and counter) and checked with
+:meth:`FrameCodec.classify` on the receiving side — slow, but the real thing. Both give
+bit-identical values (a test checks it). Frame loss is decided by the caller; a lost frame is
+simply never delivered (the receiver's E2E counter then reports OK_SOME_LOST). Either way the
+sensor pair reaches the controller's driver as decoded frames, through
+:meth:`~ehpss_hil.driver.ControllerDriver.take` (the daemon's mapping).
 """
 
 from __future__ import annotations
@@ -14,22 +17,18 @@ from collections.abc import Callable
 from cantools.database.conversion import LinearConversion
 
 from ..codec.frames import FrameCodec
-from ..codec.verdict import Decoded
+from ..codec.verdict import Decoded, Verdict
+from ..driver import ControllerDriver
 
-SensorValues = tuple[float, float, float, float]
 
-
-def sensor_values(pos: Decoded, aux: Decoded) -> SensorValues | None:
-    """(position, spool, load pressure, coil current) of a classified SENSOR_POS + SENSOR_AUX
-    pair, or None unless both are usable."""
+def take_sensor_pair(drv: ControllerDriver, pos: Decoded, aux: Decoded) -> bool:
+    """A classified SENSOR_POS + SENSOR_AUX pair onto ``drv`` (:meth:`ControllerDriver.take`)
+    when both are usable; True if taken."""
     if not (pos.verdict.usable and aux.verdict.usable) or pos.values is None or aux.values is None:
-        return None
-    return (
-        float(pos.values["Position"]),
-        float(pos.values["Spool"]),
-        float(aux.values["LoadPressure"]),
-        float(aux.values["CoilCurrent"]),
-    )
+        return False
+    drv.take(pos)
+    drv.take(aux)
+    return True
 
 
 def applied_current(cmd: Decoded) -> float | None:
@@ -84,23 +83,40 @@ class QuantizeTransport:
             raise TypeError("position/spool/current signals must use a linear integer scaling")
         (self._ps, self._po), (self._ss, self._so), (self._cs, self._co), (self._ks, self._ko) = lin  # type: ignore[misc]
         self._press = _quantizer(codec, "SENSOR_AUX", "LoadPressure")
+        self._pos_values: dict[str, float] = {"Position": 0.0, "Spool": 0.0}
+        self._aux_values: dict[str, float] = {"LoadPressure": 0.0, "CoilCurrent": 0.0}
+        self._pos = Decoded(Verdict.OK, "SENSOR_POS", self._pos_values)  # type: ignore[arg-type]
+        self._aux = Decoded(Verdict.OK, "SENSOR_AUX", self._aux_values)  # type: ignore[arg-type]
 
     def sensor(
-        self, pos: float, spool: float, pressure: float, coil: float, saturated: bool, lost: bool
-    ) -> SensorValues | None:
-        """SENSOR_POS + SENSOR_AUX as the controller decodes them (m, m, Pa, A); None if lost."""
+        self,
+        drv: ControllerDriver,
+        k: int,
+        pos: float,
+        spool: float,
+        pressure: float,
+        coil: float,
+        saturated: bool,
+        lost: bool,
+    ) -> bool:
+        """Sample ``k``'s SENSOR_POS + SENSOR_AUX onto ``drv`` as the controller decodes them
+        (m, m, Pa, A; the E2E counter k mod 16 the emulator's frames carry); False if lost. The
+        two decoded frames are this transport's own, refilled each sample."""
         if lost:
-            return None
+            return False
         pos = -0.5 if pos < -0.5 else 0.5 if pos > 0.5 else pos
         spool = -0.01 if spool < -0.01 else 0.01 if spool > 0.01 else spool
         coil = -1.0 if coil < -1.0 else 1.0 if coil > 1.0 else coil
         ps, po, ss, so, cs, co = self._ps, self._po, self._ss, self._so, self._cs, self._co
-        return (
-            round((pos - po) / ps) * ps + po,
-            round((spool - so) / ss) * ss + so,
-            self._press(_clip(pressure, 4e7)),
-            round((coil - co) / cs) * cs + co,
-        )
+        d_pos, d_aux, v_pos, v_aux = self._pos, self._aux, self._pos_values, self._aux_values
+        v_pos["Position"] = round((pos - po) / ps) * ps + po
+        v_pos["Spool"] = round((spool - so) / ss) * ss + so
+        v_aux["LoadPressure"] = self._press(_clip(pressure, 4e7))
+        v_aux["CoilCurrent"] = round((coil - co) / cs) * cs + co
+        d_pos.counter = k & 0x0F
+        drv.take(d_pos)
+        drv.take(d_aux)
+        return True
 
     def command(self, current_a: float, k: int, lost: bool) -> float | None:
         """VALVE_CMD current as the emulator decodes it (A); None if lost."""
@@ -122,10 +138,19 @@ class FramesTransport:
         self._ctrl = ctrl_codec
 
     def sensor(
-        self, pos: float, spool: float, pressure: float, coil: float, saturated: bool, lost: bool
-    ) -> SensorValues | None:
+        self,
+        drv: ControllerDriver,
+        k: int,
+        pos: float,
+        spool: float,
+        pressure: float,
+        coil: float,
+        saturated: bool,
+        lost: bool,
+    ) -> bool:
         """Encode both sensor frames on the emulator side, classify them on the controller side
-        unless ``lost`` (the TX counters advance either way)."""
+        unless ``lost`` (the TX counters advance either way) and hand them to ``drv``; True if
+        both were usable (``k``: the sample, carried by the frames' own E2E counter)."""
         f1 = self._emu.encode("SENSOR_POS", {"Position": _clip(pos, 0.5), "Spool": _clip(spool, 0.01)})
         f2 = self._emu.encode(
             "SENSOR_AUX",
@@ -138,8 +163,8 @@ class FramesTransport:
             },
         )
         if lost:
-            return None
-        return sensor_values(self._ctrl.classify(f1), self._ctrl.classify(f2))
+            return False
+        return take_sensor_pair(drv, self._ctrl.classify(f1), self._ctrl.classify(f2))
 
     def command(self, current_a: float, k: int, lost: bool) -> float | None:
         """Encode VALVE_CMD on the controller side, classify it on the emulator side unless

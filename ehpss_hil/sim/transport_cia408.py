@@ -12,10 +12,11 @@ the applied current and the missing load pressure are the codec's (its module do
 
 from __future__ import annotations
 
+from ..driver import ControllerDriver
 from ..protocol.cia408.codec import Cia408Codec
 from ..protocol.cia408.drive import REQUEST
 from ..protocol.cia408.objects import STATUS_OF, DeviceState
-from .transport import SensorValues, _clip, applied_current, sensor_values
+from .transport import _clip, applied_current, take_sensor_pair
 
 #: the largest |position| (m) and |spool| (m) the sensors report (the native DBC's ranges)
 POSITION_RANGE_M = 0.5
@@ -33,10 +34,19 @@ class Cia408Transport:
         self.syncs = 0
 
     def sensor(
-        self, pos: float, spool: float, pressure: float, coil: float, saturated: bool, lost: bool
-    ) -> SensorValues | None:
-        """SYNC, then the valve's and the encoder's TPDO; (position, spool, load pressure, current
-        echo) as the master decodes them (m, m, Pa, A), None when ``lost``."""
+        self,
+        drv: ControllerDriver,
+        k: int,
+        pos: float,
+        spool: float,
+        pressure: float,
+        coil: float,
+        saturated: bool,
+        lost: bool,
+    ) -> bool:
+        """SYNC, then the valve's and the encoder's TPDO, classified by the master's codec and
+        handed to ``drv`` (position, spool, load pressure, current echo as the master decodes
+        them: m, m, Pa, A); False when ``lost`` (``k``: the sample, carried by the SYNC count)."""
         self._ctrl.encode("SYNC", {"Cycle": self.syncs})
         self.syncs += 1
         valve = self._emu.encode(
@@ -44,9 +54,9 @@ class Cia408Transport:
         )
         encoder = self._emu.encode("SENSOR_POS", {"Position": _clip(pos, POSITION_RANGE_M)})
         if lost:
-            return None
+            return False
         d_aux = self._ctrl.classify(valve)  # first: the encoder's SENSOR_POS carries its spool
-        return sensor_values(self._ctrl.classify(encoder), d_aux)
+        return take_sensor_pair(drv, self._ctrl.classify(encoder), d_aux)
 
     def command(self, current_a: float, k: int, lost: bool) -> float | None:
         """The valve's RPDO 1 from the master; the current the valve applies (A), None if ``lost``."""
