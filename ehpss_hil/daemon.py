@@ -257,7 +257,7 @@ def _own_frames(cfg: ControllerConfig) -> tuple[str, ...]:
 
 def _cia408_master(bus: Any, codec: Any, cfg: ControllerConfig) -> tuple[Any, Any]:
     """The CANopen master's start-up session and its part of each cycle (``protocol: cia408``)."""
-    from .runtime.cia408_master import CyclicMaster, MasterSession
+    from .protocol.cia408.master import CyclicMaster, MasterSession
 
     return MasterSession(bus, cfg.nodes), CyclicMaster(codec, cfg.nodes, cfg.rate_hz)
 

@@ -1,4 +1,4 @@
-"""The master's part of each cycle (:class:`~ehpss_hil.runtime.cia408_master.CyclicMaster`) fed
+"""The master's part of each cycle (:class:`~ehpss_hil.protocol.cia408.master.CyclicMaster`) fed
 real frames — the emulated valve's own TPDOs and EMCY, heartbeat frames — and stepped by hand:
 which fail-safe reason each failure gives, and the control word it leaves."""
 
@@ -12,8 +12,8 @@ from ehpss_hil.config import CanIds
 from ehpss_hil.protocol import make_codec
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.codec import Cia408Codec
+from ehpss_hil.protocol.cia408.master import CyclicMaster
 from ehpss_hil.protocol.cia408.objects import BIT_D, NmtState
-from ehpss_hil.runtime.cia408_master import CyclicMaster
 from ehpss_hil.runtime.lifecycle import FailsafeReason
 
 RATE_HZ = 1000.0

@@ -21,6 +21,7 @@ from ehpss_hil.protocol import make_codec
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.check import check_nodes
 from ehpss_hil.protocol.cia408.codec import Cia408Codec
+from ehpss_hil.protocol.cia408.master import CyclicMaster
 from ehpss_hil.protocol.cia408.objects import (
     CONTROL_WORD,
     VPOC_SETPOINT,
@@ -29,7 +30,6 @@ from ehpss_hil.protocol.cia408.objects import (
     NmtCommand,
     NmtState,
 )
-from ehpss_hil.runtime.cia408_master import CyclicMaster
 from ehpss_hil.runtime.controller_loop import CIA408_OWN_FRAMES, OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.runtime.lifecycle import FailsafeReason, State

@@ -17,8 +17,8 @@ from ehpss_hil.errors import NodeError
 from ehpss_hil.physics.load import load_params
 from ehpss_hil.protocol import make_codec
 from ehpss_hil.protocol.cia408.codec import Cia408Codec
+from ehpss_hil.protocol.cia408.master import MasterSession
 from ehpss_hil.protocol.cia408.objects import NmtState
-from ehpss_hil.runtime.cia408_master import MasterSession
 
 CHANNEL = "master-session"
 #: the master's config: other times than the emulator's power-on values, to see them written

@@ -42,7 +42,7 @@ from .status_frames import StatusReporter
 from .watchdog import SensorWatchdog
 
 if TYPE_CHECKING:
-    from .cia408_master import CyclicMaster
+    from ..protocol.cia408.master import CyclicMaster
 
 log = logging.getLogger("ehpss_hil.controller")
 

@@ -17,14 +17,14 @@ innocent cause on a single sensor:
   (a gap of more than ``max_delta_counter`` is a WRONG_SEQUENCE, and under load such gaps come
   one after the other), or when it duplicates and reorders.
 - **more frames than one sensor sends**: a sensor samples on its own clock, one frame per control
-  period, so in any :data:`SENSOR_RATE_WINDOW_CYCLES` periods (skipped ones included) one sensor
-  delivers at most that many distinct frames, plus what a late delivery shifts into the window
-  (:data:`SENSOR_RATE_FACTOR`, :data:`SENSOR_RATE_SLACK`). Copies of one of the last
-  :data:`SENSOR_COPY_MEMORY` frames (byte-identical) are not new frames, and neither are frames
-  received before the stale window (a starved receiver's backlog: sent over the periods it slept
-  through) nor, on buses without receive timestamps, the frames drained right after skipped
-  periods. Two senders deliver about twice the periods; a sensor running faster than the control
-  rate does too, but has no sequence failures.
+  period, so in any :data:`~ehpss_hil.protocol.ratewindow.SENSOR_RATE_WINDOW_CYCLES` periods
+  (skipped ones included) one sensor delivers at most that many distinct frames, plus what a late
+  delivery shifts into the window (:class:`~ehpss_hil.protocol.ratewindow.RateWindow`). Copies
+  of one of the last :data:`SENSOR_COPY_MEMORY` frames (byte-identical) are not new frames, and
+  neither are frames received before the stale window (a starved receiver's backlog: sent over
+  the periods it slept through) nor, on buses without receive timestamps, the frames drained
+  right after skipped periods. Two senders deliver about twice the periods; a sensor running
+  faster than the control rate does too, but has no sequence failures.
 :class:`SetpointGate`: SETPOINT overrides x_d only when enabled and within the configured limits.
 """
 
@@ -35,6 +35,7 @@ import math
 from collections import deque
 
 from ..config import SetpointPolicy, Watchdog
+from ..protocol.ratewindow import RateWindow
 from .collisions import IdCollisions
 
 log = logging.getLogger("ehpss_hil.controller")
@@ -45,13 +46,6 @@ log = logging.getLogger("ehpss_hil.controller")
 #: ticks reaches 34 of 100 on an idle host)
 SENSOR_SEQ_WINDOW = 100
 SENSOR_SEQ_LIMIT = 40
-#: control periods over which distinct SENSOR_POS frames are counted against one sensor's rate
-SENSOR_RATE_WINDOW_CYCLES = 40
-#: one sensor delivers at most this many frames per period over the window (late deliveries
-#: shifted into it; two senders deliver 2) …
-SENSOR_RATE_FACTOR = 1.25
-#: … plus this many (a delivery late by a few periods at either end of the window)
-SENSOR_RATE_SLACK = 10
 #: a frame byte-identical to one of this many previous SENSOR_POS frames is a copy (the counter
 #: is 4 bits: a genuine frame repeats the bytes of one 16 frames back only at rest, noise-free)
 SENSOR_COPY_MEMORY = 8
@@ -90,41 +84,6 @@ class SequenceWindow:
     @property
     def quiet(self) -> bool:
         return self._bad == 0
-
-
-class RateWindow:
-    """Frames counted per control period over the last ``window`` periods (a ring indexed by
-    the loop's cycle number, so skipped periods count as periods with no frame)."""
-
-    __slots__ = ("_counts", "_cycle", "total")
-
-    def __init__(self, window: int = SENSOR_RATE_WINDOW_CYCLES) -> None:
-        self._counts = [0] * window
-        self._cycle = 0  # the newest cycle the ring holds
-        self.total = 0  # frames in the window
-
-    def add(self, cycle: int) -> None:
-        """One frame in the loop's cycle ``cycle`` (never earlier than the previous one)."""
-        n = len(self._counts)
-        if cycle > self._cycle:
-            if cycle - self._cycle >= n:
-                self._counts = [0] * n
-                self.total = 0
-            else:
-                for c in range(self._cycle + 1, cycle + 1):
-                    self.total -= self._counts[c % n]
-                    self._counts[c % n] = 0
-            self._cycle = cycle
-        self._counts[cycle % n] += 1
-        self.total += 1
-
-    def __len__(self) -> int:
-        """The window (periods)."""
-        return len(self._counts)
-
-    def bound(self) -> float:
-        """The most frames one sensor at one frame per period delivers in the window."""
-        return SENSOR_RATE_FACTOR * len(self._counts) + SENSOR_RATE_SLACK
 
 
 class SensorStreams:

@@ -7,5 +7,5 @@ scaling, :mod:`.eds` the shipped EDS files (``eds/``) loaded through ``canopen``
 the checks of a ``cia408:`` section. The master's side: :mod:`.cyclic` the cyclic frames and
 scalings, :mod:`.codec` the PDOs as the controller's logical frames, :mod:`.drive` the device
 state machine driven through the control word, :mod:`.startup` and :mod:`.configure` the
-start-up by SDO and NMT (run by ``ehpss_hil.runtime.cia408_master``).
+start-up by SDO and NMT (run by ``ehpss_hil.protocol.cia408.master``).
 """

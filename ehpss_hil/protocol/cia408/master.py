@@ -28,7 +28,7 @@ then NMT Stop of the valve: in STOPPED a CiA 301 node processes no PDO (the rogu
 shut out) and a CiA 408 valve takes its fault reaction. Our own Stop is expected in the valve's
 heartbeat from then on, not a failure. With ``sync: follow`` SYNC is not ours: a second
 producer shows as more SYNCs than one producer at the loop rate sends
-(:class:`~ehpss_hil.runtime.foreign.RateWindow` over the last 40 cycles), ID_COLLISION too.
+(:class:`~ehpss_hil.protocol.ratewindow.RateWindow` over the last 40 cycles), ID_COLLISION too.
 
 **The error history.** After each EMCY with an error code the master reads the node's error
 history 0x1003 by SDO (:class:`~ehpss_hil.protocol.cia408.history.ErrorHistoryReader`: one
@@ -45,16 +45,18 @@ from typing import Any
 
 import can
 
-from ..config import Cia408Config
-from ..errors import NodeError
-from ..protocol.cia408 import cobid
-from ..protocol.cia408.codec import Cia408Codec
-from ..protocol.cia408.configure import configure_encoder, configure_valve
-from ..protocol.cia408.cyclic import Scaling, frame, step_of_nm, unpack_emcy, unpack_heartbeat
-from ..protocol.cia408.drive import DeviceDrive
-from ..protocol.cia408.eds import ENCODER_EDS, VALVE_EDS
-from ..protocol.cia408.history import ErrorHistoryReader
-from ..protocol.cia408.objects import (
+from ...config import Cia408Config
+from ...errors import NodeError
+from ..failsafe import FailsafeReason
+from ..ratewindow import RateWindow
+from . import cobid
+from .codec import Cia408Codec
+from .configure import configure_encoder, configure_valve
+from .cyclic import Scaling, frame, step_of_nm, unpack_emcy, unpack_heartbeat
+from .drive import DeviceDrive
+from .eds import ENCODER_EDS, VALVE_EDS
+from .history import ErrorHistoryReader
+from .objects import (
     BIT_D,
     CONTROL_WORD,
     DEVICE_TYPE,
@@ -64,9 +66,7 @@ from ..protocol.cia408.objects import (
     NmtCommand,
     NmtState,
 )
-from ..protocol.cia408.startup import SDO_TIMEOUT_S, NodeIdentity, check_identity, go_operational, stop_nodes
-from .foreign import RateWindow
-from .lifecycle import FailsafeReason
+from .startup import SDO_TIMEOUT_S, NodeIdentity, check_identity, go_operational, stop_nodes
 
 log = logging.getLogger("ehpss_hil.controller")
 
