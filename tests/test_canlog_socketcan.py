@@ -94,8 +94,8 @@ def test_replay_of_a_candump_recording_is_exact(tmp_path: Path) -> None:
     bit with the scenario and mode given."""
     from ehpss_hil import PROJECT_ROOT
     from ehpss_hil.commands.replay import replay_log
-    from ehpss_hil.report.samplelog import write_lockstep_log
     from ehpss_hil.scenario import load_scenario
+    from ehpss_hil.sim.samplelog import write_lockstep_log
 
     src = PROJECT_ROOT / "scenarios" / "extra" / "unseen-frameloss2pct.yaml"
     scenario = tmp_path / "scenario.yaml"

@@ -23,10 +23,10 @@ from ehpss_hil.driver import ControllerDriver
 from ehpss_hil.emulation import SensorSample
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.physics.load import load_params
-from ehpss_hil.report.samplelog import _Bench
 from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.scenario import Reference, Scenario
+from ehpss_hil.sim.samplelog import _Bench
 from ehpss_hil.sim.transport import FramesTransport, QuantizeTransport
 
 PARAMS = load_params()

@@ -14,8 +14,8 @@ from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.canlog import CandumpLogger, read_log
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.commands import replay
-from ehpss_hil.report.samplelog import write_lockstep_log
 from ehpss_hil.scenario import Scenario, load_scenario
+from ehpss_hil.sim.samplelog import write_lockstep_log
 
 
 def short_case3() -> Scenario:

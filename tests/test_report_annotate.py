@@ -21,9 +21,9 @@ from ehpss_hil.commands import report, sim
 from ehpss_hil.report.annotate import Interval, describe_changes, event_labels, intervals
 from ehpss_hil.report.logdata import load_log_run
 from ehpss_hil.report.logviews import log_view
-from ehpss_hil.report.samplelog import write_lockstep_log
 from ehpss_hil.scenario import Scenario, load_scenario
 from ehpss_hil.sim.lockstep import run_scenario
+from ehpss_hil.sim.samplelog import write_lockstep_log
 
 pytest.importorskip("matplotlib")
 

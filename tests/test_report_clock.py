@@ -20,7 +20,7 @@ from ehpss_hil.codec import FrameCodec
 from ehpss_hil.commands import report
 from ehpss_hil.report.logclock import undo_clock_steps
 from ehpss_hil.report.logdata import load_log_run, log_metrics
-from ehpss_hil.report.samplelog import write_lockstep_log
+from ehpss_hil.sim.samplelog import write_lockstep_log
 
 _STAMP = re.compile(r"\((\d+\.\d+)\)(.*)", re.S)
 

@@ -18,9 +18,9 @@ from ehpss_hil.commands import report
 from ehpss_hil.report.logdata import load_log_run, log_metrics
 from ehpss_hil.report.logmeta import reference_of
 from ehpss_hil.report.metrics import compute_metrics
-from ehpss_hil.report.samplelog import write_lockstep_log
 from ehpss_hil.scenario import Scenario, load_scenario
 from ehpss_hil.sim.lockstep import run_scenario
+from ehpss_hil.sim.samplelog import write_lockstep_log
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -151,7 +151,7 @@ def write_lockstep_log(
     ts = scenario.sample_time_s
     ctrl = make_controller(mode, prm, ts, tuning, scenario.reference)
     side = {
-        "tool": "ehpss_hil.report.samplelog (lockstep, no bus)",
+        "tool": "ehpss_hil.sim.samplelog (lockstep, no bus)",
         "scenario": jsonable(scenario),
         "config": {"mode": mode, "rate_hz": 1.0 / ts},
         "clock": "synthetic: t0 + k*Ts (+ µs per frame), s since the Unix epoch",
