@@ -93,7 +93,7 @@ def test_replay_of_a_candump_recording_is_exact(tmp_path: Path) -> None:
     ``candump -L`` (can-utils: its own timestamps and file order, no sidecar) replays bit for
     bit with the scenario and mode given."""
     from ehpss_hil import PROJECT_ROOT
-    from ehpss_hil.commands.replay import replay_log
+    from ehpss_hil.replay.engine import replay_log
     from ehpss_hil.scenario import load_scenario
     from ehpss_hil.sim.samplelog import write_lockstep_log
 

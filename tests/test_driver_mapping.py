@@ -14,8 +14,6 @@ import can
 
 from ehpss_hil.canlog import CandumpLogger
 from ehpss_hil.codec import FrameCodec
-from ehpss_hil.commands.replay import ReplaySetup
-from ehpss_hil.commands.replay import _Replayer as Replayer
 from ehpss_hil.config import SetpointPolicy
 from ehpss_hil.control.registry import make_controller
 from ehpss_hil.control.tuning import ControlTuning
@@ -23,6 +21,7 @@ from ehpss_hil.driver import ControllerDriver
 from ehpss_hil.emulation import SensorSample
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.physics.load import load_params
+from ehpss_hil.replay.engine import Replayer, ReplaySetup
 from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.scenario import Reference, Scenario
@@ -132,7 +131,7 @@ def test_the_daemon_loop_and_replay_give_the_driver_the_same_input() -> None:
     def replay_offer(fs: list[can.Message]) -> None:
         for n, f in enumerate(fs):
             rep.frame(f, n)
-        rep._feed(len(rep.pending))
+        rep.feed(len(rep.pending))
 
     assert _per_sample(replay_offer, lambda: rep.driver) == want
 

@@ -14,6 +14,7 @@ from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.canlog import CandumpLogger, read_log
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.commands import replay
+from ehpss_hil.replay.engine import ReplayError, replay_log
 from ehpss_hil.scenario import Scenario, load_scenario
 from ehpss_hil.sim.samplelog import write_lockstep_log
 
@@ -33,7 +34,7 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 @pytest.mark.parametrize("mode", ["mmac", "mmac-paper", "nrc"])
 def test_same_config_is_bit_identical(logs: dict[str, Path], mode: str) -> None:
-    res = replay.replay_log(logs[mode])
+    res = replay_log(logs[mode])
     assert res.setup.mode == mode  # read from CTRL_STATUS
     assert res.cycles == 1000 and res.identical, res.first
 
@@ -68,7 +69,7 @@ def test_tampered_command_is_pinpointed(logs: dict[str, Path], tmp_path: Path) -
                     )
                 n += 1
             lg.log(msg)
-    res = replay.replay_log(out, mode="nrc", scenario=None)
+    res = replay_log(out, mode="nrc", scenario=None)
     assert res.divergent == 1 and res.first[0].cycle == 400
     assert res.first[0].logged_a - res.first[0].replayed_a == pytest.approx(1e-3, abs=1e-6)
 
@@ -118,7 +119,7 @@ def test_skipped_periods_replay_bit_identical(tmp_path: Path) -> None:
         eb.shutdown()
         cb.shutdown()
     assert loop.skipped_periods >= 18
-    res = replay.replay_log(out)
+    res = replay_log(out)
     assert res.skipped_periods == loop.skipped_periods
     assert res.cycles > 900 and res.identical, res.first
 
@@ -146,7 +147,7 @@ def test_lossy_lockstep_logs_replay_exactly(tmp_path: Path, mode: str, sensor: f
     and lost VALVE_CMDs (a CycleCount gap: cycles that ran, commands that never arrived) replay
     bit for bit; before the one driver 3025 / 1037 of 3500 cycles diverged."""
     log = write_lockstep_log(_lossy(sensor, command), mode, tmp_path / "run.log")
-    res = replay.replay_log(log)
+    res = replay_log(log)
     assert res.identical, (res.divergent, res.first)
     assert (res.skipped_periods > 0) == (command > 0)
     assert res.cycles + res.skipped_periods == 1200
@@ -181,7 +182,7 @@ def test_replay_pairs_commands_by_content_not_file_order(tmp_path: Path) -> None
     shuffled = tmp_path / "candump-order.log"
     assert _reordered_like_candump(log, shuffled) > 1000
     (tmp_path / "candump-order.log.json").write_text((tmp_path / "run.log.json").read_text())
-    res = replay.replay_log(shuffled)
+    res = replay_log(shuffled)
     assert res.identical, (res.divergent, res.first)
 
 
@@ -200,7 +201,7 @@ def test_python_can_formats_replay_exactly(tmp_path: Path, suffix: str) -> None:
     scenario.write_text(LOSSY.read_text().replace("duration_s: 4.0", "duration_s: 1.2"))
     sc = load_scenario(scenario)
     assert sc.reference == _lossy(0.03, 0.0).reference
-    res = replay.replay_log(other, mode="mmac", scenario=scenario)
+    res = replay_log(other, mode="mmac", scenario=scenario)
     assert res.identical, (res.divergent, res.first)
 
 
@@ -217,5 +218,5 @@ def test_unreadable_log_is_one_line_exit_2(
 
 
 def test_oracle_is_not_replayable(logs: dict[str, Path]) -> None:
-    with pytest.raises(replay.ReplayError, match="not replayable"):
-        replay.replay_log(logs["nrc"], mode="oracle")
+    with pytest.raises(ReplayError, match="not replayable"):
+        replay_log(logs["nrc"], mode="oracle")

@@ -14,9 +14,9 @@ from _proc import STARTUP_LIMIT_S
 from _scenarios import short_scenario_yaml
 
 from ehpss_hil.bus.netns import netns_unavailable_reason
-from ehpss_hil.commands.replay import replay_log
 from ehpss_hil.errors import ProcessFailedError
 from ehpss_hil.orchestrate import RunPlan, check_exit_codes, execute
+from ehpss_hil.replay.engine import replay_log
 from ehpss_hil.report.logdata import load_log_run
 from ehpss_hil.run_metrics import metrics_from_run
 from ehpss_hil.scenario import load_scenario

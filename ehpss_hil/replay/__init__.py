@@ -1,0 +1,1 @@
+"""Replaying a logged run through the controller, offline (:mod:`.engine`)."""
