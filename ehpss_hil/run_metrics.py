@@ -10,7 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from .errors import OutputError
-from .report.logdata import load_log_run, log_metrics
+from .report.logdata import load_log_run
+from .report.logmetrics import log_metrics
 from .report.markdown import metrics_row, write_markdown
 from .runtime.rtverdict import RealtimeVerdict, judge
 from .scenario import Scenario, load_scenario

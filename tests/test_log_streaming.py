@@ -25,7 +25,8 @@ from test_report_log import short_case1
 
 from ehpss_hil.canlog.order import OutOfOrderError, TimeOrder
 from ehpss_hil.report.decimate import thinned
-from ehpss_hil.report.logdata import load_log_run, log_metrics
+from ehpss_hil.report.logdata import load_log_run
+from ehpss_hil.report.logmetrics import log_metrics
 from ehpss_hil.sim.samplelog import write_lockstep_log
 
 #: a child that only refuses its input stays near the interpreter + numpy (≈ 50 MB)

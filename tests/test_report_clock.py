@@ -19,7 +19,8 @@ from ehpss_hil.canlog.reader import FRAME_INDEX
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.commands import report
 from ehpss_hil.report.logclock import undo_clock_steps
-from ehpss_hil.report.logdata import load_log_run, log_metrics
+from ehpss_hil.report.logdata import load_log_run
+from ehpss_hil.report.logmetrics import log_metrics
 from ehpss_hil.sim.samplelog import write_lockstep_log
 
 _STAMP = re.compile(r"\((\d+\.\d+)\)(.*)", re.S)

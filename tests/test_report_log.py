@@ -15,8 +15,9 @@ from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.canlog import CandumpLogger, read_log
 from ehpss_hil.canlog.sidecar import sidecar_path
 from ehpss_hil.commands import report
-from ehpss_hil.report.logdata import load_log_run, log_metrics
+from ehpss_hil.report.logdata import load_log_run
 from ehpss_hil.report.logmeta import reference_of
+from ehpss_hil.report.logmetrics import log_metrics
 from ehpss_hil.report.metrics import compute_metrics
 from ehpss_hil.scenario import Scenario, load_scenario
 from ehpss_hil.sim.lockstep import run_scenario

@@ -16,7 +16,8 @@ from pathlib import Path
 from ..canlog.reader import LogError
 from ..extras import require
 from ..report.decimate import thinned
-from ..report.logdata import LogRun, load_log_run, log_metrics
+from ..report.logdata import LogRun, load_log_run
+from ..report.logmetrics import log_metrics
 from ..report.markdown import metrics_row, write_markdown
 from ..scenario import load_scenario
 

@@ -1,5 +1,5 @@
 """A CAN log (any format :func:`~ehpss_hil.canlog.read_frames` reads) turned into the
-per-sample record a report needs (a :class:`SimResult`).
+per-sample record a report needs (a :class:`SimResult`; its metrics: :mod:`.logmetrics`).
 
 Alignment (the controller's view, one row per logged VALVE_CMD):
 
@@ -35,7 +35,7 @@ import numpy as np
 
 from ..canlog import BadLines, decode_log, read_sidecar
 from ..canlog.reader import FRAME_INDEX, resolve_log
-from ..codec import FrameCodec, Verdict
+from ..codec import FrameCodec
 from ..physics.load import load_params
 from ..physics.params import Params
 from ..physics.reference import ReferenceModel
@@ -44,10 +44,9 @@ from ..scenario import Scenario
 from .logbounds import check_sample_time, check_span
 from .logclock import undo_clock_steps, unwrap_counter
 from .logmeta import RunInfo, reference_of, run_info
-from .metrics import RunMetrics, compute_metrics
 from .result import N_SLOTS, SimResult
 
-__all__ = ["LogMetrics", "LogRun", "load_log_run", "log_metrics", "reference_of"]
+__all__ = ["LogRun", "load_log_run", "reference_of"]
 
 MODE_NAMES = {code: mode for mode, code in MODE_CODE.items()}  # CTRL_STATUS Mode → mode
 _NO_MODEL = 15  # CTRL_STATUS nibble of "no bank" (−1 & 0xF)
@@ -347,67 +346,3 @@ def _dbc_of(side: dict[str, Any] | None) -> str | None:
     dbc = (side or {}).get("dbc")
     p = dbc.get("path") if isinstance(dbc, dict) else dbc
     return str(p) if p and Path(str(p)).is_file() else None
-
-
-def verdict_summary(run: LogRun) -> dict[str, int]:
-    """Frames rejected while decoding the log, by verdict name (all frame names summed)."""
-    out: dict[str, int] = {}
-    for per in run.verdicts.values():
-        for v, n in per.items():
-            if not Verdict[v].usable:
-                out[v] = out.get(v, 0) + n
-    return out
-
-
-# ---- metrics (adapter to report.metrics) ------------------------------------------------------
-@dataclass
-class LogMetrics:
-    """docs/design.md §10 metrics of a log where it has ground truth, and what a log gives regardless.
-
-    ``run``: :class:`RunMetrics` (None without PLANT_TRUTH or without a reference, see
-    ``unavailable``); ``extra``: switch counter, overruns, max cycle time (s), rejected frames,
-    sensor-based RMS (y_s − y_m, m: an indication only, the sensor may be faulty).
-    """
-
-    run: RunMetrics | None
-    extra: dict[str, Any]
-    unavailable: list[str]
-
-
-def _counter_span(v: np.ndarray, modulo: int) -> int:
-    return int(unwrap_counter(v.astype(np.int64), modulo)[-1] - int(v[0])) if len(v) else 0
-
-
-def log_metrics(run: LogRun) -> LogMetrics:
-    """Metrics of a :class:`LogRun` (NaN gaps in x_true are held from the previous sample)."""
-    r, st, stats = run.result, run.frames.get("CTRL_STATUS"), run.frames.get("CTRL_STATS")
-    extra: dict[str, Any] = {"samples": len(r.t_s), "rejected_frames": verdict_summary(run)}
-    if st is not None and len(st["t_s"]):
-        extra["switches_counter"] = _counter_span(st["Switches"][np.argsort(st["t_s"])], 256)
-    if stats is not None and len(stats["t_s"]):
-        order = np.argsort(stats["t_s"])
-        extra["overruns"] = _counter_span(stats["Overruns"][order], 65536)
-        extra["cycle_time_max_s"] = float(np.nanmax(stats["CycleTimeMax"]))
-    unavailable: list[str] = []
-    if run.has_reference and np.any(np.isfinite(r.y_s_m)):
-        e_s = r.y_s_m - r.y_m_m
-        extra["sensor_rms_error_m"] = float(np.sqrt(np.nanmean(e_s**2)))
-    if not run.has_truth:
-        unavailable.append(
-            "rms_error_m, pre_fault_max_m, per-event peak_error_m and recovery_s "
-            "need x_true: the log has no PLANT_TRUTH (run the emulator with truth on)"
-        )
-    if not run.has_reference:
-        unavailable.append("every tracking metric needs y_m: no reference in the sidecar (pass --scenario)")
-    if unavailable or len(r.t_s) == 0:
-        return LogMetrics(None, extra, unavailable)
-    x = r.x_true_m.copy()
-    gaps = ~np.isfinite(x)
-    if gaps.any():
-        idx = np.where(gaps, 0, np.arange(len(x)))
-        np.maximum.accumulate(idx, out=idx)
-        x = x[idx]
-        x[~np.isfinite(x)] = 0.0
-        extra["x_true_filled_samples"] = int(gaps.sum())
-    filled = SimResult(**{**r.__dict__, "x_true_m": x})
-    return LogMetrics(compute_metrics(filled), extra, unavailable)

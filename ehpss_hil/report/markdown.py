@@ -11,7 +11,8 @@ from typing import Any
 
 from .annotate import Interval
 from .html import write_html
-from .logdata import LogMetrics, LogRun
+from .logdata import LogRun
+from .logmetrics import LogMetrics
 from .logviews import log_view
 
 
