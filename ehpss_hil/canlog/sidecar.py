@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import DEFAULT_DBC, __version__
+from .candumpfile import numbered
 from .formats import SIDECAR_FORMATS
 
 DEFAULT_CLOCK = (
@@ -217,3 +218,22 @@ def is_rotation_of(log_name: str, name: str) -> bool:
     """``name`` is a rotated file ``<log_name>.N`` (N a positive decimal number)."""
     tail = name[len(log_name) + 1 :] if name.startswith(log_name + ".") else ""
     return tail.isdecimal() and tail.isascii() and int(tail) > 0
+
+
+def claim_log_names(path: Path, backups: int, what: str, overwrite: bool) -> None:
+    """Before a log is opened at ``path``: refuse a foreign file among its names (the log, its
+    sidecar, ``path.1`` … ``path.<backups>``; :class:`~ehpss_hil.errors.OutputError` naming
+    ``what`` would be written) unless ``overwrite``; remove the earlier log's rotated files
+    (those its sidecar lists, nothing else)."""
+    from ..outputs import foreign, refuse_foreign
+
+    root = path.parent
+    ours = owned_names(path)
+    rotated = (numbered(path, i) for i in range(1, backups + 1))
+    names = [path, sidecar_path(path), *rotated]
+    if not overwrite:
+        refuse_foreign(path, foreign(names, ours, root), what)
+    for name in sorted(ours):
+        p = root / name
+        if is_rotation_of(path.name, name) and (p.is_symlink() or p.is_file()):
+            p.unlink()

@@ -43,7 +43,6 @@ from typing import Any
 import can
 
 from ..extras import require
-from ..outputs import foreign, refuse_foreign
 from .candumpfile import CandumpFile, numbered
 from .diskspace import DISK_RESERVE_BYTES, DiskRoom, LineDrops
 from .formats import SIDECAR_FORMATS, FrameFile, log_format
@@ -52,8 +51,7 @@ from .sidecar import (
     SIDECAR_RESERVE_BYTES,
     FileRecord,
     build_sidecar,
-    is_rotation_of,
-    owned_names,
+    claim_log_names,
     sidecar_path,
     write_json_atomic,
 )
@@ -132,7 +130,7 @@ class CandumpLogger:
         self._records: list[FileRecord] = [FileRecord()]  # [0] = current file, [i] = path.i
         if self.format == "mf4":
             require("mf4", f"{self.path}: an MF4 log")  # before any file is touched
-        self._claim(overwrite)
+        claim_log_names(self.path, self.backups, f"a {self.format} log", overwrite)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._room = DiskRoom(self.path.parent, disk_reserve_bytes)
         self._drops = LineDrops(self.path)
@@ -317,20 +315,6 @@ class CandumpLogger:
         while len(self._records) > self.backups + 1:
             self._discarded += self._records.pop().lines
         self._write_sidecar("open")
-
-    def _claim(self, overwrite: bool) -> None:
-        """Refuse a foreign target unless ``overwrite``; remove the earlier log's rotated files
-        (those its sidecar lists, nothing else)."""
-        root = self.path.parent
-        ours = owned_names(self.path)
-        rotated = (numbered(self.path, i) for i in range(1, self.backups + 1))
-        names = [self.path, sidecar_path(self.path), *rotated]
-        if not overwrite:
-            refuse_foreign(self.path, foreign(names, ours, root), f"a {self.format} log")
-        for name in sorted(ours):
-            p = root / name
-            if is_rotation_of(self.path.name, name) and (p.is_symlink() or p.is_file()):
-                p.unlink()
 
     # ---- shutdown ------------------------------------------------------------------------
     def close(self) -> LogSummary:
