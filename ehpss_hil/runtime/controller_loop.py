@@ -20,7 +20,6 @@ per received sensor pair (triggered by SENSOR_AUX, which the emulator sends afte
 
 from __future__ import annotations
 
-import logging
 import time
 from typing import TYPE_CHECKING
 
@@ -39,23 +38,16 @@ from .loop_options import CIA408_OWN_FRAMES, OWN_FRAMES, LoopOptions
 from .periodic import PeriodicFrames
 from .stats import LoopStats
 from .status_frames import StatusReporter
+from .transitions import Transitions
 from .watchdog import SensorWatchdog
 
 if TYPE_CHECKING:
     from ..protocol.cia408.master import CyclicMaster
 
-log = logging.getLogger("ehpss_hil.controller")
-
 __all__ = ["CIA408_OWN_FRAMES", "OWN_FRAMES", "ControllerLoop", "LoopOptions"]
 
 _E2E_VERDICTS = (Verdict.CRC_ERROR, Verdict.REPEATED, Verdict.WRONG_SEQUENCE, Verdict.BAD_DLC)
 _SEQUENCE_VERDICTS = (Verdict.REPEATED, Verdict.WRONG_SEQUENCE)
-#: who put the loop into FAULT, for the log (anything else: the CANopen master's device checks)
-_SOURCE = {
-    None: "watchdog",
-    FailsafeReason.ID_COLLISION: "second transmitter",
-    FailsafeReason.BUS_ERROR: "bus",
-}
 
 
 class ControllerLoop:
@@ -100,6 +92,10 @@ class ControllerLoop:
         io.health = BusHealth(opts.watchdog)
         self.setpoints = SetpointGate(opts.setpoint)
         self.stats = LoopStats(opts.stats_capacity)
+        #: CONFIGURED → ACTIVE ⇄ FAULT, decided each cycle
+        self.transitions = Transitions(
+            self.life, self.wd, self.guard, io.health, self.driver, master, opts.watchdog.failsafe
+        )
         #: the sensor pair's CAN IDs under this loop's protocol profile
         self.id_pos = self.codec.can_id("SENSOR_POS")
         self.id_aux = self.codec.can_id("SENSOR_AUX")
@@ -217,66 +213,21 @@ class ControllerLoop:
 
     # ---- one cycle --------------------------------------------------------------------------
     def _update_state(self) -> None:
-        st = self.life.state
-        collided = self.guard.update(self.cycles)
-        device = self.master.update(self.cycles) if self.master is not None else None
-        if collided and self.master is not None:  # the valve shut out (first cause only)
-            self.master.second_transmitter(self.guard.last_cause)
-        if self.io.health.update(self.cycles):  # nothing reaches the valve: before any device
-            device = FailsafeReason.BUS_ERROR
-        if st is State.CONFIGURED:
-            if self._fresh and (self.master is None or self.master.ready):
-                self.wd.reset()
-                self.life.to(State.ACTIVE)
-                log.info("first sensor data: ACTIVE (mode %s)", self.controller.mode)
-                if collided:
-                    self.enter_fault(FailsafeReason.ID_COLLISION)
-            return
-        if self._stale_in_cycle:
-            log.warning(
-                "cycle %d: %d stale sensor frame(s) (received > %.3g ms ago) dropped",
-                self.cycles,
-                self._stale_in_cycle,
-                self.stale_after_s * 1e3,
-            )
-        fresh = self._fresh and (self.master is None or self.master.status_fresh)
-        tripped = self.wd.update(fresh, self._e2e_bad, self._implausible, self._late)
-        if st is State.ACTIVE and device is not None:
-            self.enter_fault(device)
-        elif st is State.ACTIVE and (tripped or collided):
-            self.enter_fault(None if tripped else FailsafeReason.ID_COLLISION)
-        elif st is State.FAULT and collided:  # the more specific diagnosis
-            if self.life.reason is not FailsafeReason.ID_COLLISION:
-                log.error(
-                    "cycle %d: second transmitter: FAULT reason %s -> ID_COLLISION",
-                    self.cycles,
-                    self.life.reason.name,
-                )
-            self.life.reason = FailsafeReason.ID_COLLISION
-        elif st is State.FAULT and device is not None and self.life.reason is not device:
-            # the device's own diagnosis (EMCY, leaving ACTIVE, a lost heartbeat) is more specific
-            # than a starved loop's or a silent sensor's: it is what has to be cleared first
-            if self.life.reason is not FailsafeReason.ID_COLLISION:
-                log.error("cycle %d: FAULT reason %s -> %s", self.cycles, self.life.reason.name, device.name)
-                self.life.reason = device
-        elif st is State.FAULT and not tripped and device is None:
-            self.driver.restart()
-            self.life.to(State.ACTIVE)
-            log.warning(
-                "cycle %d: sensor data fresh for %d cycles: ACTIVE again", self.cycles, self.wd.fresh_cycles
-            )
+        """This cycle's lifecycle transition (:class:`~.transitions.Transitions`)."""
+        self.transitions.update(
+            self.cycles,
+            self.controller.mode,
+            self._fresh,
+            self._e2e_bad,
+            self._implausible,
+            self._late,
+            self._stale_in_cycle,
+            self.stale_after_s,
+        )
 
     def enter_fault(self, reason: FailsafeReason | None = None) -> None:
         """ACTIVE → FAULT for ``reason`` (None: the watchdog's)."""
-        why = self.wd.reason if reason is None else reason
-        self.life.to(State.FAULT, why)
-        log.error(
-            "cycle %d: %s: %s -> FAULT, fail-safe %s",
-            self.cycles,
-            _SOURCE.get(reason, "device"),
-            why.name,
-            self.opts.watchdog.failsafe,
-        )
+        self.transitions.enter_fault(self.cycles, reason)
 
     def _command(self) -> tuple[float, bool]:
         st = self.life.state
