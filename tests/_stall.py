@@ -164,7 +164,8 @@ class Status:
 
 def controller_log(path: Path) -> tuple[list[Command], list[Status]]:
     """Commands (with the echoed sensor frame's receive time) and CTRL_STATUS frames."""
-    from ehpss_hil.runtime.lifecycle import FailsafeReason, State
+    from ehpss_hil.protocol.failsafe import FailsafeReason
+    from ehpss_hil.runtime.lifecycle import State
 
     codec = FrameCodec()
     pos, cmd, st = (codec.can_id(n) for n in ("SENSOR_POS", "VALVE_CMD", "CTRL_STATUS"))

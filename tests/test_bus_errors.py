@@ -18,8 +18,9 @@ from test_id_collisions import Rig, _active
 
 from ehpss_hil.bus.netns import SETUP_SH, PrivateNetns, netns_unavailable_reason
 from ehpss_hil.config import Watchdog
+from ehpss_hil.protocol.failsafe import FailsafeReason
 from ehpss_hil.runtime.bushealth import CAN_ERR_ACK, CAN_ERR_BUSOFF, ERROR_FRAME_LIMIT
-from ehpss_hil.runtime.lifecycle import FailsafeReason, State
+from ehpss_hil.runtime.lifecycle import State
 
 ROOT = Path(__file__).resolve().parent.parent
 NETNS_SKIP = netns_unavailable_reason()

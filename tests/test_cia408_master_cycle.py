@@ -14,7 +14,7 @@ from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.codec import Cia408Codec
 from ehpss_hil.protocol.cia408.master import CyclicMaster
 from ehpss_hil.protocol.cia408.objects import BIT_D, NmtState
-from ehpss_hil.runtime.lifecycle import FailsafeReason
+from ehpss_hil.protocol.failsafe import FailsafeReason
 
 RATE_HZ = 1000.0
 

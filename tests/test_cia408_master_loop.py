@@ -30,9 +30,10 @@ from ehpss_hil.protocol.cia408.objects import (
     NmtCommand,
     NmtState,
 )
+from ehpss_hil.protocol.failsafe import FailsafeReason
 from ehpss_hil.runtime.controller_loop import CIA408_OWN_FRAMES, OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.frameio import FrameIO
-from ehpss_hil.runtime.lifecycle import FailsafeReason, State
+from ehpss_hil.runtime.lifecycle import State
 from ehpss_hil.runtime.loop_run import loop_summary
 from ehpss_hil.runtime.rawio import RawFrameIO
 from ehpss_hil.scenario import Reference, Scenario

@@ -25,7 +25,8 @@ from ehpss_hil.codec import FrameCodec
 from ehpss_hil.orchestrate import RunPlan, check_exit_codes, execute
 from ehpss_hil.physics.load import load_params
 from ehpss_hil.protocol.cia408 import cobid
-from ehpss_hil.runtime.lifecycle import FailsafeReason, State
+from ehpss_hil.protocol.failsafe import FailsafeReason
+from ehpss_hil.runtime.lifecycle import State
 from ehpss_hil.sim.lockstep import reference_output
 
 NETNS_SKIP = netns_unavailable_reason()

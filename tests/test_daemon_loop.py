@@ -15,8 +15,9 @@ from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.codec.e2e import protect
 from ehpss_hil.config import Watchdog
 from ehpss_hil.control.base import ControllerStatus, Measurement, ValveCommand
+from ehpss_hil.protocol.failsafe import FailsafeReason
 from ehpss_hil.runtime.frameio import FrameIO
-from ehpss_hil.runtime.lifecycle import FailsafeReason, State
+from ehpss_hil.runtime.lifecycle import State
 
 
 @pytest.fixture

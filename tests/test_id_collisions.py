@@ -18,11 +18,12 @@ from ehpss_hil.config import SetpointPolicy, Watchdog
 from ehpss_hil.control.base import Controller, ControllerStatus, Measurement, ValveCommand
 from ehpss_hil.physics.load import load_params
 from ehpss_hil.physics.params import Params
+from ehpss_hil.protocol.failsafe import FailsafeReason
 from ehpss_hil.runtime.collisions import SentFrames
 from ehpss_hil.runtime.controller_loop import OWN_FRAMES, ControllerLoop, LoopOptions
 from ehpss_hil.runtime.foreign import SensorStreams
 from ehpss_hil.runtime.frameio import FrameIO, limit_sensor_rate
-from ehpss_hil.runtime.lifecycle import FailsafeReason, State
+from ehpss_hil.runtime.lifecycle import State
 from ehpss_hil.runtime.loop_run import loop_summary
 from ehpss_hil.scenario import Reference
 

@@ -15,7 +15,8 @@ from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import Watchdog
 from ehpss_hil.control.base import Measurement, ValveCommand
 from ehpss_hil.control.sampleclock import RESYNC_SAMPLES
-from ehpss_hil.runtime.lifecycle import FailsafeReason, State
+from ehpss_hil.protocol.failsafe import FailsafeReason
+from ehpss_hil.runtime.lifecycle import State
 from ehpss_hil.runtime.watchdog import SensorWatchdog
 
 LONG = Watchdog(timeout_cycles=100, recovery_cycles=5, auto_recover=True)

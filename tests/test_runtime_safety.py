@@ -8,7 +8,8 @@ import signal
 import pytest
 
 from ehpss_hil.config import Watchdog
-from ehpss_hil.runtime.lifecycle import FailsafeReason, Lifecycle, LifecycleError, State
+from ehpss_hil.protocol.failsafe import FailsafeReason
+from ehpss_hil.runtime.lifecycle import Lifecycle, LifecycleError, State
 from ehpss_hil.runtime.signals import install_stop_handlers, restore_handlers
 from ehpss_hil.runtime.watchdog import SensorWatchdog
 

@@ -33,7 +33,7 @@ def test_the_dbc_names_every_failsafe_reason() -> None:
     import cantools
 
     from ehpss_hil import DATA_DIR
-    from ehpss_hil.runtime.lifecycle import FailsafeReason
+    from ehpss_hil.protocol.failsafe import FailsafeReason
 
     db = cantools.database.load_file(str(DATA_DIR / "dbc" / "ehpss.dbc"))
     assert isinstance(db, cantools.database.can.Database)

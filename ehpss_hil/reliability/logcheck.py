@@ -203,7 +203,8 @@ def last_status(
 ) -> tuple[str, str] | None:
     """(State, FailsafeReason) names of the controller's last CTRL_STATUS (with
     ``before_last``: the one before the shutdown status)."""
-    from ..runtime.lifecycle import FailsafeReason, State
+    from ..protocol.failsafe import FailsafeReason
+    from ..runtime.lifecycle import State
 
     codec = codec or FrameCodec()
     st = [f for f in log.frames if f[0] == codec.can_id("CTRL_STATUS")]

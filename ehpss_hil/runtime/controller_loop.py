@@ -29,11 +29,12 @@ from ..codec import Verdict
 from ..control.base import Controller, Measurement
 from ..control.sampleclock import RESYNC_SAMPLES
 from ..driver import ControllerDriver
+from ..protocol.failsafe import FailsafeReason
 from ..scenario import Reference, ReferenceBlocks
 from .bushealth import BusHealth
 from .foreign import CollisionGuard, SetpointGate
 from .frameio import FrameIO
-from .lifecycle import FailsafeReason, Lifecycle, State
+from .lifecycle import Lifecycle, State
 from .loop_options import CIA408_OWN_FRAMES, OWN_FRAMES, LoopOptions
 from .periodic import PeriodicFrames
 from .stats import LoopStats

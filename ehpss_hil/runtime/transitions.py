@@ -11,9 +11,10 @@ import logging
 from typing import TYPE_CHECKING
 
 from ..driver import ControllerDriver
+from ..protocol.failsafe import FailsafeReason
 from .bushealth import BusHealth
 from .foreign import CollisionGuard
-from .lifecycle import FailsafeReason, Lifecycle, State
+from .lifecycle import Lifecycle, State
 from .watchdog import SensorWatchdog
 
 if TYPE_CHECKING:

@@ -18,7 +18,7 @@ it does not recover while that holds.
 from __future__ import annotations
 
 from ..config import Watchdog
-from .lifecycle import FailsafeReason
+from ..protocol.failsafe import FailsafeReason
 
 
 class LateWindow:
