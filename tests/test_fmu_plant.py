@@ -236,3 +236,40 @@ def test_without_fmpy_an_fmu_scenario_names_the_extra(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "pip install 'ehpss-hil[fmu]'" in proc.stderr, proc.stderr
+
+
+# ---- campaigns ------------------------------------------------------------------------------------
+_CAMPAIGN = """\
+name: fmu-campaign
+base: {base}
+samples: 4
+modes: [nrc, mmac, oracle]
+duration_s: 1.0
+faults:
+  count: [1, 1]
+  onset_s: [0.0, 0.5]
+  kinds:
+    {kind}: {{weight: 1, magnitude: [0.5, 0.9]}}
+"""
+
+
+def test_a_campaign_on_the_fmu_checks_its_kinds_and_hashes_the_fmu(
+    fmus: dict[str, Path], tmp_path: Path
+) -> None:
+    """A fault kind the FMU does not model is refused naming it; the content hash covers the
+    FMU's bytes, so a campaign resumed on a changed FMU does not reuse the old runs."""
+    from ehpss_hil.campaign.spec import load_campaign
+
+    fmap = {k: v for k, v in TEST_FMU_MAP.items() if k != "k_q"}
+    base = _scenario(tmp_path, fmus["good"], fmap=fmap)
+    bad = tmp_path / "kq.yaml"
+    bad.write_text(_CAMPAIGN.format(base=base.name, kind="kq"))
+    proc = _cli([*EHPSS_HIL, "check-config", str(bad)], tmp_path)
+    assert proc.returncode == 2
+    assert "faults.kinds.kq: the base scenario's FMU plant does not model k_q" in proc.stderr
+    camp = tmp_path / "loe.yaml"
+    camp.write_text(_CAMPAIGN.format(base=base.name, kind="loe"))
+    first = load_campaign(camp).content_hash
+    assert load_campaign(camp).content_hash == first
+    (tmp_path / fmus["good"].name).write_bytes(fmus["fail_1s"].read_bytes())
+    assert load_campaign(camp).content_hash != first

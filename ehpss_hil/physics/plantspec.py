@@ -123,6 +123,14 @@ class PlantSpec:
         check_fmu(Path(spec.path), spec.fmu_map, source)
         return spec
 
+    def fmu_digest(self) -> str:
+        """SHA-256 (hex) of the FMU file's bytes (``model: fmu``; "" otherwise)."""
+        if self.model != "fmu":
+            return ""
+        import hashlib
+
+        return hashlib.sha256(Path(self.path).read_bytes()).hexdigest()
+
     @property
     def modelled_faults(self) -> frozenset[str]:
         """The actuator faults (FaultState fields) this plant models: all for the built-in
