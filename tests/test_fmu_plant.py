@@ -45,6 +45,7 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "not_fmu": d / "notes.fmu",
         "no_binary": d / "no-binary.fmu",
         "not_zip": d / "garbage.fmu",
+        "bad_binary": d / "bad-binary.fmu",
     }
     with zipfile.ZipFile(out["not_fmu"], "w") as zf:
         zf.writestr("readme.txt", "a zip, but no FMU")
@@ -52,6 +53,11 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         for name in src.namelist():
             if not name.startswith("binaries/linux64/"):
                 zf.writestr(name, src.read(name))
+    with zipfile.ZipFile(good) as src, zipfile.ZipFile(out["bad_binary"], "w") as zf:
+        for name in src.namelist():
+            zf.writestr(
+                name, b"not a shared library" if name.startswith("binaries/linux64/") else src.read(name)
+            )
     out["not_zip"].write_bytes(b"\x7fELF not a zip at all")
     return out
 
@@ -188,6 +194,10 @@ def test_sensor_faults_act_around_the_fmu_and_an_unmodelled_inject_is_refused(fm
         ("not_fmu", "plant.path: notes.fmu is not an FMU (no modelDescription.xml in the zip)"),
         ("not_zip", "plant.path: garbage.fmu is not an FMU (not a zip archive)"),
         ("no_binary", "plant.path: no-binary.fmu has no binary for linux64 (it has: win64)"),
+        (
+            "bad_binary",
+            "plant.path: FMU bad-binary.fmu: initialization failed: Failed to load shared library",
+        ),
     ],
 )
 def test_a_hostile_fmu_is_one_line_and_exit_2(

@@ -138,10 +138,16 @@ class _Slave:
         self.c = None
 
 
-def _release(live: list[_Slave], folder: str) -> None:
+def _free(live: list[_Slave]) -> None:
+    """Free every instance in ``live`` (and empty it)."""
     for slave in live:
         slave.free()
     live.clear()
+
+
+def _release(live: list[_Slave], folder: str) -> None:
+    """The plant's end: its instances freed, its extracted FMU removed."""
+    _free(live)
     shutil.rmtree(folder, ignore_errors=True)
 
 
@@ -192,7 +198,7 @@ class FmuPlant:
         (ConfigError naming the FMU and the FMI status when it cannot be instantiated)."""
         if self._slave is not None and self._k == 0 and self.faults == FaultState():
             return  # fresh already
-        _release(self._live, "")  # the folder stays; only the old instance goes
+        _free(self._live)  # the extracted FMU stays; only the old instance goes
         self._k = 0
         self.faults = FaultState()
         self._echo_a = self._current[0] = 0.0
