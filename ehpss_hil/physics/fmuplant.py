@@ -27,9 +27,13 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError, PlantStepError, one_line
+from ..extras import require
 from .faults import FaultState
 from .fmucheck import FmuDescription, check_fmu
 from .fmumap import ACTUATOR_FAULTS, FmuMap
+
+require("fmu", "plant: {model: fmu}", ("fmpy",))  # before fmpy's first import below
+from fmpy.fmi1 import FMICallException  # noqa: E402  (fmpy: the FMU plant's own dependency)
 
 log = logging.getLogger("ehpss_hil.fmu")
 
@@ -234,9 +238,7 @@ class FmuPlant:
             try:
                 self._set_faults_on(self._slave)
                 self._read(self._slave)  # outputs that feed a fault through (the actual spool)
-            except PlantStepError:
-                raise
-            except Exception as exc:
+            except (FMICallException, ctypes.ArgumentError) as exc:
                 raise PlantStepError(self._describe(exc, f"setting faults at t = {self.t_s:.4f} s")) from exc
 
     def _set_faults_on(self, slave: _Slave) -> None:
@@ -269,9 +271,7 @@ class FmuPlant:
                         f"FMU {self.desc.name}: asked to terminate at t = {t0 + j * h:.4f} s"
                     )
             self._read(slave)
-        except PlantStepError:
-            raise
-        except Exception as exc:  # fmpy's FMICallException (the status), or a ctypes error
+        except (FMICallException, ctypes.ArgumentError) as exc:  # the status; a bad value
             raise PlantStepError(self._describe(exc, f"step at t = {t0:.4f} s")) from exc
         self._k += 1
         return u

@@ -15,7 +15,7 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
-from ...errors import MissingExtraError
+from ...errors import OutputError
 from ...extras import require
 
 #: the FMU's ``fmu_map`` (docs/fmu.md's worked example): the bench's signal → the FMU variable
@@ -70,8 +70,8 @@ def build_test_fmu(
         script.write_text(text)
         try:
             fmu = FmuBuilder.build_FMU(script, dest=dest / f"{stem}.fmu")
-        except Exception as exc:  # pythonfmu reports a failed build with its own exceptions
-            raise MissingExtraError(f"pythonfmu could not build the test FMU: {exc}") from exc
+        except Exception as exc:  # pythonfmu reports a failed build with plain exceptions
+            raise OutputError(f"cannot build the test FMU into {dest}: {exc}") from exc
         finally:
             while tmp in sys.path:  # the builder puts the script's folder on sys.path
                 sys.path.remove(tmp)
