@@ -4,14 +4,14 @@ VENV ?= .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-socketcan lint venv lock clean
+.PHONY: demo test test-socketcan lint venv lock lock-add clean
 
 #: the lock files: exact versions with hashes, resolved by uv for Python 3.11 on Linux x86_64
 #: (CI's platform). dev.lock: the base + every extra make and CI install; base.lock: the daemon
 #: and the emulator alone (a bench PC), the same versions. `make lock` is the only way they move.
 LOCK := requirements/dev.lock
 BASE_LOCK := requirements/base.lock
-EXTRAS := test plot monitor campaign identify mf4
+EXTRAS := test plot monitor campaign identify mf4 fmu
 UV_VERSION := 0.13.9
 UV_VENV := .venv-uv
 LOCK_PYTHON := 3.11
@@ -36,6 +36,16 @@ lock:
 		pyproject.toml requirements/build.in -c $(LOCK) -o $(BASE_LOCK)
 	rm -rf $(VENV)
 	$(MAKE) test
+
+## add what pyproject.toml newly asks for (a new extra, a new dependency) to the lock files
+## without moving any package already pinned (no --upgrade: uv keeps the pins in the output
+## file); check with `git diff requirements/` that only new packages appear
+lock-add:
+	test -x $(UV_VENV)/bin/uv || { $(PY) -m venv $(UV_VENV) && $(UV_VENV)/bin/pip install --quiet uv==$(UV_VERSION); }
+	$(UV_VENV)/bin/uv pip compile --quiet --generate-hashes --python-version $(LOCK_PYTHON) \
+		pyproject.toml requirements/build.in $(addprefix --extra ,$(EXTRAS)) -o $(LOCK)
+	$(UV_VENV)/bin/uv pip compile --quiet --generate-hashes --python-version $(LOCK_PYTHON) \
+		pyproject.toml requirements/build.in -c $(LOCK) -o $(BASE_LOCK)
 
 ## the main job: emulator + controller, a fault scenario, log, metrics and figures
 demo: $(STAMP)

@@ -15,7 +15,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .errors import InjectError
 from .physics.faults import FaultState
+from .physics.fmumap import ACTUATOR_FAULTS
 from .physics.params import Params, PlantParams
 from .physics.plant import Plant, make_plant
 from .scenario import FrameLoss, Scenario
@@ -91,7 +93,6 @@ class PlantEmulation:
         self.loss = self.scenario.initial_loss
         self._override: dict[str, float | bool] = {}
         self._stuck_value_m = 0.0
-        self._last_applied_a = 0.0
         self._saturated = False
         self._apply_schedule()
 
@@ -118,8 +119,12 @@ class PlantEmulation:
 
         Keys: ``k_loe``, ``k_q``, ``k_dft``, ``position_bias_m``, ``stuck``, ``current_limit_a``;
         ``frame_loss`` sets the loss probability of both directions (until the next scheduled
-        loss change). Returns the new fault state.
+        loss change). Returns the new fault state; InjectError for an actuator fault the plant
+        does not model (:attr:`~.physics.plant.Plant.modelled_faults`).
         """
+        gone = [k for k in ACTUATOR_FAULTS if k in values and k not in self.plant.modelled_faults]
+        if gone:
+            raise InjectError(f"the plant does not model {gone[0]} (an FMU without fmu_map.{gone[0]})")
         if "frame_loss" in values:
             p = float(values.pop("frame_loss"))
             self.loss = FrameLoss(p, p)
@@ -164,7 +169,7 @@ class PlantEmulation:
             position_m=pos,
             spool_m=self.plant.spool_actual_m + nz.spool_m * n_spool,
             load_pressure_pa=self.plant.load_pressure_pa + nz.pressure_pa * n_p,
-            coil_current_a=self._last_applied_a,
+            coil_current_a=self.plant.coil_current_a,
             true_position_m=self.plant.position_m,
             true_spool_m=self.plant.spool_actual_m,
             faults=self.plant.faults,
@@ -187,7 +192,6 @@ class PlantEmulation:
             i += self._valve_dist_gain_a_per_m * self._disturbance_m()
         applied = self.plant.step(i)
         self._saturated = applied != i
-        self._last_applied_a = applied
         self.k += 1
         self._apply_schedule()
         return applied

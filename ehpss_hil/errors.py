@@ -132,6 +132,12 @@ class ModelError(EhpssError, ArithmeticError):
     """A physical/controller model cannot be built (unstable, singular, bad dimensions)."""
 
 
+class PlantStepError(EhpssError, RuntimeError):
+    """The emulated plant cannot advance (an FMU's step failed or returned a non-finite value):
+    the message names the plant, the FMI function, its status and the time. The run stops
+    (the emulator: fail-safe, no more sensor frames); the input was loadable, so exit 1."""
+
+
 class ControlTimeoutError(EhpssError, TimeoutError):
     """Sensor or command data went stale for longer than the configured watchdog allows."""
 

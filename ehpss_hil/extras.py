@@ -15,6 +15,7 @@ from .errors import MissingExtraError
 #: extra name → the top-level modules it installs (pyproject.toml ``[project.optional-dependencies]``)
 EXTRAS: dict[str, tuple[str, ...]] = {
     "campaign": ("dask", "distributed", "pyarrow", "scipy"),
+    "fmu": ("fmpy",),
     "identify": ("scipy",),
     "mf4": ("asammdf",),
     "monitor": ("aiohttp",),

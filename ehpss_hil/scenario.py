@@ -22,6 +22,7 @@ from .limits import (
     MIN_REFERENCE_SCALE,
 )
 from .physics.faults import FaultState
+from .physics.fmumap import ACTUATOR_FAULTS
 from .physics.plantspec import PlantSpec
 from .schema import build, load_yaml, rng
 from .trajectory import ReferenceTable, load_reference_table
@@ -273,6 +274,21 @@ class Scenario:
                 raise ConfigError(
                     "", f"events[{i}].t_s", f"event after the end of the run ({ev.t_s} > {self.duration_s})"
                 )
+        self._check_modelled_faults()
+
+    def _check_modelled_faults(self) -> None:
+        """An actuator fault the plant does not model (an FMU whose ``fmu_map`` does not name
+        it) is refused: the bench cannot emulate it around the FMU."""
+        modelled = self.plant.modelled_faults
+        for i, ev in enumerate(self.events):
+            for key in ACTUATOR_FAULTS:
+                value = getattr(ev, key)
+                if value is not None and value != 1.0 and key not in modelled:
+                    raise ConfigError(
+                        "",
+                        f"events[{i}].{key}",
+                        f"the FMU plant does not model {key}: map its input as plant.fmu_map.{key}",
+                    )
 
     @property
     def n_samples(self) -> int:
@@ -323,4 +339,9 @@ def load_scenario(path: str | Path, data: object = None) -> Scenario:
             f"must hold 1 to {MAX_SCENARIO_SAMPLES} samples of sample_time_s, got {n:.6g}",
         )
     base = p.resolve().parent
-    return replace(sc, base_dir=str(base), reference=sc.reference.loaded(base, str(p)))
+    return replace(
+        sc,
+        base_dir=str(base),
+        reference=sc.reference.loaded(base, str(p)),
+        plant=sc.plant.loaded(base, str(p)),
+    )

@@ -133,6 +133,8 @@ def format_summary(s: dict[str, object]) -> str:
         f"max {lat['max'] * 1e6:.1f} µs, compute p99 "
         f"{st['compute_s']['p99'] * 1e6:.1f} µs",
     ]
+    if s.get("plant_failure"):
+        lines.append(f"  plant failure (fail-safe): {s['plant_failure']}")
     return "\n".join(lines)
 
 
@@ -312,7 +314,7 @@ def run(args: argparse.Namespace) -> int:
             n = scenario.n_samples if args.duration is None else round(args.duration * cfg.rate_hz)
             ok = proc.run_lockstep(stop, n)
         else:
-            proc.run_realtime(stop, realtime_periods(args, cfg.rate_hz, scenario))
+            ok = proc.run_realtime(stop, realtime_periods(args, cfg.rate_hz, scenario))
     finally:
         restore_handlers(previous)
         io.close()

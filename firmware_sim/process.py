@@ -26,6 +26,7 @@ import can
 
 from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.emulation import PlantEmulation, SensorSample
+from ehpss_hil.errors import InjectError, PlantStepError
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.runtime.signals import StopFlag
@@ -88,6 +89,8 @@ class EmulatorProcess:
         self.inject_applied = 0
         self.inject_rejected = 0
         self.inject_ignored = 0
+        #: why the plant stopped (an FMU's failed step), or "" while it runs
+        self.plant_failure = ""
         self.applied_a = 0.0
         self._faults: FaultState = emu.faults
         #: the newest valid command among the frames drained before the first period
@@ -142,7 +145,12 @@ class EmulatorProcess:
             log.warning("t=%.4f s: FAULT_INJECT rejected (%s)", self.t_s, d.verdict.name)
             return
         if change:
-            self.emu.inject(**change)
+            try:
+                self.emu.inject(**change)
+            except InjectError as exc:
+                self.inject_rejected += 1
+                log.warning("t=%.4f s: FAULT_INJECT rejected (%s)", self.t_s, exc)
+                return
         else:
             self.emu.clear_injected()
         self.inject_applied += 1
@@ -278,16 +286,30 @@ class EmulatorProcess:
         return self.applied_a
 
     # ---- loops ------------------------------------------------------------------------------
-    def run_realtime(self, stop: StopFlag, n_periods: int | None = None) -> None:
-        """Run on the deadline grid until ``stop`` or ``n_periods`` periods."""
+    def _fail_safe(self, exc: PlantStepError) -> None:
+        """The plant cannot advance (an FMU's step failed): no more sensor frames, so the
+        controller's sensor watchdog takes its own fail-safe; a STOPPED heartbeat; the reason
+        logged on one line and kept for the summary (``plant_failure``)."""
+        self.plant_failure = str(exc)
+        log.error("t=%.4f s: %s; emulator stopped (fail-safe: no more sensor frames)", self.t_s, exc)
+        self.io.send("HEARTBEAT_EMU", {"NmtState": NMT_STOPPED})
+
+    def run_realtime(self, stop: StopFlag, n_periods: int | None = None) -> bool:
+        """Run on the deadline grid until ``stop`` or ``n_periods`` periods; False when the
+        plant failed (fail-safe, :meth:`_fail_safe`)."""
         self.io.send("HEARTBEAT_EMU", {"NmtState": 0})  # CiA 301 boot-up
         # the frames queued since the bus opened (a running controller sends ~1000/s): handled
         # now, not in the first period, which they made several ms late — a stall right at the
         # controller's first samples, whose reference starts with them
         self._early = self._drain()
-        run_periods(self.emu.ts_s, self.step_period, lambda: self.periods, self.stats, stop, n_periods)
+        try:
+            run_periods(self.emu.ts_s, self.step_period, lambda: self.periods, self.stats, stop, n_periods)
+        except PlantStepError as exc:
+            self._fail_safe(exc)
+            return False
         self._drain()  # classify + log what arrived since the last period (e.g. a final command)
         self.io.send("HEARTBEAT_EMU", {"NmtState": NMT_STOPPED})
+        return True
 
     def _await_command(self, stop: StopFlag) -> tuple[bool, tuple[float, bool] | None]:
         """Lockstep: wait for the next VALVE_CMD frame → (arrived, valid command or None)."""
@@ -305,7 +327,15 @@ class EmulatorProcess:
         return False, None
 
     def run_lockstep(self, stop: StopFlag, n_periods: int) -> bool:
-        """Lockstep for ``n_periods`` periods; False when the peer stopped answering."""
+        """Lockstep for ``n_periods`` periods; False when the peer stopped answering or the
+        plant failed (fail-safe, :meth:`_fail_safe`)."""
+        try:
+            return self._lockstep(stop, n_periods)
+        except PlantStepError as exc:
+            self._fail_safe(exc)
+            return False
+
+    def _lockstep(self, stop: StopFlag, n_periods: int) -> bool:
         delay: deque[float] = deque([0.0] * self.emu.scenario.transport_delay_samples)
         sent = self._send_sample(self.emu.measure())
         while self.periods < n_periods and not stop:
@@ -349,6 +379,7 @@ class EmulatorProcess:
             "inject_applied": self.inject_applied,
             "inject_rejected": self.inject_rejected,
             "inject_ignored": self.inject_ignored,
+            "plant_failure": self.plant_failure,
             "stats": self.stats.summary(),
             "max_rss_bytes": peak_rss_bytes(),
         }

@@ -12,6 +12,7 @@ BENCHES: tuple[str, ...] = (
     "codec",
     "control",
     "faults",
+    "fmu",
     "identify",
     "loop",
     "monitor",

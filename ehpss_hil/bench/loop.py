@@ -11,6 +11,9 @@ frames and peak RSS beside docs/design.md §11's targets. Figures come from each
 preallocated statistics (``--summary-json``); each variant's first line is its realtime verdict
 (:mod:`ehpss_hil.runtime.rtverdict`: did the host hold the rate). Then the host's share
 (:mod:`.hostref`): the control step + VALVE_CMD encode alone, after a sleep and back to back.
+With ``--fmu`` the emulator's plant is the test FMU (fmpy running our nonlinear plant built by
+pythonfmu, :mod:`ehpss_hil.physics.fmutest`; the ``fmu`` extra), and the emulator's overruns are
+a target (none) when the run is realtime-valid.
 """
 
 from __future__ import annotations
@@ -56,11 +59,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variants", default="plain,rt", help="comma list of: plain, rt")
     p.add_argument("--out", type=Path, default=None, help="keep the run directories here")
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
+    p.add_argument(
+        "--fmu", action="store_true", help="the emulator runs the test FMU as its plant (the fmu extra)"
+    )
 
 
-def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, Any]:
+def _fmu_plant(out: Path) -> str:
+    """The scenario's ``plant:`` line for the test FMU, built into ``out``."""
+    from ..physics.fmutest import TEST_FMU_MAP, build_test_fmu
+
+    fmu = build_test_fmu(out / "fmu")
+    return "plant: " + json.dumps({"model": "fmu", "path": str(fmu), "fmu_map": TEST_FMU_MAP}) + "\n"
+
+
+def _measure(variant: str, rate: float, seconds: float, out: Path, plant: str = "") -> dict[str, Any]:
     sc = out / "bench-loop.yaml"
-    sc.write_text(_SCENARIO.format(seconds=seconds, ts=1.0 / rate))
+    sc.write_text(_SCENARIO.format(seconds=seconds, ts=1.0 / rate) + plant)
     ctrl_args, emu_args = _VARIANTS[variant]
     d = out / variant
     res = execute(
@@ -102,6 +116,7 @@ def _measure(variant: str, rate: float, seconds: float, out: Path) -> dict[str, 
         "emulator_overruns": e["stats"]["overruns"],
         "emulator_lateness_s": e["stats"]["lateness_s"],
         "host_steal_fraction": res.host_steal_fraction,
+        "fmu_plant": bool(plant),
     }
 
 
@@ -162,6 +177,11 @@ def _print(rows: list[dict[str, Any]], card: Scorecard) -> None:
             f"{r['emulator_overruns']}; rejected frames {r['rejected_frames']}; watchdog trips "
             f"{r['watchdog_trips']} (not counting the one when the emulator ended the run)"
         )
+        if r.get("fmu_plant"):
+            n = r["emulator_overruns"]
+            ok = n == 0 if r["realtime_valid"] else None  # a busy host's overruns are no verdict
+            verdict = card.mark(ok, f"{r['variant']} emulator overruns {n} with the FMU plant")
+            print(f"{r['variant']:<7} emulator with the FMU plant: {n} overruns (target 0) {verdict}")
         for who in ("controller", "emulator"):
             print(_rss_row(r["variant"], who, r[f"{who}_max_rss_bytes"], card))
         steal = r.get("host_steal_fraction")
@@ -177,11 +197,12 @@ def run(args: argparse.Namespace) -> Scorecard:
     with tempfile.TemporaryDirectory(prefix="ehpss-bench-loop-") as tmp:
         out = args.out or Path(tmp)
         out.mkdir(parents=True, exist_ok=True)
+        plant = _fmu_plant(out) if args.fmu else ""
         for v in [x.strip() for x in args.variants.split(",") if x.strip()]:
             if v not in _VARIANTS:
                 raise SystemExit(f"unknown variant {v!r} (plain, rt)")
             print(f"running {v} at {args.rate:g} Hz for {args.seconds:g} s ...", flush=True)
-            rows.append(_measure(v, args.rate, args.seconds, out))
+            rows.append(_measure(v, args.rate, args.seconds, out, plant))
     print("timing the controller's own work on this host (no bus) ...", flush=True)
     host = hostref.measure(args.rate)
     card = Scorecard()

@@ -245,6 +245,22 @@ def canonical_json(data: Any) -> str:
     return json.dumps(data, sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
+#: the campaign fault kinds that are actuator faults: kind → the FaultState field it sets
+ACTUATOR_KINDS = {"loe": "k_loe", "kq": "k_q"}
+
+
+def _check_fmu_faults(spec: CampaignSpec, base: Scenario, source: str) -> None:
+    """An actuator fault kind the base scenario's plant does not model (an FMU whose
+    ``fmu_map`` does not name it) cannot be drawn: ConfigError naming ``faults.kinds.<kind>``."""
+    for kind, key in ACTUATOR_KINDS.items():
+        if getattr(spec.faults.kinds, kind) is not None and key not in base.plant.modelled_faults:
+            raise ConfigError(
+                source,
+                f"faults.kinds.{kind}",
+                f"the base scenario's FMU plant does not model {key} (no plant.fmu_map.{key})",
+            )
+
+
 def load_campaign(path: str | Path, data: object = None) -> Campaign:
     """Load and validate a campaign file (``data``: its parsed content, when the caller read it
     already) and its base scenario. The content hash covers the parsed campaign (not its comments
@@ -259,6 +275,10 @@ def load_campaign(path: str | Path, data: object = None) -> Campaign:
     base = load_scenario(base_path, base_data)
     if spec.faults.onset_s[1] > (spec.duration_s or base.duration_s):
         raise ConfigError(str(p), "faults.onset_s", "onsets must lie within the run's duration_s")
+    _check_fmu_faults(spec, base, str(p))
     own = {k: v for k, v in data.items() if k != "base"} if isinstance(data, dict) else data
-    digest = hashlib.sha256(canonical_json({"campaign": own, "base": base_data}).encode()).hexdigest()
+    hashed = {"campaign": own, "base": base_data}
+    if base.plant.model == "fmu":  # a changed FMU is another campaign (resumed runs are not reused)
+        hashed["fmu_sha256"] = base.plant.fmu_digest()
+    digest = hashlib.sha256(canonical_json(hashed).encode()).hexdigest()
     return Campaign(spec, base, str(p), digest)

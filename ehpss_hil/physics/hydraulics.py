@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from ..errors import ConfigError
 from .discretize import zoh
 from .faults import FaultState
+from .fmumap import ACTUATOR_FAULTS
 from .model import valve_matrices
 from .params import PlantParams
 from .plantspec import RETURN_PRESSURE_PA, SUPPLY_PRESSURE_PA, PlantSpec
@@ -152,6 +153,7 @@ class NonlinearPlant:
             (float(ad[1, 0]), float(ad[1, 1]), float(bd[1, 0])),
         )
         self._p_lam = ORIFICE_LAMINAR_FRACTION * (hp.supply_pressure_pa - hp.return_pressure_pa)
+        self.modelled_faults = frozenset(ACTUATOR_FAULTS)
         self.faults = FaultState()
         self.reset()
 
@@ -162,6 +164,7 @@ class NonlinearPlant:
         p0 = self.hp.rest_pressure_pa
         self._vv, self._xv = 0.0, 0.0
         self._pa, self._pb, self._x, self._v = p0, p0, 0.0, 0.0
+        self._u = 0.0
         self.set_faults(FaultState())
 
     def set_faults(self, faults: FaultState) -> None:
@@ -191,6 +194,11 @@ class NonlinearPlant:
         return self._xv
 
     @property
+    def coil_current_a(self) -> float:
+        """The current applied over the last sample (A): the amplifier's echo."""
+        return self._u
+
+    @property
     def chamber_pressures_pa(self) -> tuple[float, float]:
         """Cap-side and rod-side chamber pressures ``(P_A, P_B)`` (Pa)."""
         return self._pa, self._pb
@@ -207,6 +215,7 @@ class NonlinearPlant:
         applied (limited) current (A)."""
         lim = self.faults.current_limit_a
         u = min(max(current_a, -lim), lim)
+        self._u = u
         self._hydraulics(self._spool_path(u))
         return u
 

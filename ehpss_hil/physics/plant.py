@@ -1,21 +1,24 @@
 """The emulated plant behind one :class:`Plant` protocol, stepped at a fixed sample time.
 
 :class:`LinearPlant` is the paper's eq 39 plant with exact ZOH; the nonlinear valve-controlled
-cylinder lives in :mod:`.hydraulics`. :func:`make_plant` builds the one a scenario's ``plant:``
-section asks for. The emulation (:mod:`ehpss_hil.emulation`), and through it the emulator process,
-the lockstep simulator and the CiA 408 node, only ever see the protocol.
+cylinder lives in :mod:`.hydraulics`, the user's FMU in :mod:`.fmuplant`. :func:`make_plant`
+builds the one a scenario's ``plant:`` section asks for. The emulation
+(:mod:`ehpss_hil.emulation`), and through it the emulator process, the lockstep simulator and
+the CiA 408 node, only ever see the protocol.
 """
 
 from __future__ import annotations
 
 import typing
 from collections.abc import Hashable
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
 from .discretize import Matrix, ZohCache
 from .faults import FaultState
+from .fmumap import ACTUATOR_FAULTS
 from .model import ACC, POS, SPOOL, SPOOL_VEL, load_pressure_pa, plant_matrices
 from .params import Params, PlantParams
 from .plantspec import PlantSpec
@@ -27,6 +30,9 @@ class Plant(Protocol):
 
     ts_s: float
     faults: FaultState
+    #: the actuator faults (FaultState fields of :data:`~.fmumap.ACTUATOR_FAULTS`) the plant
+    #: models; the others must stay 1 (an FMU models those its ``fmu_map`` names)
+    modelled_faults: frozenset[str]
 
     def reset(self) -> None:
         """Back to rest at the origin (valve centred, piston centred), fault-free."""
@@ -53,6 +59,14 @@ class Plant(Protocol):
     def load_pressure_pa(self) -> float:
         """Load pressure (Pa): what the pressure sensor measures."""
 
+    @property
+    def coil_current_a(self) -> float:
+        """Coil current the valve electronics echo for the last sample (A)."""
+
+
+#: the actuator faults the built-in plants model: all
+ALL_ACTUATOR_FAULTS = frozenset(ACTUATOR_FAULTS)
+
 
 class LinearPlant:
     """Plant state ``[ẍ, ẋ, x, ẋ_v, x_v]`` advanced by one sample per :meth:`step`.
@@ -72,6 +86,8 @@ class LinearPlant:
         self._rows: tuple[tuple[float, ...], ...] = ()
         self._rows_stop: tuple[tuple[float, ...], ...] = ()
         self._key: Hashable = None
+        self._u = 0.0
+        self.modelled_faults = ALL_ACTUATOR_FAULTS
         self.faults = FaultState()
         self._stroke_m = plant.spool_stroke_m
         self._p_per_acc = load_pressure_pa(plant, 1.0)
@@ -103,6 +119,7 @@ class LinearPlant:
     def reset(self) -> None:
         """Back to rest at the origin, fault-free."""
         self._s = [0.0] * 5
+        self._u = 0.0
         self.set_faults(FaultState())
 
     def set_faults(self, faults: FaultState) -> None:
@@ -119,6 +136,7 @@ class LinearPlant:
         (the valve is fast against Ts: it reaches the stop early in the sample)."""
         lim = self.faults.current_limit_a
         u = min(max(current_a, -lim), lim)
+        self._u = u
         s0, s1, s2, s3, s4 = self._s
         r0, r1, r2, r3, r4 = self._rows
         xv = r4[0] * s0 + r4[1] * s1 + r4[2] * s2 + r4[3] * s3 + r4[4] * s4 + r4[5] * u
@@ -163,6 +181,11 @@ class LinearPlant:
         """Load pressure P_L = m·ẍ/A_h (Pa)."""
         return self._p_per_acc * self._s[ACC]
 
+    @property
+    def coil_current_a(self) -> float:
+        """The current applied over the last sample (A): the amplifier's echo."""
+        return self._u
+
 
 class PlantStepper(LinearPlant):
     """The linear plant of a full :class:`Params` (the name tools and tests used before
@@ -174,7 +197,13 @@ class PlantStepper(LinearPlant):
 
 def make_plant(spec: PlantSpec, base: PlantParams, ts_s: float) -> Plant:
     """The plant a scenario's ``plant:`` section asks for: ``base`` (the emulator's params.yaml
-    plant) with the section's lumped keys, linear or nonlinear (:mod:`.hydraulics`)."""
+    plant) with the section's lumped keys, linear or nonlinear (:mod:`.hydraulics`), or the
+    section's FMU (:mod:`.fmuplant`; ``base`` unused: the FMU carries its parameters)."""
+    if spec.model == "fmu":
+        from .fmuplant import FmuPlant  # fmpy: only for an FMU plant
+
+        assert spec.fmu_map is not None
+        return FmuPlant(Path(spec.path), spec.fmu_map, ts_s)
     plant = spec.plant_params(base)
     if spec.model == "nonlinear":
         from .hydraulics import NonlinearPlant, derive

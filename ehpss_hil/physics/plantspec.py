@@ -5,17 +5,21 @@ replaces that value for the emulated plant only (the controller, its models and 
 controller's params). ``model: nonlinear`` selects the valve-controlled single-rod cylinder of
 :mod:`.hydraulics`, whose own keys are listed in :class:`PlantSpec` (each with its unit); they are
 refused with ``model: linear``. Ranges are the same as in ``params.yaml`` (one home: the
-metadata of :class:`~.params.PlantParams`).
+metadata of :class:`~.params.PlantParams`). ``model: fmu`` runs the user's FMI co-simulation FMU
+at ``path`` (relative to the scenario's folder) through ``fmu_map`` (:mod:`.fmumap`,
+:mod:`.fmuplant`, docs/fmu.md); the FMU carries its own parameters, so no plant key goes with it.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, is_dataclass, replace
+from pathlib import Path
 from typing import Any, Literal
 
 from ..errors import ConfigError
 from ..schema import build, rng
+from .fmumap import ACTUATOR_FAULTS, FmuMap
 from .params import PlantParams
 
 # the nonlinear plant's two pressure defaults live here, below :mod:`.hydraulics` (which reads
@@ -41,7 +45,7 @@ class PlantSpec:
     base value) and the nonlinear model's keys (None: the default of :mod:`.hydraulics`, derived
     so that the nonlinear plant linearises to the lumped one; see docs/physics.md)."""
 
-    model: Literal["linear", "nonlinear"] = "linear"
+    model: Literal["linear", "nonlinear", "fmu"] = "linear"
     cylinder_damping_1_s: float | None = field(default=None, metadata=_same_range("cylinder_damping_1_s"))
     hydraulic_stiffness_1_s2: float | None = field(
         default=None, metadata=_same_range("hydraulic_stiffness_1_s2")
@@ -75,8 +79,13 @@ class PlantSpec:
     piston_stroke_m: float | None = field(default=None, metadata=rng(0.0, 0.5, lo_open=True))
     #: oil beyond an end stop (chamber dead volume + hose) as a length of the bore (m)
     dead_length_m: float | None = field(default=None, metadata=rng(0.0, 1.0, lo_open=True))
+    #: ``model: fmu``: the FMU file (absolute once the scenario is loaded)
+    path: str = ""
+    #: ``model: fmu``: bench signal → FMU variable (:class:`~.fmumap.FmuMap`)
+    fmu_map: FmuMap | None = None
 
     def __post_init__(self) -> None:
+        self._check_fmu_keys()
         if self.model == "linear":
             for key in NONLINEAR_KEYS:
                 if getattr(self, key) is not None:
@@ -89,6 +98,52 @@ class PlantSpec:
         stroke, lap = self.spool_stroke_m, self.spool_overlap_m
         if lap is not None and lap >= (stroke if stroke is not None else PlantParams().spool_stroke_m):
             raise ConfigError("", "spool_overlap_m", "must be below the spool stroke")
+
+    def _check_fmu_keys(self) -> None:
+        """``path`` and ``fmu_map`` go with ``model: fmu`` and nothing else does."""
+        if self.model != "fmu":
+            for key in ("path", "fmu_map"):
+                if getattr(self, key):
+                    raise ConfigError("", key, "a key of the FMU plant: needs model: fmu")
+            return
+        for key in ("path", "fmu_map"):
+            if not getattr(self, key):
+                raise ConfigError("", key, "required with model: fmu")
+        for key in (*LUMPED_KEYS, *NONLINEAR_KEYS):
+            if getattr(self, key) is not None:
+                raise ConfigError("", key, "the FMU carries its own plant parameters: not with model: fmu")
+
+    def loaded(self, base_dir: Path | None = None, source: str = "") -> PlantSpec:
+        """This section with an FMU's ``path`` made absolute (relative to ``base_dir``, the folder
+        of the file naming it) and the FMU checked against ``fmu_map`` (:func:`.fmuplant.check_fmu`:
+        ConfigError naming ``plant.path`` or ``plant.fmu_map.<key>`` in ``source``); else itself."""
+        if self.model != "fmu":
+            return self
+        from .fmuplant import check_fmu  # fmpy: only for an FMU plant
+
+        p = Path(self.path)
+        if not p.is_absolute() and base_dir is not None:
+            p = base_dir / p
+        spec = replace(self, path=str(p.absolute()))
+        assert spec.fmu_map is not None
+        check_fmu(Path(spec.path), spec.fmu_map, source)
+        return spec
+
+    def fmu_digest(self) -> str:
+        """SHA-256 (hex) of the FMU file's bytes (``model: fmu``; "" otherwise)."""
+        if self.model != "fmu":
+            return ""
+        import hashlib
+
+        return hashlib.sha256(Path(self.path).read_bytes()).hexdigest()
+
+    @property
+    def modelled_faults(self) -> frozenset[str]:
+        """The actuator faults (FaultState fields) this plant models: all for the built-in
+        plants, those ``fmu_map`` names for an FMU."""
+        if self.model == "fmu" and self.fmu_map is not None:
+            return self.fmu_map.faults
+        return frozenset(ACTUATOR_FAULTS)
 
     @property
     def lumped_overrides(self) -> dict[str, float]:
@@ -109,16 +164,24 @@ class PlantSpec:
         """This section checked like a file's (ranges included: a section built in code, such
         as a campaign's sampled plant, gets no range check otherwise); ConfigError naming the
         key."""
-        data = {f.name: v for f in dataclasses.fields(self) if (v := getattr(self, f.name)) is not None}
+        data = {
+            f.name: asdict(v) if is_dataclass(v) and not isinstance(v, type) else v
+            for f in dataclasses.fields(self)
+            if (v := getattr(self, f.name)) is not None
+        }
         return build(PlantSpec, data)
 
     def describe(self) -> str:
         """``linear``, or ``nonlinear, flow_gain_1_s3 1.134e+08, area_ratio 0.6`` (keys set)."""
+        if self.model == "fmu":
+            return f"fmu {Path(self.path).name}"
         keys = [f"{k} {v:g}" for k in (*LUMPED_KEYS, *NONLINEAR_KEYS) if (v := getattr(self, k)) is not None]
         return ", ".join([self.model, *keys])
 
 
 #: the keys only the nonlinear plant reads
 NONLINEAR_KEYS = tuple(
-    f.name for f in dataclasses.fields(PlantSpec) if f.name != "model" and f.name not in LUMPED_KEYS
+    f.name
+    for f in dataclasses.fields(PlantSpec)
+    if f.name not in ("model", "path", "fmu_map") and f.name not in LUMPED_KEYS
 )
