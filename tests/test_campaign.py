@@ -131,15 +131,31 @@ def test_worst_case_scenarios_rerun_exactly_with_sim(reference: tuple[Path, Path
     out = tmp_path / "worst"
     assert cli("campaign", str(f), "--workers", "1", "--out", str(out), "--no-figures").returncode == 0
     rows = {r["index"]: r for r in pq.read_table(out / PARQUET_NAME).to_pylist()}
-    worst = sorted((out / "worst" / "all").glob("*.yaml"))
-    assert len(worst) == 5
     summary = json.loads((out / "summary.json").read_text())["classes"]
     assert summary[-1]["fault_class"] == "all" and summary[-1]["runs"] == 8
     assert sum(c["runs"] for c in summary[:-1]) == 8
-    top = summary[-1]["worst"][0]
-    assert top["rms_m"]["mmac"] == rows[top["index"]]["mmac.rms_error_m"]
-    assert worst[0].name == f"1-run{top['index']:05d}.yaml"
-    for path in worst[:2]:
+    md = (out / "summary.md").read_text()
+    for order, other in (("harm", "nrc"), ("gap", "oracle")):
+        # the worst five of all runs by mmac − nrc and by mmac − oracle, largest first
+        ranked = sorted(
+            rows.values(), key=lambda r: (r[f"{other}.rms_error_m"] - r["mmac.rms_error_m"], r["index"])
+        )
+        listed = summary[-1][f"worst_{order}"]
+        assert [w["index"] for w in listed] == [r["index"] for r in ranked[:5]]
+        top = ranked[0]
+        assert listed[0][f"{order}_m"] == top["mmac.rms_error_m"] - top[f"{other}.rms_error_m"]
+        assert f"run {top['index']}: {listed[0][f'{order}_m'] * 1e6:+.1f}" in md
+        files = sorted((out / "worst" / "all").glob(f"{order}-*.yaml"))
+        assert [p.name for p in files] == [
+            f"{order}-{k}-run{w['index']:05d}.yaml" for k, w in enumerate(listed, 1)
+        ]
+    assert "## Most harm (mmac − nrc RMS)" in md and "## Largest gap to the oracle (mmac − oracle RMS)" in md
+    section = ""
+    for line in md.splitlines():  # each class's list links the files in its own folder
+        section = line[4:] if line.startswith("### ") else section
+        if "| worst/" in line:
+            assert line.split("| ")[-1].startswith(f"worst/{section}/"), line
+    for path in sorted((out / "worst" / "all").glob("harm-*.yaml"))[:2]:
         index = int(path.stem.split("run")[1])
         js = tmp_path / f"{path.stem}.json"
         sim = cli("sim", str(path), "-C", "nrc", "-C", "mmac", "-C", "oracle", "--json", str(js), "-j", "1")
