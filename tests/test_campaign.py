@@ -221,6 +221,9 @@ def test_the_shipped_campaigns_load() -> None:
     quick = load_campaign(ROOT / "campaigns" / "quick.yaml")
     qual = load_campaign(ROOT / "campaigns" / "qualification.yaml")
     assert 40 <= quick.spec.samples <= 64 and qual.spec.samples >= 2000
+    model_error = load_campaign(ROOT / "campaigns" / "model-error.yaml")
+    for camp in (quick, qual, model_error):  # the description says the number of runs sampled
+        assert camp.spec.description.startswith(f"{camp.spec.samples} runs"), camp.spec.description
     out = cli(
         "check-config", str(ROOT / "campaigns" / "quick.yaml"), str(ROOT / "campaigns" / "qualification.yaml")
     )
