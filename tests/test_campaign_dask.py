@@ -147,3 +147,27 @@ def test_bad_scheduler_or_retries_is_one_line_exit_2(
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and f"{key}:" in lines[0], lines
     assert not (tmp_path / "o").exists()
+
+
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def test_ctrl_c_stops_a_local_cluster_campaign_without_a_traceback(tmp_path: Path) -> None:
+    f = tiny(tmp_path / "tiny.yaml", samples=2000)  # far more than are done before the signal
+    out = tmp_path / "int"
+    proc = subprocess.Popen(
+        [*EHPSS_HIL, "campaign", str(f), "--scheduler", "local:2", "--out", str(out), "--no-figures"],
+        cwd=ROOT,
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+        preexec_fn=_default_sigint,  # a foreground command's Ctrl-C (see test_campaign.py)
+    )
+    wait_lines(out / JOURNAL_NAME, 2, proc)
+    os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: to the campaign and its workers
+    _stdout, stderr = proc.communicate(timeout=LIMIT_S)
+    assert proc.returncode == 130, stderr
+    assert b"Traceback" not in stderr and b"KeyboardInterrupt" not in stderr, stderr.decode()[-2000:]
+    assert b"--resume" in stderr

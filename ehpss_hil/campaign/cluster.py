@@ -13,10 +13,15 @@ from __future__ import annotations
 
 import importlib.util
 import logging
+import signal
+import threading
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from types import TracebackType
 from typing import Any
+
+from distributed import WorkerPlugin
 
 from ..errors import ClusterError, ConfigError, EhpssError
 from .executors import OnResult, Tally, default_workers
@@ -32,6 +37,36 @@ DASHBOARD_ADDRESS = ":8787"
 EVENT_TOPIC = "all"
 #: a run's task key: the run hash, so a key names the same run on every cluster
 KEY_PREFIX = "campaign-run-"
+
+
+class IgnoreInterrupt(WorkerPlugin):
+    """Makes a LocalCluster's worker ignore SIGINT: a Ctrl-C in the terminal reaches the whole
+    process group, and the campaign, not each worker (with a KeyboardInterrupt traceback), stops
+    the cluster. The workers started with the cluster inherit it (:func:`_interrupts_ignored`);
+    registered with the client, this plugin gives it to a worker the nanny restarts."""
+
+    name = "ehpss-ignore-interrupt"
+
+    def setup(self, worker: Any) -> None:
+        """Ignore SIGINT in this worker process (its event loop runs in the main thread)."""
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextmanager
+def _interrupts_ignored() -> Iterator[None]:
+    """SIGINT ignored while the LocalCluster starts: its worker processes inherit that (a Ctrl-C
+    then stops the campaign, which closes them, instead of each printing a KeyboardInterrupt
+    traceback), and a cluster half started is not torn down from an atexit hook. A Ctrl-C in
+    those seconds is lost; the next one stops the campaign."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)
 
 
 def parse_local(scheduler: str) -> int | None:
@@ -88,8 +123,8 @@ class DaskExecutor:
             target: Any = self.scheduler
         else:
             try:
-                with warnings.catch_warnings():  # "Port 8787 is already in use": the link says which
-                    warnings.simplefilter("ignore", UserWarning)
+                with warnings.catch_warnings(), _interrupts_ignored():
+                    warnings.simplefilter("ignore", UserWarning)  # "Port 8787 is already in use"
                     self.cluster = LocalCluster(
                         n_workers=self.local_workers,
                         threads_per_worker=1,
@@ -110,6 +145,8 @@ class DaskExecutor:
             self.client = Client(target, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as exc:
             raise ClusterError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from exc
+        if self.cluster is not None:
+            self.client.register_plugin(IgnoreInterrupt())
         self.dashboard = self.client.dashboard_link or ""
         if self.dashboard and self.cluster is not None and importlib.util.find_spec("bokeh") is None:
             self.dashboard += " (bokeh is not installed: the page says what to install for the dashboard)"
