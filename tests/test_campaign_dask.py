@@ -20,9 +20,14 @@ from _campaign import LIMIT_S, cli, digest, tiny, wait_lines
 from _proc import EHPSS_HIL, ENV, ROOT
 from distributed import Client, LocalCluster
 
+from ehpss_hil.campaign.cluster import DaskExecutor
+from ehpss_hil.campaign.executors import Tally
 from ehpss_hil.campaign.journal import JOURNAL_NAME
+from ehpss_hil.campaign.runs import RunTask
+from ehpss_hil.campaign.sampling import plan_runs
 from ehpss_hil.campaign.session import run_campaign
 from ehpss_hil.campaign.spec import load_campaign
+from ehpss_hil.errors import ModelError
 
 #: runs of the campaign a worker is killed in: enough that many are left after the kill
 SAMPLES = 24
@@ -171,3 +176,23 @@ def test_ctrl_c_stops_a_local_cluster_campaign_without_a_traceback(tmp_path: Pat
     assert proc.returncode == 130, stderr
     assert b"Traceback" not in stderr and b"KeyboardInterrupt" not in stderr, stderr.decode()[-2000:]
     assert b"--resume" in stderr
+
+
+def test_a_failing_run_is_retried_then_its_own_error_is_raised(
+    reference: tuple[Path, Path],
+) -> None:
+    f, _one = reference
+    camp = load_campaign(f)
+    plans = plan_runs(camp)[:3]
+    good = [RunTask(p.index, p.run_hash, p.scenario, camp.spec.modes) for p in plans[:2]]
+    bad = RunTask(plans[2].index, plans[2].run_hash, plans[2].scenario, ("no-such-mode",))
+    done: list[int] = []
+    tally = Tally()
+    with DaskExecutor("local:1", retries=2) as ex, pytest.raises(ModelError, match="no-such-mode"):
+        ex.run([*good, bad], lambda rec: done.append(rec["index"]), tally)
+    assert tally.retried == [bad.index, bad.index] and tally.lost_workers == []
+    assert tally.text() == "0 workers lost, 2 runs retried"
+    clean = Tally()
+    with DaskExecutor("local:1") as ex:  # the same runs without the failing one: all finish
+        ex.run(good, lambda rec: done.append(rec["index"]), clean)
+    assert sorted(done[-2:]) == [p.index for p in plans[:2]] and clean.counts() == (0, 0)
