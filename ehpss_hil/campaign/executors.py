@@ -60,22 +60,24 @@ class Tally:
 
     def text(self) -> str:
         """``1 worker lost, 2 runs retried`` (empty when nothing went wrong)."""
-        lost, retried = self.counts()
-        if not lost and not retried:
-            return ""
-        workers = f"{lost} worker{'' if lost == 1 else 's'} lost"
-        return f"{workers}, {retried} run{'' if retried == 1 else 's'} retried"
+        return self._describe(detail=False)
 
     def detail(self) -> str:
         """``1 worker lost (tcp://…), 2 runs retried (runs 3, 7)`` (empty: nothing went wrong)."""
+        return self._describe(detail=True)
+
+    def _describe(self, detail: bool) -> str:
         with self._lock:
-            lost, retried = list(self.lost_workers), sorted(set(self.retried))
+            lost, retried = list(self.lost_workers), list(self.retried)
         if not lost and not retried:
             return ""
-        text = self.text()
         workers = f"{len(lost)} worker{'' if len(lost) == 1 else 's'} lost"
-        runs = ", ".join(str(i) for i in retried)
-        return text.replace(workers, f"{workers} ({', '.join(lost)})") + (f" (runs {runs})" if runs else "")
+        runs = f"{len(retried)} run{'' if len(retried) == 1 else 's'} retried"
+        if detail and lost:
+            workers += f" ({', '.join(lost)})"
+        if detail and retried:
+            runs += f" (runs {', '.join(str(i) for i in sorted(set(retried)))})"
+        return f"{workers}, {runs}"
 
 
 class Executor(Protocol):
