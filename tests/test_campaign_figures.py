@@ -71,6 +71,7 @@ def test_the_onset_map_of_stuck_has_no_magnitude_axis(tmp_path: Path) -> None:
         assert loe.get_title() == "loe (14 runs)" and loe.get_ylabel() == "k_LOE"
         assert stuck.get_title() == "stuck (14 runs)" and stuck.get_ylabel() == ""
         assert list(stuck.get_yticks()) == []
+        assert loe.get_facecolor() == stuck.get_facecolor() != (1.0, 1.0, 1.0, 1.0)  # empty: not white
         assert loe.collections[0].get_array().shape == (2, 2)  # 14 runs: 2 × 2 cells
         assert stuck.collections[0].get_array().shape == (1, 4)  # over the onset only: 4 cells
     finally:

@@ -33,6 +33,8 @@ MAX_BINS = 12
 #: colour range of the mmac/oracle RMS ratio (log scale, 1 in the middle: blue = mmac better
 #: than the oracle, red = worse)
 RATIO_RANGE = (0.01, 100.0)
+#: colour of a map cell that holds no run (matplotlib grey level)
+EMPTY_CELL_COLOR = "0.8"
 #: y-axis label per fault kind with a magnitude (:data:`~.spec.MAGNITUDE_BOUNDS`: what it is)
 MAGNITUDE_LABEL = {
     "loe": "k_LOE",
@@ -82,6 +84,7 @@ def _map(ax: Any, x: np.ndarray, y: np.ndarray | None, v: np.ndarray) -> Any:
     from matplotlib.colors import LogNorm
 
     xe, ye, grid = binned_median(x, y, np.clip(v, *RATIO_RANGE))
+    ax.set_facecolor(EMPTY_CELL_COLOR)  # a cell without runs, not white (white is a ratio of 1)
     return ax.pcolormesh(xe, ye, grid, norm=LogNorm(*RATIO_RANGE), cmap="RdBu_r", shading="flat")
 
 
@@ -99,7 +102,7 @@ def coverage_loe_drift(rows: Sequence[dict[str, Any]], path: Path) -> Path | Non
     ax.scatter(loe, drift, s=6, c="white", edgecolors="black", linewidths=0.3)
     ax.set_xlabel("LOE 1 − k_LOE")
     ax.set_ylabel("drift |1 − k_DFT|")
-    ax.set_title(f"mmac / oracle RMS (median per cell), {len(sel)} runs")
+    ax.set_title(f"mmac / oracle RMS (median per cell; grey: no run), {len(sel)} runs")
     fig.colorbar(mesh, ax=ax, label="mmac / oracle RMS")
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -152,7 +155,7 @@ def onset_figure(rows: Sequence[dict[str, Any]]) -> Any:
             ax.set_yticks([])
     for ax in list(axes.flat)[len(kinds) :]:
         ax.set_visible(False)
-    fig.suptitle("mmac / oracle RMS over fault onset × magnitude (median per cell)")
+    fig.suptitle("mmac / oracle RMS over fault onset × magnitude (median per cell; grey: no run)")
     fig.colorbar(mesh, ax=axes, label="mmac / oracle RMS")
     return fig
 
