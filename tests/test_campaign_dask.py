@@ -139,6 +139,7 @@ def test_an_unreachable_scheduler_leaves_nothing_and_the_plain_rerun_works(
     [
         (["--scheduler", "local:0"], "--scheduler"),
         (["--scheduler", "local:two"], "--scheduler"),
+        (["--scheduler", "local:100000"], "--scheduler"),
         (["--retries", "2"], "--retries"),
         (["--scheduler", "local:1", "--retries", "-1"], "--retries"),
     ],

@@ -29,6 +29,8 @@ from .runs import RunTask, execute
 
 #: ``--scheduler`` value that starts a LocalCluster here (``local`` or ``local:N``)
 LOCAL = "local"
+#: most worker processes of a LocalCluster per core (one thread each: more only share the cores)
+MAX_LOCAL_PER_CORE = 4
 #: how long to wait for the Dask scheduler to answer (s)
 CONNECT_TIMEOUT_S = 30.0
 #: where the local cluster serves its dashboard (Dask's default; another free port when taken)
@@ -71,15 +73,19 @@ def _interrupts_ignored() -> Iterator[None]:
 
 def parse_local(scheduler: str) -> int | None:
     """Workers of a ``local[:N]`` scheduler (``local``: every core); None for an address.
-    ConfigError (exit 2) for ``local:`` with anything but a whole number ≥ 1."""
+    ConfigError (exit 2) for ``local:`` with anything but a whole number from 1 to
+    :data:`MAX_LOCAL_PER_CORE` × the cores."""
     if scheduler != LOCAL and not scheduler.startswith(LOCAL + ":"):
         return None
     text = scheduler[len(LOCAL) + 1 :]
     if not text:
         return default_workers()
-    if not text.isdigit() or int(text) < 1:
+    most = MAX_LOCAL_PER_CORE * default_workers()
+    if not text.isdigit() or not 1 <= int(text) <= most:
         raise ConfigError(
-            "", "--scheduler", f"expected local, local:N with N ≥ 1, or tcp://host:port, got {scheduler!r}"
+            "",
+            "--scheduler",
+            f"expected local, local:N with 1 ≤ N ≤ {most}, or tcp://host:port, got {scheduler!r}",
         )
     return int(text)
 
