@@ -97,9 +97,8 @@ def test_campaign_reports_model_error_and_worst_runs_rerun_exactly(tmp_path: Pat
     md = (out / "summary.md").read_text()
     assert "## Model error" in md and "| flow_gain_1_s3 | -20 … +20 |" in md
     assert "model error (plant ≠ model" in md
-    worst = res.summaries[-1].worst[0]
-    assert worst.path is not None
-    sc = load_scenario(worst.path)
+    worst = res.summaries[-1].worst_gap[0]
+    sc = load_scenario(worst.paths["gap"])
     assert sc.plant.flow_gain_1_s3 is not None
     rerun = compute_metrics(run_scenario(sc, "mmac", load_params())).rms_error_m
     assert rerun == worst.rms_m["mmac"]

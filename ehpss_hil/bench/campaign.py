@@ -1,6 +1,7 @@
-"""``ehpss-hil bench campaign``: campaign throughput on 1 and 2 local processes and on a local Dask
-cluster (scheduler + 2 workers started here on 127.0.0.1), the per-run overhead beside the
-simulation time, and the offline speed of mmac; each target printed with PASS/FAIL.
+"""``ehpss-hil bench campaign``: campaign throughput on 1 and 2 local processes and on a Dask
+``LocalCluster`` (2 worker processes on 127.0.0.1, as ``campaign --scheduler local:2``), the
+per-run overhead beside the simulation time, and the offline speed of mmac; each target printed
+with PASS/FAIL.
 
 Overhead of an executor = (workers × wall time − Σ the runs' own time in the workers) / Σ the
 runs' own time: what scheduling, transfer and idling add to the simulation.
@@ -17,8 +18,7 @@ from dataclasses import replace
 from typing import Any
 
 from .. import PROJECT_ROOT
-from ..campaign.executors import run_dask, run_local
-from ..campaign.localcluster import LocalDaskCluster
+from ..campaign.executors import Tally, run_local
 from ..campaign.runs import RunTask, execute
 from ..campaign.spec import load_campaign
 from ..extras import EXTRAS, require
@@ -40,7 +40,7 @@ WORKERS = 2
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--file", default=str(PROJECT_ROOT / "campaigns" / "quick.yaml"), help="campaign file")
     p.add_argument("--runs", type=int, default=16, help="runs per executor (default 16)")
-    p.add_argument("--no-dask", action="store_true", help="skip the local Dask cluster")
+    p.add_argument("--no-dask", action="store_true", help="skip the Dask LocalCluster")
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
 
 
@@ -87,9 +87,11 @@ def run(args: argparse.Namespace) -> Scorecard:
     wall, recs = _timed(lambda cb: run_local(tasks, WORKERS, cb))
     results.append(_figures(f"local ×{WORKERS}", wall, recs, WORKERS))
     if not args.no_dask:
-        with LocalDaskCluster(WORKERS) as cluster:
-            run_dask(warm, cluster.address, lambda _r: None)  # the workers import and load once
-            wall, recs = _timed(lambda cb: run_dask(tasks, cluster.address, cb))
+        from ..campaign.cluster import LOCAL, DaskExecutor
+
+        with DaskExecutor(f"{LOCAL}:{WORKERS}") as dask:
+            dask.run(warm, lambda _r: None, Tally())  # the workers import and load once
+            wall, recs = _timed(lambda cb: dask.run(tasks, cb, Tally()))
         results.append(_figures(f"Dask ×{WORKERS}", wall, recs, WORKERS))
     load = " / ".join(f"{x:.2f}" for x in os.getloadavg())
     print(

@@ -4,7 +4,8 @@ Parquet row per run, a summary per fault class, worst cases, coverage maps (docs
 
 Modules, from the bottom up: :mod:`.spec` (the campaign file), :mod:`.sampling` (run index →
 scenario), :mod:`.scenario_file` (a scenario back to YAML), :mod:`.runs` (one run → one row),
-:mod:`.journal` (finished rows, kill-safe), :mod:`.executors` (local pool, Dask), :mod:`.progress`,
+:mod:`.journal` (finished rows, kill-safe), :mod:`.executors` (local pool), :mod:`.cluster` (Dask:
+a scheduler or a LocalCluster, lost workers, retries), :mod:`.progress`,
 :mod:`.table` (Parquet/CSV), :mod:`.summary` (fault classes, worst cases, summary.md),
 :mod:`.figures` (coverage maps, distributions).
 """

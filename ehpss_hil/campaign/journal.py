@@ -150,9 +150,13 @@ class Journal:
             raise OutputError(f"cannot write {self.path}: {exc.strerror or exc}") from exc
 
     def close(self) -> None:
-        """Sync to disk, unlock and close."""
+        """Sync to disk, unlock and close; a journal still empty (no run finished) is removed,
+        so a campaign that never ran one leaves no journal to ``--resume``."""
         try:
-            os.fsync(self._fd)
+            if os.fstat(self._fd).st_size == 0:
+                self.path.unlink(missing_ok=True)  # still under our lock: no one appends to it
+            else:
+                os.fsync(self._fd)
         finally:
             os.close(self._fd)
 

@@ -12,7 +12,7 @@ that the manifest does not list (a user's ``summary.md``) is refused the same wa
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,7 +20,7 @@ from typing import Any
 from ..canlog.sidecar import write_json_atomic
 from ..errors import OutputError
 from ..outputs import MANIFEST, exists, foreign, manifest_files, refuse_foreign, write_manifest
-from .executors import run_dask, run_local
+from .executors import Executor, Tally, open_executor
 from .figures import FIGURE_NAMES, write_figures
 from .journal import JOURNAL_NAME, Expected, Journal, read_journal
 from .progress import Progress
@@ -65,13 +65,16 @@ class Outcome:
     files: list[Path] = field(default_factory=list)
     #: timing of the runs done now (from their records)
     timings: list[dict[str, Any]] = field(default_factory=list)
+    #: where the runs went, and the workers lost and runs retried there
+    executor: str = ""
+    tally: Tally = field(default_factory=Tally)
 
 
 def prepare_out(out: Path, resume: bool, overwrite: bool = False) -> Path:
     """Make ``out``; refuse one holding a journal unless ``resume``, and files at the campaign's
     names it did not write unless ``overwrite``; record the names in its manifest."""
     journal = out / JOURNAL_NAME
-    if exists(journal) and not resume:
+    if exists(journal) and not resume and not _empty(journal):
         raise OutputError(
             f"{out} holds a campaign's runs ({JOURNAL_NAME}); pass --resume or choose another --out"
         )
@@ -94,6 +97,11 @@ def prepare_out(out: Path, resume: bool, overwrite: bool = False) -> Path:
     return journal
 
 
+def _empty(path: Path) -> bool:
+    """``path`` is a regular file of 0 bytes (a journal of a session that ran nothing)."""
+    return path.is_file() and not path.is_symlink() and path.stat().st_size == 0
+
+
 def _worst_files(out: Path) -> list[str]:
     """The files under ``out/worst`` (relative to ``out``), symlinks included, not followed."""
     root = out / WORST_DIR
@@ -111,16 +119,6 @@ def record_files(out: Path, paths: list[Path]) -> None:
         raise OutputError(f"cannot write the manifest of {out}: {exc.strerror or exc}") from exc
 
 
-def execute_runs(
-    tasks: list[RunTask], workers: int, scheduler: str | None, on_result: Callable[[dict[str, Any]], None]
-) -> None:
-    """Run ``tasks`` locally on ``workers`` processes, or on the Dask ``scheduler``."""
-    if scheduler:
-        run_dask(tasks, scheduler, on_result)
-    else:
-        run_local(tasks, workers, on_result)
-
-
 def run_campaign(
     camp: Campaign,
     out: Path,
@@ -131,9 +129,25 @@ def run_campaign(
     figures: bool = True,
     progress: Progress | None = None,
     overwrite: bool = False,
+    executor: Executor | None = None,
 ) -> Outcome:
-    """Run the campaign into ``out`` (see the module docstring). KeyboardInterrupt propagates
-    after the journal is closed: every run that finished is kept."""
+    """Run the campaign into ``out`` (see the module docstring) on ``executor`` (default: the
+    one of ``workers`` and ``scheduler``, opened before ``out`` is touched). KeyboardInterrupt
+    propagates after the journal is closed: every run that finished is kept."""
+    with open_executor(workers, scheduler) if executor is None else nullcontext(executor) as ex:
+        return _run(camp, out, ex, resume, csv, figures, progress, overwrite)
+
+
+def _run(
+    camp: Campaign,
+    out: Path,
+    ex: Executor,
+    resume: bool,
+    csv: bool,
+    figures: bool,
+    progress: Progress | None,
+    overwrite: bool,
+) -> Outcome:
     journal_path = prepare_out(out, resume, overwrite)
     plans = plan_runs(camp)
     columns = [f"{m}.{c}" for m in camp.spec.modes for c in METRIC_COLUMNS]
@@ -141,8 +155,9 @@ def run_campaign(
     with Journal(journal_path) as journal:
         records = read_journal(journal_path, expected)
         todo = [p for p in plans if p.run_hash not in records]
-        outcome = Outcome(len(plans), len(plans) - len(todo))
+        outcome = Outcome(len(plans), len(plans) - len(todo), executor=ex.description)
         prog = progress if progress is not None else Progress(len(plans), outcome.skipped)
+        prog.tally = outcome.tally
         tasks = [RunTask(p.index, p.run_hash, p.scenario, camp.spec.modes, camp.spec.transport) for p in todo]
 
         def on_result(rec: dict[str, Any]) -> None:
@@ -154,7 +169,7 @@ def run_campaign(
 
         t0 = time.perf_counter()
         try:
-            execute_runs(tasks, workers, scheduler, on_result)
+            ex.run(tasks, on_result, outcome.tally)
         finally:
             outcome.run_wall_s = time.perf_counter() - t0
             prog.finish()
@@ -186,6 +201,11 @@ def finish(
         f"- {len(rows)} runs of {camp.duration_s:g} s, sampler {spec.sampler}, modes {', '.join(spec.modes)}",
         "- table: `results.parquet` (one row per run; columns `<mode>.<metric>`)",
     ]
+    if outcome.ran:
+        trouble = outcome.tally.detail()
+        header.append(
+            f"- {outcome.ran} runs executed now on {outcome.executor}" + (f": {trouble}" if trouble else "")
+        )
     sections: list[str] = []
     if spec.model_error is not None:
         ranges = spec.model_error.ranges()

@@ -7,10 +7,15 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..campaign.executors import default_workers
 from ..campaign.spec import load_campaign
+from ..errors import ConfigError
 from ..extras import EXTRAS, require
+
+if TYPE_CHECKING:
+    from ..campaign.session import Outcome
 
 NAME = "campaign"
 #: exit code after Ctrl-C (the shell's 128 + SIGINT)
@@ -27,7 +32,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="local worker processes (default: all cores; ignored with --scheduler)",
     )
     p.add_argument(
-        "--scheduler", metavar="ADDRESS", help="run on the Dask cluster of this scheduler (tcp://host:8786)"
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on Dask: the cluster of this scheduler (tcp://host:8786), or local[:N] for a "
+        "distributed.LocalCluster of N worker processes here (default N: all cores)",
+    )
+    p.add_argument(
+        "--retries",
+        type=int,
+        default=0,
+        metavar="N",
+        help="with --scheduler: submit a run that fails (or whose workers keep dying) again up to N "
+        "times (default 0; Dask reruns a lost worker's runs itself)",
     )
     p.add_argument("--out", "-o", metavar="DIR", help="output directory (default: runs/campaign-<name>)")
     p.add_argument("--resume", action="store_true", help="continue in DIR: runs already finished are skipped")
@@ -45,37 +61,56 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 LOCAL_MODULES = ("pyarrow", "scipy")
 
 
+#: most retries of one run
+MAX_RETRIES = 100
+
+
 def run(args: argparse.Namespace) -> int:
     require("campaign", "ehpss-hil campaign", EXTRAS["campaign"] if args.scheduler else LOCAL_MODULES)
+    if not 0 <= args.retries <= MAX_RETRIES:
+        raise ConfigError("", "--retries", f"expected 0 … {MAX_RETRIES}, got {args.retries}")
+    if args.retries and not args.scheduler:
+        raise ConfigError("", "--retries", "needs --scheduler (a local run that fails stops the campaign)")
+    from ..campaign.executors import open_executor
     from ..campaign.session import run_campaign
-    from ..campaign.summary import format_summary
 
     camp = load_campaign(args.file)
     out = Path(args.out) if args.out else Path("runs") / f"campaign-{camp.spec.name}"
-    where = (
-        f"Dask scheduler {args.scheduler}" if args.scheduler else f"{max(1, args.workers)} local process(es)"
-    )
-    spec = camp.spec
-    print(f"campaign {spec.name}: {spec.samples} runs × {len(spec.modes)} modes on {where} → {out}")
     t0 = time.perf_counter()
     try:
-        res = run_campaign(
-            camp,
-            out,
-            max(1, args.workers),
-            args.scheduler,
-            args.resume,
-            args.csv,
-            not args.no_figures,
-            overwrite=args.overwrite,
-        )
+        with open_executor(max(1, args.workers), args.scheduler, args.retries) as ex:
+            spec = camp.spec
+            runs = f"{spec.samples} runs × {len(spec.modes)} modes"
+            print(f"campaign {spec.name}: {runs} on {ex.description} → {out}")
+            if args.scheduler:
+                print(f"Dask dashboard: {ex.dashboard or 'none (the scheduler serves none)'}", flush=True)
+            res = run_campaign(
+                camp,
+                out,
+                resume=args.resume,
+                csv=args.csv,
+                figures=not args.no_figures,
+                overwrite=args.overwrite,
+                executor=ex,
+            )
     except KeyboardInterrupt:
         print(f"\ninterrupted: the finished runs are kept in {out}; continue with --resume", file=sys.stderr)
         return INTERRUPTED_EXIT
-    wall = time.perf_counter() - t0
+    _report(res, time.perf_counter() - t0)
+    return 0
+
+
+def _report(res: Outcome, wall: float) -> None:
+    """The summary table, the counts and the files written, on stdout."""
+    from ..campaign.summary import format_summary
+
     print(format_summary(res.summaries))
     rate = f" ({res.ran / res.run_wall_s:.2f} runs/s)" if res.ran and res.run_wall_s > 0 else ""
-    print(f"{res.ran} run(s) done{rate}, {res.skipped} skipped (finished before); {wall:.1f} s in all")
+    trouble = res.tally.text()
+    print(
+        f"{res.ran} run(s) done{rate}, {res.skipped} skipped (finished before)"
+        + (f", {trouble}" if trouble else "")
+        + f"; {wall:.1f} s in all"
+    )
     for f in res.files:
         print(f"wrote {f}")
-    return 0
