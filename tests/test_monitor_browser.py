@@ -455,6 +455,13 @@ def test_refusal_failsafe_shading_and_csv_export(monitored: Monitored, tmp_path:
         _until("the CSV download", lambda: any(p.suffix == ".csv" for p in downloads.iterdir()))
         saved = next(p for p in downloads.iterdir() if p.suffix == ".csv")
         _until("the CSV written", lambda: saved.read_text() == csv_text)
+        driver.find_element(By.ID, "export-png").click()  # type: ignore[attr-defined]
+        _until("the PNG download", lambda: any(p.suffix == ".png" for p in downloads.iterdir()))
+        png = next(p for p in downloads.iterdir() if p.suffix == ".png")
+        _until("the PNG written", lambda: png.stat().st_size > 24)
+        head = png.read_bytes()[:24]
+        width, height = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+        assert head[:8] == b"\x89PNG\r\n\x1a\n" and width >= 640 and height >= 400, (width, height)
         # a zoom: the x range shrinks to the interval, the view stays frozen
         js(
             "for (const p of plots) p.u.setScale('x', {min: arguments[0], max: arguments[1]});",
