@@ -249,3 +249,43 @@ def test_every_dbc_reason_has_its_colour() -> None:
         names = {str(v) for v in choices.values()}
         assert names <= set(table), names - set(table)
     assert len(set(FAILSAFE_COLORS.values())) == len(FAILSAFE_COLORS)
+
+
+def _with_acks(log: Path, out: Path, acks: list[tuple[float, dict[str, float]]]) -> Path:
+    """``log`` with FAULT_INJECT_ACK frames (``(s after the first frame, values)``) inserted in
+    time order, as an emulator answering the monitor's injections logs them."""
+    tx = FrameCodec()
+    lines = log.read_text().splitlines()
+    t0 = float(lines[0].split(")")[0][1:])
+    chan = lines[0].split()[1]
+    for dt, values in acks:
+        msg = tx.encode("FAULT_INJECT_ACK", values)
+        t = t0 + dt
+        i = next(i for i, ln in enumerate(lines) if float(ln.split(")")[0][1:]) > t)
+        lines.insert(i, f"({t:.6f}) {chan} {msg.arbitration_id:03X}#{msg.data.hex().upper()}")
+    out.write_text("\n".join(lines) + "\n")
+    shutil.copy(str(log) + ".json", str(out) + ".json")
+    return out
+
+
+def test_an_injection_only_its_answer_shows_is_an_event(logs: dict[str, Path], tmp_path: Path) -> None:
+    """A frame loss injected from the monitor changes no gain: the emulator's FAULT_INJECT_ACK
+    (APPLIED) makes it an event in words, on the figures and in the table; a refused
+    injection is none."""
+    log = _with_acks(
+        logs["nrc"],
+        tmp_path / "bus.log",
+        [
+            (0.6, {"FaultKind": 5, "Status": 0, "Value": 0.2}),  # frame_loss 20 %, applied
+            (0.7, {"FaultKind": 0, "Status": 1, "Value": 7.0}),  # k_loe 7, OUT_OF_RANGE
+        ],
+    )
+    run = load_log_run(log)
+    view = log_view(run)
+    words = [w for _, w in view.events]
+    assert words == ["drift 0.8", "frame loss 20 %", "LOE 50 %"], view.events
+    t_loss = next(t for t, w in view.events if w == "frame loss 20 %")
+    assert t_loss == pytest.approx(0.6, abs=0.005)
+    assert t_loss in run.result.event_times_s  # in the metrics' event table too
+    again = log_view(run)
+    assert again.events == view.events

@@ -7,11 +7,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .result import SimResult
+
+if TYPE_CHECKING:
+    from ..codec import FrameCodec
 
 #: a gain change smaller than this is no event (the DBC's PLANT_FAULTS LSB is 1e-4)
 GAIN_STEP = 5e-5
@@ -126,7 +129,38 @@ def _agrees(seen: dict[str, Any], fields: dict[str, Any]) -> bool:
     return bool(common) and all(abs(float(seen[k]) - float(fields[k])) <= GAIN_STEP * 2 for k in common)
 
 
-def event_labels(r: SimResult, events: tuple[Any, ...] = ()) -> list[tuple[float, str]]:
+#: injected kinds no other frame shows (PLANT_FAULTS has the gains, PLANT_TRUTH the stuck flag)
+INJECTED_ONLY = ("position_bias_m", "frame_loss", "current_limit_a")
+
+
+def injection_events(
+    acks: dict[str, np.ndarray], codec: FrameCodec, t_rows: np.ndarray, k: np.ndarray, ts: float
+) -> list[tuple[float, str]]:
+    """``(t, words)`` of the injections the emulator applied (FAULT_INJECT_ACK frames ``acks``
+    with ``Status`` APPLIED, names from ``codec``'s DBC) of a kind only that frame shows
+    (:data:`INJECTED_ONLY`: a frame loss, a bias, a current limit), on the controller's time
+    (``k·Ts`` of the row received next; ``t_rows`` the rows' wall receive times)."""
+    if len(acks["t_s"]) == 0 or len(t_rows) == 0:
+        return []
+    msg = codec.message("FAULT_INJECT_ACK")
+    kinds = {int(c): str(n) for c, n in (msg.get_signal_by_name("FaultKind").choices or {}).items()}
+    codes = {str(n): int(c) for c, n in (msg.get_signal_by_name("Status").choices or {}).items()}
+    applied = codes.get("APPLIED", -1)
+    out = []
+    for t_wall, kind, status, value in zip(
+        acks["t_s"], acks["FaultKind"], acks["Status"], acks["Value"], strict=True
+    ):
+        name = kinds.get(int(kind), "")
+        if int(status) != applied or name not in INJECTED_ONLY:
+            continue
+        j = min(int(np.searchsorted(t_rows, t_wall)), len(k) - 1)
+        out.append((float(k[j] * ts), describe_changes({name: float(value)})))
+    return out
+
+
+def event_labels(
+    r: SimResult, events: tuple[Any, ...] = (), known: tuple[tuple[float, str], ...] = ()
+) -> list[tuple[float, str]]:
     """``(t, words)`` for each event of ``r``, sorted by t (s, the run's time axis).
 
     Every change the run saw (``r.event_times_s``: a log's PLANT_FAULTS gains and PLANT_TRUTH
@@ -135,9 +169,11 @@ def event_labels(r: SimResult, events: tuple[Any, ...] = ()) -> list[tuple[float
     times differ by its start-up offset) and takes the scenario's words; a scenario event the
     bus cannot show (a bias, a frame loss, a current limit) is placed at its time plus that
     offset. The changes no scenario event explains (an injection from the monitor) are named
-    from what changed. Calling it again on times it produced gives the same events.
+    from what changed; ``known``: times whose words are known already (:func:`injection_events`).
+    Calling it again on times it produced gives the same events.
     """
-    free = [float(t) for t in r.event_times_s]
+    named = {float(t): words for t, words in known}
+    free = [float(t) for t in r.event_times_s if float(t) not in named]
     seen = {t: _changes_at(r, t) for t in free}
     placed: list[tuple[float, str, float]] = []  # (time seen or NaN, words, scenario time)
     after = -math.inf
@@ -156,6 +192,7 @@ def event_labels(r: SimResult, events: tuple[Any, ...] = ()) -> list[tuple[float
             t = free.pop(i) if i is not None else t_ev + offset
         out.append((t, words))
     out += [(t, describe_changes(seen[t])) for t in free]
+    out += [(t, w) for t, w in named.items() if t in {float(x) for x in r.event_times_s}]
     return sorted(out, key=lambda e: e[0])
 
 

@@ -40,7 +40,7 @@ from ..physics.params import Params, load_params
 from ..physics.reference import ReferenceModel
 from ..runtime.status_frames import MODE_CODE
 from ..scenario import Scenario
-from .annotate import bus_event_times, event_labels
+from .annotate import bus_event_times, event_labels, injection_events
 from .logbounds import check_sample_time, check_span
 from .logclock import undo_clock_steps, unwrap_counter
 from .logmeta import RunInfo, reference_of, run_info
@@ -73,6 +73,8 @@ class LogRun:
     notes: list[str] = field(default_factory=list)
     #: why the log gave no sample row (empty when it gave some)
     no_samples: str = ""
+    #: ``(t, words)`` of applied injections only FAULT_INJECT_ACK shows (a frame loss, a bias)
+    injections: tuple[tuple[float, str], ...] = ()
 
 
 # ---- helpers on decoded arrays ----------------------------------------------------------------
@@ -227,10 +229,15 @@ def load_log_run(
             "unavailable; pass --scenario to recompute them"
         )
     result, has_truth = _assemble(frames, sc, info, k, t_rows, ts, x_d, y_m, notes)
+    injections = tuple(injection_events(_sorted(frames, "FAULT_INJECT_ACK"), codec, t_rows, k, ts))
+    if injections:  # events too: in the metrics' event table and on the figures
+        result.event_times_s = tuple(sorted({*result.event_times_s, *(t for t, _ in injections)}))
     for name in set(frames) - _VIEWED:  # laid out per sample: only the count is still read
         frames[name] = {"t_s": frames[name]["t_s"]}
     has_ref = ref is not None
-    return LogRun(log, result, side, has_truth, has_ref, sc, i_cmd, frames, verdicts, notes, empty)
+    return LogRun(
+        log, result, side, has_truth, has_ref, sc, i_cmd, frames, verdicts, notes, empty, injections
+    )
 
 
 def _assemble(
