@@ -231,6 +231,12 @@ def test_no_estimator_traces_for_nrc_and_a_colour_per_reason(logs: dict[str, Pat
     labels = [ln.get_label() for a in fig.axes[3:] for ln in a.lines]
     assert any(lab.endswith(" mmac") for lab in labels)
     assert not any(lab.endswith(" nrc") for lab in labels), labels
+    # k̂ of mmac is a gap inside its FAULT interval (the controller resets its estimators there)
+    fault = next(iv for iv in mmac.intervals if iv.kind == "FAULT")
+    k_loe = next(ln for ln in fig.axes[4].lines if ln.get_label() == "k̂_LOE mmac")
+    t, y = (np.asarray(a, float) for a in k_loe.get_data())
+    inside = (t >= fault.t0_s) & (t < fault.t1_s)
+    assert inside.any() and np.isnan(y[inside]).all() and np.isfinite(y[~inside]).any()
     handles, names = fig.axes[-1].get_legend_handles_labels()
     span = handles[names.index("mmac FAULT: SENSOR_TIMEOUT")]
     assert to_rgb(span.get_facecolor()) == to_rgb(FAILSAFE_COLORS["SENSOR_TIMEOUT"])

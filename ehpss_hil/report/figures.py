@@ -73,6 +73,17 @@ def _masked(v: np.ndarray, counted: np.ndarray) -> np.ndarray:
     return np.where(counted, v, np.nan)
 
 
+def estimating(v: RunView) -> np.ndarray:
+    """Per sample, whether the controller had an estimate in use: False inside its FAULT
+    intervals (it resets its estimators there; the reset values would read as a jump)."""
+    t = v.result.t_s
+    ok = np.ones(len(t), bool)
+    for iv in v.intervals:
+        if iv.kind == "FAULT":
+            ok &= (t < iv.t0_s) | (t >= iv.t1_s)
+    return ok
+
+
 def mark_events(axes: list[Any], events: list[tuple[float, str]]) -> None:
     """Dashed lines at the events on every axis; their names above the top one (not over data)."""
     for ax in axes:
@@ -136,8 +147,9 @@ def _outside_legend(ax: Any) -> None:
 def draw_runs(views: list[RunView], title: str | None = None) -> Any:
     """The matplotlib figure of :func:`plot_runs` (the caller saves and closes it): (a) x of
     each run with x_d and y_m; (b) e = x − y_m; (c) coil current; (d) active model slot per
-    channel; (e) k̂_LOE, k̂_DFT with the true gains (panels (d), (e) without the runs of a mode that has no
-    estimator). Several runs share the reference and the events (the first run's)."""
+    channel; (e) k̂_LOE, k̂_DFT with the true gains, gaps in FAULT (panels (d), (e) without the
+    runs of a mode that has no estimator). Several runs share the reference and the events (the
+    first run's)."""
     plt = _pyplot()
     several = len(views) > 1
     first = views[0].result
@@ -156,8 +168,9 @@ def draw_runs(views: list[RunView], title: str | None = None) -> Any:
             ax[3].step(r.t_s, r.active_spool, where="post", color=c, label=f"spool / joint{name}")
             if not np.array_equal(r.active_spool, r.active_position):
                 ax[3].step(r.t_s, r.active_position, where="post", color=c, ls="--", label=f"position{name}")
-        ax[4].plot(r.t_s, r.k_loe_hat, color=c, lw=0.9, label=f"k̂_LOE{name}")
-        ax[4].plot(r.t_s, r.k_dft_hat, color=c, lw=0.9, ls="-.", label=f"k̂_DFT{name}")
+        est = estimating(v)
+        ax[4].plot(r.t_s, np.where(est, r.k_loe_hat, np.nan), color=c, lw=0.9, label=f"k̂_LOE{name}")
+        ax[4].plot(r.t_s, np.where(est, r.k_dft_hat, np.nan), color=c, lw=0.9, ls="-.", label=f"k̂_DFT{name}")
     ax[4].plot(
         first.t_s, first.true_k_loe * first.true_k_q, "k-", lw=1.2, alpha=0.6, label="k_LOE·k_Q (true)"
     )

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..extras import require
-from .figures import RunView, has_estimator, mark_events, plot_runs, shade
+from .figures import RunView, estimating, has_estimator, mark_events, plot_runs, shade
 from .logdata import LogRun
 from .logviews import log_view
 from .metrics import RECOVERY_BAND_M
@@ -161,12 +161,12 @@ def fig_models(run: LogRun, out_dir: Path, view: RunView) -> Path | None:
 
 
 def fig_estimates(run: LogRun, out_dir: Path, view: RunView) -> Path | None:
-    """k̂_LOE and k̂_DFT against the true fault gains (PLANT_FAULTS); the true gains alone for a
-    mode without an estimator."""
+    """k̂_LOE and k̂_DFT against the true fault gains (PLANT_FAULTS), gaps in FAULT; the true
+    gains alone for a mode without an estimator."""
     r = run.result
     if "CTRL_STATUS" not in run.frames and "PLANT_FAULTS" not in run.frames:
         return None
-    estimates = has_estimator(r.controller)
+    estimates, est = has_estimator(r.controller), estimating(view)
     if not estimates and not np.any(np.isfinite(r.true_k_loe)):
         return None
     fig, axs = _figure(view, 2, 2.6)
@@ -175,7 +175,7 @@ def fig_estimates(run: LogRun, out_dir: Path, view: RunView) -> Path | None:
         (axs[1], r.k_dft_hat, r.true_k_dft, "k_DFT"),
     ):
         if estimates:
-            ax.plot(r.t_s, hat, "C0", lw=1.0, label=f"{lab} estimate (CTRL_STATUS)")
+            ax.plot(r.t_s, np.where(est, hat, np.nan), "C0", lw=1.0, label=f"{lab} estimate (CTRL_STATUS)")
         if np.any(np.isfinite(true)):
             ax.step(r.t_s, true, "k--", where="post", lw=1.0, label=f"true {lab}")
         ax.set_ylabel(lab)
