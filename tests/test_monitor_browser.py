@@ -449,6 +449,12 @@ def test_refusal_failsafe_shading_and_csv_export(monitored: Monitored, tmp_path:
         SHADED_SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
         driver.save_screenshot(str(SHADED_SCREENSHOT))  # type: ignore[attr-defined]
 
+        driver.find_element(By.ID, "hold-y").click()  # type: ignore[attr-defined]
+        held = js("return plots.map((p) => [p.u.scales.y.min, p.u.scales.y.max])")
+        inject("k_dft", "0.5")  # the gains plot's data change; its y range does not
+        _until("true k_DFT 0.5", lambda: text("k-true").endswith("0.500"))
+        assert js("return plots.map((p) => [p.u.scales.y.min, p.u.scales.y.max])") == held
+        driver.find_element(By.ID, "hold-y").click()  # type: ignore[attr-defined]
         driver.find_element(By.ID, "pause").click()  # type: ignore[attr-defined]
         csv_text = str(js("return monitorVisibleCsv()"))
         driver.find_element(By.ID, "export-csv").click()  # type: ignore[attr-defined]

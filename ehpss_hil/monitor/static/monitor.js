@@ -8,7 +8,7 @@
 const BUFFER_S = 60;      // rows kept in the page (the server keeps 60 s too)
 const ACTIVE = 2, FAULT = 3;
 const cols = {};          // field -> array (SI), the last BUFFER_S seconds
-const view = { windowS: 10, paused: false, t0: null, intervals: [], events: [], drawn: [], acks: [] };
+const view = { windowS: 10, paused: false, holdY: false, t0: null, intervals: [], events: [], drawn: [], acks: [] };
 let cfg = {};
 let fields = [];
 let plots = [];
@@ -149,6 +149,18 @@ function readout(u) {
   out.textContent = `t = ${Number(t).toFixed(3)} s · ${parts.join(" · ")}`;
 }
 
+// y range: auto (the data's, padded) or held where it was when "hold y" was pressed
+function yRange(u, min, max) {
+  if (view.holdY && u.heldY) return u.heldY;
+  return uPlot.rangeNum(min ?? 0, max ?? 1, 0.1, true);
+}
+
+function setHoldY(on) {
+  view.holdY = on;
+  for (const p of plots) p.u.heldY = on ? [p.u.scales.y.min, p.u.scales.y.max] : null;
+  document.getElementById("hold-y").textContent = on ? "y: held (auto)" : "y: auto (hold)";
+}
+
 function makePlots() {
   const w = Math.max(320, Math.floor((document.querySelector(".plots").clientWidth - 40) / 2));
   plots = PLOTS.map((p) => {
@@ -158,7 +170,7 @@ function makePlots() {
       width: w, height: 210, series, legend: { show: true, live: true },
       cursor: { show: true, drag: { x: true, y: false, setScale: true }, sync: { key: "monitor" } },
       axes: [{ label: "run time (s)", labelSize: 16, size: 36 }, { size: 60 }],
-      scales: { x: { time: false } },
+      scales: { x: { time: false }, y: { range: yRange } },
       hooks: { draw: [drawOverlays], setSelect: [syncZoom], setCursor: [readout] },
     };
     const data = [[]].concat(p.series.map(() => []));
@@ -228,6 +240,7 @@ function setPaused(p) {
 
 function setupView() {
   document.getElementById("pause").addEventListener("click", () => setPaused(!view.paused));
+  document.getElementById("hold-y").addEventListener("click", () => setHoldY(!view.holdY));
   const sel = document.getElementById("window");
   sel.addEventListener("change", () => { view.windowS = Number(sel.value); view.paused = false; setPaused(false); });
 }
