@@ -64,6 +64,11 @@ function scan(x) {
     let kind = null, reason = "";
     if (st[i] === FAULT) { kind = "FAULT"; reason = reasonName("FailsafeReason", fr[i]); }
     else if (fb[i] === 1) { kind = "fallback"; reason = fbr[i] ? reasonName("FallbackReason", fbr[i]) : ""; }
+    if (open && kind === "fallback" && open.kind === kind && (!reason || !open.reason)) {
+      // CTRL_STATS (10 Hz) names the reason after CTRL_STATUS (50 Hz) flags the fallback: one interval
+      if (!open.reason && reason) { open.reason = reason; open.color = reasonColor(kind, reason); }
+      continue;
+    }
     if (open && (open.kind !== kind || open.reason !== reason)) close(i);
     if (kind && !open) open = { kind, reason, x0: x[i], x1: x[i], color: reasonColor(kind, reason) };
   }
