@@ -18,7 +18,7 @@ from ehpss_hil.canlog import decode_log
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.errors import CaptureError
 from ehpss_hil.monitor.capture import Capture, CaptureSpec
-from ehpss_hil.monitor.state import ROW_FIELDS, MonitorState, choice_names
+from ehpss_hil.monitor.state import ROW_FIELDS, STATE_FAULT, MonitorState, choice_names
 
 TS = 1e-3  # s between frames
 T0 = 1000.0  # s, the first frame's receive time
@@ -109,5 +109,6 @@ def test_acks_and_trips_as_the_page_reads_them() -> None:
         (2, "stuck", "APPLIED", 1.0),
     ]
     assert s["failsafe_trips"] == 2
+    assert choice_names(rx)["State"][STATE_FAULT] == "FAULT"  # the constant is the DBC's code
     rows = st.rows_since(0)
     assert rows["state"][-1] == 3 and rows["failsafe_reason"][-1] == 1

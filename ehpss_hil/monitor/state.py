@@ -38,7 +38,7 @@ ROW_FIELDS = (
     "fallback",  # CTRL_STATUS.NominalFallback (1: loop held on nominal compensation)
     "fallback_reason",  # CTRL_STATS.FallbackReason code
 )
-#: CTRL_STATUS State code of the fail-safe
+#: CTRL_STATUS State code of the fail-safe (the DBC's value table names it FAULT; a test checks)
 STATE_FAULT = 3
 #: FAULT_INJECT_ACK answers kept for the page (newest last)
 ACKS_KEPT = 20

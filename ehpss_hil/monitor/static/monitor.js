@@ -6,7 +6,7 @@
 // monitor-tools.js.
 "use strict";
 const BUFFER_S = 60;      // rows kept in the page (the server keeps 60 s too)
-const ACTIVE = 2, FAULT = 3;
+let ACTIVE = 2, FAULT = 3;  // CTRL_STATUS State codes: taken from the DBC's names at start-up
 const cols = {};          // field -> array (SI), the last BUFFER_S seconds
 const view = { windowS: 10, paused: false, holdY: false, t0: null, intervals: [], events: [], drawn: [], acks: [] };
 let cfg = {};
@@ -318,6 +318,10 @@ window.monitorView = view;
 (async () => {
   cfg = await (await fetch("/api/config")).json();
   fields = cfg.fields;
+  for (const [code, name] of Object.entries(cfg.choices.State || {})) {
+    if (name === "ACTIVE") ACTIVE = Number(code);
+    if (name === "FAULT") FAULT = Number(code);
+  }
   if (cfg.title) set("title", cfg.title);
   setupView();
   setupTools(cfg);
