@@ -112,3 +112,15 @@ def test_acks_and_trips_as_the_page_reads_them() -> None:
     assert choice_names(rx)["State"][STATE_FAULT] == "FAULT"  # the constant is the DBC's code
     rows = st.rows_since(0)
     assert rows["state"][-1] == 3 and rows["failsafe_reason"][-1] == 1
+
+
+def test_an_event_capture_fires_on_entering_the_fail_safe_or_the_fallback(tmp_path: Path) -> None:
+    base = dict.fromkeys(ROW_FIELDS, 1.0) | {"state": 2.0, "fallback": 0.0, "stuck": 0.0}
+    for change, reason in (({"state": 3.0}, "fail-safe (FAULT)"), ({"fallback": 1.0}, "nominal fallback")):
+        cap = Capture(CaptureSpec("event", before_s=0.0, after_s=0.0), tmp_path, 1)
+        assert not cap.row(base | {"t_s": T0}) and cap.state == "armed"
+        assert cap.row(base | change | {"t_s": T0 + 0.01}) and cap.reason == reason
+    # leaving them is no trigger
+    cap = Capture(CaptureSpec("event", before_s=0.0, after_s=0.0), tmp_path, 2)
+    cap.row(base | {"state": 3.0, "fallback": 1.0, "t_s": T0})
+    assert not cap.row(base | {"t_s": T0 + 0.01}) and cap.state == "armed"

@@ -25,8 +25,8 @@ from .state import ROW_FIELDS, STATE_FAULT
 
 #: longest span before / after a trigger (s): at about 6000 frames/s, 10 s is ~60 000 frames
 MAX_SPAN_S = 10.0
-#: the row fields whose change is a fault event (or a change of the controller's state)
-EVENT_FIELDS = ("k_loe_true", "k_dft_true", "k_q_true", "stuck", "fallback")
+#: the row fields whose change is a fault event
+EVENT_FIELDS = ("k_loe_true", "k_dft_true", "k_q_true", "stuck")
 #: the row fields a threshold may watch
 THRESHOLD_FIELDS = ("e_m", "x_true_m", "y_s_m", "i_cmd_a", "i_applied_a", "k_loe_hat", "k_dft_hat")
 #: a gain change smaller than this is no event (PLANT_FAULTS LSB 1e-4)
@@ -118,6 +118,8 @@ class Capture:
                 return f"{f} {p[f]:g} → {v[f]:g}"
         if v["state"] == STATE_FAULT and p["state"] != STATE_FAULT:
             return "fail-safe (FAULT)"
+        if v["fallback"] == 1.0 and p["fallback"] != 1.0:
+            return "nominal fallback"
         return ""
 
     def write(self, rows: list[tuple[float, ...]], t0_s: float) -> list[Path]:
