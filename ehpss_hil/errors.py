@@ -106,6 +106,12 @@ class InjectError(EhpssError, ValueError):
     exit_code = 2
 
 
+class CaptureError(EhpssError, ValueError):
+    """The monitor refuses a triggered-capture request (bad trigger, span, field or level)."""
+
+    exit_code = 2
+
+
 class ServeError(EhpssError, OSError):
     """The monitor's web server cannot listen where it was told (port taken, bad address)."""
 

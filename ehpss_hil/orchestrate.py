@@ -251,6 +251,8 @@ def _monitor_command(plan: RunPlan, out: Path, netns: PrivateNetns | None) -> li
         str(plan.monitor_port),
         *(["--netns", f"/proc/{netns.pid}/ns/net"] if netns is not None else []),
         *(["--allow-inject"] if plan.monitor_inject else []),
+        "--capture-dir",
+        str(out / "captures"),
     ]
 
 

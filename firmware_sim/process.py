@@ -34,13 +34,13 @@ from ehpss_hil.runtime.stats import LoopStats, peak_rss_bytes
 
 from .command_hold import CommandHold
 from .commanders import CommanderCheck
-from .inject import parse_inject
+from .inject import InjectStatus, ack_values, check_inject
 from .periods import run_periods
 
 log = logging.getLogger("firmware_sim")
 
 #: frames this process transmits (their echoes on udp_multicast are dropped on receive)
-OWN_FRAMES = ("SENSOR_POS", "SENSOR_AUX", "PLANT_TRUTH", "PLANT_FAULTS", "HEARTBEAT_EMU")
+OWN_FRAMES = ("SENSOR_POS", "SENSOR_AUX", "PLANT_TRUTH", "PLANT_FAULTS", "FAULT_INJECT_ACK", "HEARTBEAT_EMU")
 #: a second VALVE_CMD transmitter (commanders.py): frames looked back over, foreign frames in
 #: them that make a conflict, the largest CycleCount step of one controller (a catch-up)
 COMMANDER_WINDOW = 100
@@ -135,14 +135,19 @@ class EmulatorProcess:
         return newest
 
     def _on_inject(self, msg: can.Message) -> None:
+        """Apply a FAULT_INJECT when injection is on and it checks out; answer every one with a
+        FAULT_INJECT_ACK saying what became of it (the monitor's page shows a refusal)."""
+        d = self.codec.classify(msg)
+        values = d.values if d.verdict.usable else None
         if not self.opts.fault_inject:
             self.inject_ignored += 1
+            self.io.send("FAULT_INJECT_ACK", ack_values(InjectStatus.INJECTION_OFF, values))
             return
-        d = self.codec.classify(msg)
-        change = parse_inject(d.values) if d.verdict.usable and d.values is not None else None
+        status, change = check_inject(values) if values is not None else (InjectStatus.INVALID_FRAME, None)
+        self.io.send("FAULT_INJECT_ACK", ack_values(status, values))
         if change is None:
             self.inject_rejected += 1
-            log.warning("t=%.4f s: FAULT_INJECT rejected (%s)", self.t_s, d.verdict.name)
+            log.warning("t=%.4f s: FAULT_INJECT rejected (%s, %s)", self.t_s, d.verdict.name, status.name)
             return
         if change:
             try:

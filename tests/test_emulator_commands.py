@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import Any
 
 import can
 import pytest
@@ -15,6 +16,7 @@ from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.physics.load import load_params
 from ehpss_hil.runtime.frameio import FrameIO
 from ehpss_hil.scenario import Scenario
+from firmware_sim.inject import InjectStatus
 from firmware_sim.process import OWN_FRAMES, EmulatorOptions, EmulatorProcess
 
 TIMEOUT_PERIODS = 10  # command_timeout_s 10 ms at 1 kHz
@@ -156,6 +158,46 @@ def test_fault_inject_only_when_enabled() -> None:
             r.step()
             assert r.proc.emu.faults.k_loe == 1.0
             assert (r.proc.inject_applied, r.proc.inject_rejected) == ((2, 1) if enabled else (0, 0))
+        finally:
+            r.close()
+
+
+def test_every_fault_inject_is_answered_with_its_status() -> None:
+    """FAULT_INJECT_ACK echoes the kind and value and says APPLIED, OUT_OF_RANGE (k_loe 7),
+    UNKNOWN_KIND, INVALID_FRAME (a bad CRC) or, with injection off, INJECTION_OFF."""
+    names: Any = FrameCodec().message("FAULT_INJECT_ACK").get_signal_by_name("Status").choices or {}
+    assert {int(k): str(v) for k, v in names.items()} == {s.value: s.name for s in InjectStatus}
+    for enabled in (True, False):
+        r = Rig(f"ack-{enabled}", fault_inject=enabled)
+        try:
+            sent = [
+                r.codec.encode("FAULT_INJECT", {"FaultKind": 0, "Value": 0.5}),
+                r.codec.encode("FAULT_INJECT", {"FaultKind": 0, "Value": 7.0}),
+                r.codec.encode("FAULT_INJECT", {"FaultKind": 9, "Value": 1.0}),
+            ]
+            bad = r.codec.encode("FAULT_INJECT", {"FaultKind": 4, "Value": 1.0})
+            sent.append(
+                can.Message(
+                    arbitration_id=bad.arbitration_id,
+                    data=bytes([bad.data[0] ^ 1, *bad.data[1:]]),
+                    is_extended_id=False,
+                )
+            )
+            for msg in sent:
+                r.peer.send(msg)
+            r.proc.step_period()
+            acks = [(a["FaultKind"], a["Status"], a["Value"]) for a in r.values_of("FAULT_INJECT_ACK")]
+            if enabled:
+                assert acks == [
+                    (0, InjectStatus.APPLIED, 0.5),
+                    (0, InjectStatus.OUT_OF_RANGE, 7.0),
+                    (9, InjectStatus.UNKNOWN_KIND, 1.0),
+                    (15, InjectStatus.INVALID_FRAME, 0.0),
+                ]
+                assert r.proc.emu.faults.k_loe == 0.5
+            else:
+                assert [a[1] for a in acks] == [InjectStatus.INJECTION_OFF] * 4
+                assert r.proc.emu.faults.k_loe == 1.0
         finally:
             r.close()
 

@@ -2,9 +2,12 @@
 an ``mmac`` controller run realtime in a private network namespace; ``ehpss-hil monitor
 --netns … --allow-inject`` listens there and serves its page on the host's 127.0.0.1; headless
 Chromium (Debian's ``chromium`` + ``chromium-driver``, driven by selenium) opens the page, clicks
-"LOE 50 %" then "drift 0.8", and the page's k̂ and active models must follow: k̂_LOE → 0.5 with
-an active spool model of θ ≈ 0.5, then k̂_DFT → 0.8 with an active position model of θ ≈ 0.8.
-A screenshot is saved (its path printed). Waits have generous limits only; nothing is timed.
+"LOE 50 %" then "drift 0.8" (the emulator answers "applied"), and the page's k̂ and active
+models must follow: k̂_LOE → 0.5 with an active spool model of θ ≈ 0.5, then k̂_DFT → 0.8 with
+an active position model of θ ≈ 0.8. A second test: an injection the emulator refuses, a
+fail-safe shaded with its reason, the visible data exported as CSV against the senders' logs, a
+zoom, a triggered capture. Screenshots are saved (their paths printed). Waits have generous
+limits only; nothing is timed.
 """
 
 from __future__ import annotations
@@ -18,10 +21,13 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
 from _proc import EHPSS_HIL, EMU_CFG_PATH, FIRMWARE_SIM, ROOT, Proc
 
 from ehpss_hil.bus.netns import PrivateNetns, netns_unavailable_reason
+from ehpss_hil.canlog import decode_log
+from ehpss_hil.codec import FrameCodec
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMEDRIVER = shutil.which("chromedriver")
@@ -64,10 +70,17 @@ SCREENSHOT = ROOT / "out" / "monitor-browser.png"
 
 @dataclass
 class Monitored:
-    """The page's URL and the monitor's process (its output)."""
+    """The page's URL, the monitor's process (its output), the controller's and the emulator's
+    processes and their logs (candump -L: every frame each sent is in its own), and where the
+    monitor writes captures."""
 
     url: str
     monitor: Proc
+    controller: Proc
+    emulator: Proc
+    log: Path
+    emulator_log: Path
+    captures: Path
 
 
 @pytest.fixture
@@ -83,7 +96,12 @@ def monitored(tmp_path: Path) -> Iterator[Monitored]:
     procs: list[Proc] = []
     with PrivateNetns() as ns:
         try:
-            emu = Proc(ns.prefix() + FIRMWARE_SIM + ["-c", EMU_CFG_PATH, "--truth", "--fault-inject"])
+            emu_log = tmp_path / "emulator.log"
+            emu = Proc(
+                ns.prefix()
+                + FIRMWARE_SIM
+                + ["-c", EMU_CFG_PATH, "--truth", "--fault-inject", "--log", str(emu_log)]
+            )
             procs.append(emu)
             assert emu.wait_for("realtime on"), emu.text
             netns = f"/proc/{ns.pid}/ns/net"
@@ -99,16 +117,19 @@ def monitored(tmp_path: Path) -> Iterator[Monitored]:
                     "--port",
                     "0",
                     "--allow-inject",
+                    "--capture-dir",
+                    str(tmp_path / "captures"),
                 ]
             )
             procs.append(mon)
             assert mon.wait_for("monitor: http://"), mon.text
             url = re.search(r"http://[\d.]+:\d+/", mon.text)
             assert url is not None, mon.text
-            ctl = Proc(ns.prefix() + EHPSS_HIL + ["controller", "-c", str(cfg)])
+            log = tmp_path / "controller.log"
+            ctl = Proc(ns.prefix() + EHPSS_HIL + ["controller", "-c", str(cfg), "--log", str(log)])
             procs.append(ctl)
             assert ctl.wait_for("first sensor data: ACTIVE"), ctl.text + emu.text
-            yield Monitored(url.group(0), mon)
+            yield Monitored(url.group(0), mon, ctl, emu, log, emu_log, tmp_path / "captures")
         finally:
             for p in reversed(procs):
                 p.terminate()
@@ -116,13 +137,17 @@ def monitored(tmp_path: Path) -> Iterator[Monitored]:
                 p.wait()
 
 
-def _browser() -> object:
+def _browser(downloads: Path | None = None) -> object:
     from selenium import webdriver
     from selenium.webdriver.chrome.options import Options
     from selenium.webdriver.chrome.service import Service
 
     opts = Options()
     opts.binary_location = str(CHROMIUM)
+    if downloads is not None:
+        opts.add_experimental_option(
+            "prefs", {"download.default_directory": str(downloads), "download.prompt_for_download": False}
+        )
     for a in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1500,1150"):
         opts.add_argument(a)
     return webdriver.Chrome(service=Service(executable_path=str(CHROMEDRIVER)), options=opts)
@@ -203,7 +228,7 @@ def test_fault_injected_from_the_page_reconfigures_the_controller(bench: str) ->
 
         overruns0 = _number(text("overruns"))
         click("k_loe")
-        _until("the inject sent", lambda: text("inject-result").startswith("sent: FAULT_INJECT k_loe = 0.5"))
+        _until("the inject applied", lambda: text("inject-result") == "applied by the emulator: k_loe = 0.5")
         _until("true k_LOE 0.5", lambda: text("k-true").startswith("0.500"))
         _until_controlling(
             "k̂_LOE ≈ 0.5", lambda: abs(_number(text("k-loe-hat")) - 0.5) <= 0.05, text, overruns0
@@ -308,3 +333,169 @@ def test_a_page_from_another_origin_cannot_inject_or_read(monitored: Monitored) 
     assert refused is not None, monitored.monitor.text
     counts = ast.literal_eval(refused.group(1))  # the monitor prints a dict of str → int
     assert counts.get("origin", 0) >= 3, counts  # two posts and the WebSocket (config: no CORS)
+
+
+SHADED_SCREENSHOT = ROOT / "out" / "monitor-failsafe.png"
+ZOOM_SCREENSHOT = ROOT / "out" / "monitor-zoomed.png"
+#: how long after its sender logged a frame the monitor (nice 10, on a busy host) may receive
+#: it (s); not a timing requirement, a bound for the search
+ROW_LAG_S = 2.0
+#: the sender logs its frame at send time, just after the bus took it: the monitor's receive
+#: time may precede the log's by this much (s)
+CLOCK_SLACK_S = 0.005
+
+
+def _csv_matches_log(csv_text: str, ctl_log: Path, emu_log: Path) -> tuple[int, list[str]]:
+    """(rows checked, mismatches): the exported rows' commanded current and sensor position, in
+    order, must be values of VALVE_CMD / SENSOR_POS frames as their sender (controller /
+    emulator) logged them, in the same order (a row holds the newest value: it may repeat one),
+    each sent before the monitor received it and at most :data:`ROW_LAG_S` earlier. Rows from
+    before the controller started logging are not checked."""
+    import csv as csvmod
+    import io
+
+    frames = {"VALVE_CMD": decode_log(ctl_log, FrameCodec())["VALVE_CMD"]}
+    frames["SENSOR_POS"] = decode_log(emu_log, FrameCodec())["SENSOR_POS"]
+    rows = list(csvmod.DictReader(io.StringIO(csv_text)))
+    log_from = float(frames["VALVE_CMD"]["t_s"][0]) + ROW_LAG_S
+    bad: list[str] = []
+    checked = 0
+    last = {"i_cmd_a": 0, "y_s_m": 0}
+    for r in rows:
+        t = float(r["t_s"])
+        if t < log_from:
+            continue
+        for field, frame, sig in (
+            ("i_cmd_a", "VALVE_CMD", "CurrentSetpoint"),
+            ("y_s_m", "SENSOR_POS", "Position"),
+        ):
+            if r[field] == "":
+                continue
+            f = frames[frame]
+            i0 = max(last[field], int(np.searchsorted(f["t_s"], t - ROW_LAG_S)) - 1)
+            i1 = int(np.searchsorted(f["t_s"], t + CLOCK_SLACK_S, side="right"))
+            hit = np.flatnonzero(np.abs(f[sig][i0:i1] - float(r[field])) <= 1e-12)
+            if len(hit) == 0:
+                bad.append(f"{field} {r[field]} at {t:.4f} (state {r['state']})")
+            else:
+                last[field] = i0 + int(hit[0])
+        checked += 1
+    return checked, bad
+
+
+def test_refusal_failsafe_shading_and_csv_export(monitored: Monitored, tmp_path: Path) -> None:
+    """The emulator refuses k_LOE 7 and the page says so (FAULT_INJECT_ACK); total frame loss
+    trips the controller into FAULT (SENSOR_TIMEOUT, or LOOP_OVERRUN when its wait for the
+    sensor overran) and, once lifted, it recovers: the page shades
+    that interval in the reason's colour with its name; the visible data exported as CSV match
+    the controller's log row by row."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    from ehpss_hil.reasons import FAILSAFE_COLORS
+
+    downloads = tmp_path / "downloads"
+    downloads.mkdir()
+    driver = _browser(downloads)
+    js = driver.execute_script  # type: ignore[attr-defined]
+    try:
+        driver.get(monitored.url)  # type: ignore[attr-defined]
+
+        def text(elem_id: str) -> str:
+            return str(driver.find_element(By.ID, elem_id).text)  # type: ignore[attr-defined]
+
+        def inject(kind: str, value: str) -> None:
+            Select(driver.find_element(By.ID, "inject-kind")).select_by_visible_text(kind)  # type: ignore[attr-defined]
+            box = driver.find_element(By.ID, "inject-value")  # type: ignore[attr-defined]
+            box.clear()
+            box.send_keys(value)
+            driver.find_element(By.ID, "inject-send").click()  # type: ignore[attr-defined]
+
+        _until("mode mmac", lambda: text("mode") == "mmac")
+        inject("k_loe", "7")
+        _until("the refusal", lambda: text("inject-result").startswith("REFUSED by the emulator"))
+        assert text("inject-result") == "REFUSED by the emulator: OUT_OF_RANGE (k_loe = 7)"
+        assert text("k-true").startswith("1.000")  # nothing applied
+
+        inject("frame_loss", "1")
+        _until("the applied answer", lambda: text("inject-result").startswith("applied by the emulator"))
+        _until("the fail-safe", lambda: text("state") == "FAULT")
+        reason = text("failsafe-reason")  # SENSOR_TIMEOUT, or LOOP_OVERRUN when the wait overran
+        assert reason in FAILSAFE_COLORS and reason != "NONE", reason
+        assert text("k-loe-hat") == "– (no estimate)"
+        inject("frame_loss", "0")
+        _until("the controller ACTIVE again", lambda: text("state") == "ACTIVE")
+
+        def closed_fault() -> list[dict[str, object]]:
+            got = js("return monitorView.intervals") or []
+            return [iv for iv in got if iv["kind"] == "FAULT" and not iv.get("open")]
+
+        _until("a closed FAULT interval", lambda: bool(closed_fault()))
+        iv = closed_fault()[-1]  # the injected one (a loaded host may also trip at start-up)
+        assert iv["reason"] == reason and iv["color"] == FAILSAFE_COLORS[reason]
+        assert float(iv["x1"]) > float(iv["x0"])  # type: ignore[arg-type]
+        assert f"FAULT: {reason}" in text("events")
+        assert "frame loss 100 % at" in text("events") and "frame loss 0 % at" in text("events")
+        drawn = js("return monitorView.drawn") or []
+        assert any(d["reason"] == reason for d in drawn), drawn  # shaded on the canvas
+        # the estimates are gaps inside the interval, not 1: no k̂ point drawn there
+        gaps = js(
+            "const u = plots[3].u, x = u.data[0], k = u.data[1];"
+            "return x.filter((t, i) => t > arguments[0] && t < arguments[1] && k[i] !== null).length",
+            float(iv["x0"]) + 0.05,  # type: ignore[arg-type]
+            float(iv["x1"]) - 0.05,  # type: ignore[arg-type]
+        )
+        assert gaps == 0
+        SHADED_SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
+        driver.save_screenshot(str(SHADED_SCREENSHOT))  # type: ignore[attr-defined]
+
+        driver.find_element(By.ID, "hold-y").click()  # type: ignore[attr-defined]
+        held = js("return plots.map((p) => [p.u.scales.y.min, p.u.scales.y.max])")
+        inject("k_dft", "0.5")  # the gains plot's data change; its y range does not
+        _until("true k_DFT 0.5", lambda: text("k-true").endswith("0.500"))
+        assert js("return plots.map((p) => [p.u.scales.y.min, p.u.scales.y.max])") == held
+        driver.find_element(By.ID, "hold-y").click()  # type: ignore[attr-defined]
+        driver.find_element(By.ID, "pause").click()  # type: ignore[attr-defined]
+        csv_text = str(js("return monitorVisibleCsv()"))
+        driver.find_element(By.ID, "export-csv").click()  # type: ignore[attr-defined]
+        _until("the CSV download", lambda: any(p.suffix == ".csv" for p in downloads.iterdir()))
+        saved = next(p for p in downloads.iterdir() if p.suffix == ".csv")
+        _until("the CSV written", lambda: saved.read_text() == csv_text)
+        driver.find_element(By.ID, "export-png").click()  # type: ignore[attr-defined]
+        _until("the PNG download", lambda: any(p.suffix == ".png" for p in downloads.iterdir()))
+        png = next(p for p in downloads.iterdir() if p.suffix == ".png")
+        _until("the PNG written", lambda: png.stat().st_size > 24)
+        head = png.read_bytes()[:24]
+        width, height = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+        assert head[:8] == b"\x89PNG\r\n\x1a\n" and width >= 640 and height >= 400, (width, height)
+        # a zoom: the x range shrinks to the interval, the view stays frozen
+        js(
+            "for (const p of plots) p.u.setScale('x', {min: arguments[0], max: arguments[1]});",
+            iv["x0"],
+            iv["x1"],
+        )
+        driver.save_screenshot(str(ZOOM_SCREENSHOT))  # type: ignore[attr-defined]
+        print(f"\nscreenshots: {SHADED_SCREENSHOT} {ZOOM_SCREENSHOT}")
+        # a triggered capture: armed on events, fired by k_Q 0.7, saved as candump log + CSV
+        driver.find_element(By.ID, "pause").click()  # type: ignore[attr-defined]  # live again
+        for box, value in (("capture-before", "0.5"), ("capture-after", "0.5")):
+            el = driver.find_element(By.ID, box)  # type: ignore[attr-defined]
+            el.clear()
+            el.send_keys(value)
+        driver.find_element(By.ID, "capture-arm").click()  # type: ignore[attr-defined]
+        _until("the capture armed", lambda: "armed" in text("capture-state"))
+        inject("k_q", "0.7")
+        _until("the capture saved", lambda: "saved" in text("capture-state"))
+        assert "k_q_true 1 → 0.7" in text("capture-state"), text("capture-state")
+    finally:
+        driver.quit()  # type: ignore[attr-defined]
+    for p in (monitored.controller, monitored.emulator):  # their logs complete
+        p.terminate()
+        p.wait()
+    checked, bad = _csv_matches_log(csv_text, monitored.log, monitored.emulator_log)
+    assert checked >= 100, checked  # the 10-ms rows on screen (the run is a few s old)
+    assert not bad, (len(bad), bad[:10])
+    saved_log = next(monitored.captures.glob("capture-001-*.log"))
+    captured = decode_log(saved_log, FrameCodec())
+    assert set(np.round(captured["PLANT_FAULTS"]["KQ"], 4)) == {1.0, 0.7}
+    assert saved_log.with_suffix(".csv").read_text().startswith("t_run_s,t_s,")

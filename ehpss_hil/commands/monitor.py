@@ -57,6 +57,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="show fault-injection buttons that send FAULT_INJECT frames (bench only)",
     )
+    p.add_argument(
+        "--capture-dir",
+        type=Path,
+        default=Path("monitor-captures"),
+        metavar="DIR",
+        help="where the page's triggered captures (candump log + CSV) are written "
+        "(default ./monitor-captures, made on the first capture)",
+    )
     p.add_argument("--refresh-hz", type=float, default=20.0, help="page updates per second (default 20)")
     p.add_argument("--tui", action="store_true", help="show the figures in this terminal instead of a page")
     p.add_argument("--duration", type=float, default=0.0, metavar="S", help="--tui: stop after S seconds")
@@ -98,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
         bitrate=bus.bitrate,
         netns=args.netns,
         allow_inject=args.allow_inject,
+        capture_dir=args.capture_dir,
     )
     where = f"{bus.interface}:{bus.channel}" + (f" in {args.netns}" if args.netns else "")
     listener.start()

@@ -22,6 +22,7 @@ def build_listener(
     bitrate: int,
     netns: str | None = None,
     allow_inject: bool = False,
+    capture_dir: Path | None = None,
 ) -> BusListener:
     """The listener (not started) with its state: the config's DBC and ID layout, and x_d/y_m
     from its reference and rate when ``cfg`` is given. ``bitrate``: bit/s, for the bus load."""
@@ -32,4 +33,6 @@ def build_listener(
         track = ReferenceTrack(cfg.reference, load_params(cfg.params or None), 1.0 / cfg.rate_hz)
     state = MonitorState(choice_names(codec), track, bitrate=bitrate)
     tx = process_codec(dbc, ids, where) if allow_inject else None
-    return BusListener(open_bus, codec, state, tx_codec=tx, netns=netns, allow_inject=allow_inject)
+    return BusListener(
+        open_bus, codec, state, tx_codec=tx, netns=netns, allow_inject=allow_inject, capture_dir=capture_dir
+    )

@@ -5,7 +5,8 @@ the state is shared under :attr:`BusListener.lock`. With ``netns`` the thread fi
 network namespace (a run's private bus) and opens the bus there, while the web server's socket,
 opened by another thread, stays on the host's loopback. The monitor transmits nothing, except a
 FAULT_INJECT frame when :meth:`BusListener.inject` is called (the page's buttons, only with
-``--allow-inject``).
+``--allow-inject``). A triggered capture (:mod:`.capture`), when armed, is fed here too and
+written from this thread once complete.
 """
 
 from __future__ import annotations
@@ -14,14 +15,16 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import can
 
 from ..bus.netns import enter_netns
 from ..codec import FrameCodec
-from ..errors import BusUnavailableError, FrameError, InjectError
-from .state import MonitorState
+from ..errors import BusUnavailableError, CaptureError, FrameError, InjectError
+from .capture import Capture, CaptureSpec
+from .state import ROW_FIELDS, MonitorState
 
 #: how long :meth:`BusListener.start` waits for the bus to open (s)
 OPEN_TIMEOUT_S = 10.0
@@ -40,6 +43,7 @@ class BusListener:
         tx_codec: FrameCodec | None = None,
         netns: str | None = None,
         allow_inject: bool = False,
+        capture_dir: Path | None = None,
     ) -> None:
         self._open_bus = open_bus
         self.codec = codec
@@ -55,6 +59,11 @@ class BusListener:
         self._bus: can.BusABC | None = None
         self._thread = threading.Thread(target=self._run, name="monitor-bus", daemon=True)
         self.injected: list[tuple[str, float]] = []
+        #: where triggered captures are written (None: captures off)
+        self.capture_dir = capture_dir
+        #: the armed (or last) capture; guarded by :attr:`lock`
+        self.capture: Capture | None = None
+        self._captures = 0
         kinds: dict[int, Any] = codec.message("FAULT_INJECT").get_signal_by_name("FaultKind").choices or {}
         #: fault kind name (DBC FaultKind value table) → code
         self.kinds = {str(name): int(code) for code, name in kinds.items()}
@@ -106,15 +115,42 @@ class BusListener:
         return self._error
 
     def _receive(self, bus: can.BusABC) -> None:
-        classify, feed, lock = self.codec.classify, self.state.feed, self.lock
+        classify, feed, lock, state = self.codec.classify, self.state.feed, self.lock, self.state
         while not self._stop.is_set():
             msg = bus.recv(timeout=RECV_TIMEOUT_S)
             if msg is None:
                 continue
             d = classify(msg)
             now = time.time()
+            done, rows = False, []
             with lock:
+                seq = state.seq
                 feed(d, msg.dlc, now)
+                cap = self.capture
+                if cap is not None and not cap.files:
+                    cap.frame(msg, now)
+                    if state.seq != seq:
+                        done = cap.row(dict(zip(ROW_FIELDS, state.rows[-1][1], strict=True)))
+                    if done:
+                        rows, t0 = [r for _, r in state.rows], state.status_t0()
+            if done and cap is not None:
+                try:
+                    cap.write(rows, t0)
+                except OSError as exc:  # a full disk: the capture says so, the monitor goes on
+                    cap.reason += f" (not saved: {exc.strerror or exc})"
+                    cap.files = ["(not saved)"]
+
+    def arm(self, spec: CaptureSpec) -> dict[str, object]:
+        """Arm a triggered capture (replacing one not yet triggered); returns its summary.
+        Raises :class:`CaptureError` when captures are off or one is being collected."""
+        if self.capture_dir is None:
+            raise CaptureError("captures are off (start the monitor with --capture-dir)")
+        with self.lock:
+            if self.capture is not None and self.capture.state == "triggered":
+                raise CaptureError("a capture is being collected: wait until it is saved")
+            self._captures += 1
+            self.capture = Capture(spec, self.capture_dir, self._captures)
+            return self.capture.summary(self.state.status_t0())
 
     def inject(self, kind: str, value: float) -> str:
         """Send one FAULT_INJECT frame (``kind``: a DBC FaultKind name, ``value`` in its unit);

@@ -6,8 +6,12 @@ second, ``{"rows": {column: [values…]}, "status": {…}}`` with the rows added
 message (:class:`~.state.MonitorState`); ``/api/config`` (options, kinds, row fields, the
 process id); ``/api/status`` (one snapshot, for scripts); ``POST /api/inject``
 ``{"kind": "k_loe", "value": 0.5}`` with the header ``X-Monitor-Token`` → one FAULT_INJECT frame
-(403 unless the monitor was started with ``--allow-inject``). Every request passes the checks of
-:mod:`.access` (Host, Origin, token, rates, client count).
+(403 unless the monitor was started with ``--allow-inject``; the answer's ``ack_after`` is the
+count of FAULT_INJECT_ACK frames heard before it, so the page knows which answer is this
+injection's); ``POST /api/capture`` ``{"trigger": "event"|"threshold", "before_s", "after_s",
+"field", "level"}`` (token) arms a triggered capture (:mod:`.capture`, with ``--capture-dir``);
+``GET /api/capture/NAME`` one of its files. Every request passes the checks of :mod:`.access`
+(Host, Origin, token, rates, client count).
 
 Slow readers: each WebSocket has at most one message in flight; a push that finds the previous
 one still being written is dropped (counted) and the next carries the rows since the last one
@@ -22,6 +26,7 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import re
 import signal
 import socket
 import time
@@ -31,8 +36,10 @@ from typing import Any
 
 from aiohttp import WSMsgType, web
 
-from ..errors import InjectError, ServeError
+from ..errors import CaptureError, InjectError, ServeError
+from ..reasons import FAILSAFE_COLORS, FALLBACK_COLORS, UNKNOWN_COLOR
 from .access import TOKEN_HEADER, AccessPolicy, allowed_hosts, middleware
+from .capture import CaptureSpec
 from .listener import BusListener
 from .state import ROW_FIELDS
 
@@ -48,6 +55,8 @@ STATIC_DIR = Path(str(resources.files(__package__) / "static"))
 _LISTENER: web.AppKey[BusListener] = web.AppKey("listener", BusListener)
 _OPTIONS: web.AppKey[dict[str, Any]] = web.AppKey("options", dict)
 _POLICY: web.AppKey[AccessPolicy] = web.AppKey("policy", AccessPolicy)
+#: the names of capture files (capture-NNN-YYYYmmddTHHMMSS.log|csv): nothing else is served
+_CAPTURE_FILE = re.compile(r"^capture-\d{3}-\d{8}T\d{6}\.(log|csv)$")
 
 
 def _policy(request: web.Request) -> AccessPolicy:
@@ -74,12 +83,19 @@ def make_app(
         "fields": list(ROW_FIELDS),
         "title": title,
         "pid": os.getpid(),  # for benchmarks that measure the monitor's CPU use
+        "choices": {
+            k: listener.state.choices.get(k, {}) for k in ("State", "FailsafeReason", "FallbackReason")
+        },
+        "reason_colors": {"FAULT": FAILSAFE_COLORS, "fallback": FALLBACK_COLORS, "unknown": UNKNOWN_COLOR},
+        "capture": listener.capture_dir is not None,
     }
     app.router.add_get("/", _index)
     app.router.add_get("/ws", _websocket)
     app.router.add_get("/api/config", _config)
     app.router.add_get("/api/status", _status)
     app.router.add_post("/api/inject", _inject)
+    app.router.add_post("/api/capture", _capture)
+    app.router.add_get("/api/capture/{name}", _capture_file)
     app.router.add_static("/static/", STATIC_DIR, follow_symlinks=False)
     return app
 
@@ -90,7 +106,7 @@ async def _index(request: web.Request) -> web.StreamResponse:
 
 async def _config(request: web.Request) -> web.Response:
     opts = request.app[_OPTIONS].copy()
-    if opts["allow_inject"]:  # readable by this page only: no CORS headers, Host checked
+    if opts["allow_inject"] or opts["capture"]:  # this page only: no CORS headers, Host checked
         opts["token"] = request.app[_POLICY].token
     return web.json_response(opts)
 
@@ -99,6 +115,8 @@ def _snapshot(listener: BusListener, seq: int) -> tuple[dict[str, Any], int]:
     with listener.lock:
         st = listener.state.status(time.time())
         rows = listener.state.rows_since(max(seq, st["seq"] - INITIAL_ROWS))
+        cap = listener.capture
+        st["capture"] = cap.summary(listener.state.status_t0()) if cap is not None else None
     return {"rows": rows, "status": st}, st["seq"]
 
 
@@ -162,23 +180,63 @@ async def _inject(request: web.Request) -> web.Response:
     listener = request.app[_LISTENER]
     if not listener.allow_inject:
         return web.json_response({"error": "fault injection is off (--allow-inject)"}, status=403)
+    refused = _guard(request)
+    if refused is not None:
+        return refused
+    try:
+        body = await request.json()
+        kind, value = str(body["kind"]), float(body["value"])
+    except (ValueError, KeyError, TypeError):
+        return web.json_response({"error": 'expected {"kind": NAME, "value": NUMBER}'}, status=400)
+    with listener.lock:
+        acks = listener.state.acks_seen
+    try:
+        sent = listener.inject(kind, value)
+    except InjectError as exc:
+        return web.json_response({"error": str(exc)}, status=400)
+    return web.json_response({"sent": sent, "ack_after": acks})
+
+
+def _guard(request: web.Request) -> web.Response | None:
+    """The token and rate checks of a request that acts (inject, capture): None when it passes."""
     pol = request.app[_POLICY]
     if not pol.token_ok(request.headers.get(TOKEN_HEADER)):
         pol.count("token")
         return web.json_response({"error": f"missing or wrong {TOKEN_HEADER}"}, status=403)
     if not pol.inject_rate.take():
         pol.count("rate")
-        return web.json_response({"error": "too many injections: at most 5 per second"}, status=429)
+        return web.json_response({"error": "too many requests: at most 5 per second"}, status=429)
+    return None
+
+
+async def _capture(request: web.Request) -> web.Response:
+    refused = _guard(request)
+    if refused is not None:
+        return refused
     try:
         body = await request.json()
-        kind, value = str(body["kind"]), float(body["value"])
-    except (ValueError, KeyError, TypeError):
-        return web.json_response({"error": 'expected {"kind": NAME, "value": NUMBER}'}, status=400)
-    try:
-        sent = listener.inject(kind, value)
-    except InjectError as exc:
-        return web.json_response({"error": str(exc)}, status=400)
-    return web.json_response({"sent": sent})
+        spec = CaptureSpec(
+            trigger=str(body.get("trigger", "event")),
+            before_s=float(body.get("before_s", 2.0)),
+            after_s=float(body.get("after_s", 2.0)),
+            field=str(body.get("field", "e_m")),
+            level=float(body.get("level", 0.0)),
+        )
+        summary = request.app[_LISTENER].arm(spec)
+    except (ValueError, TypeError, AttributeError) as exc:  # CaptureError is a ValueError
+        msg = str(exc) if isinstance(exc, CaptureError) else "expected a JSON object of numbers and names"
+        return web.json_response({"error": msg}, status=400)
+    return web.json_response(summary)
+
+
+async def _capture_file(request: web.Request) -> web.StreamResponse:
+    name = request.match_info["name"]
+    folder = request.app[_LISTENER].capture_dir
+    if folder is None or not _CAPTURE_FILE.match(name) or not (folder / name).is_file():
+        return web.json_response({"error": "no such capture file"}, status=404)
+    kind = "text/csv" if name.endswith(".csv") else "text/plain"
+    headers = {"Content-Disposition": f'attachment; filename="{name}"'}
+    return web.FileResponse(folder / name, headers={**headers, "Content-Type": kind})
 
 
 def serve(

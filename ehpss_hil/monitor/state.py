@@ -31,7 +31,17 @@ ROW_FIELDS = (
     "k_dft_hat",
     "k_loe_true",  # PLANT_FAULTS (bench only)
     "k_dft_true",
+    "k_q_true",
+    "stuck",  # PLANT_TRUTH.Stuck: 1 while the position sensor is stuck (bench only)
+    "state",  # CTRL_STATUS.State code (3: FAULT); the page shades the fail-safe from it
+    "failsafe_reason",  # CTRL_STATUS.FailsafeReason code
+    "fallback",  # CTRL_STATUS.NominalFallback (1: loop held on nominal compensation)
+    "fallback_reason",  # CTRL_STATS.FallbackReason code
 )
+#: CTRL_STATUS State code of the fail-safe (the DBC's value table names it FAULT; a test checks)
+STATE_FAULT = 3
+#: FAULT_INJECT_ACK answers kept for the page (newest last)
+ACKS_KEPT = 20
 #: default time between two rows (s)
 ROW_PERIOD_S = 0.01
 #: rows kept for a page that connects late (60 s at the default period)
@@ -56,6 +66,7 @@ _CHOICE_SIGNALS = (
     ("CTRL_STATS", "FallbackReason"),
     ("HEARTBEAT_CTRL", "NmtState"),
     ("FAULT_INJECT", "FaultKind"),
+    ("FAULT_INJECT_ACK", "Status"),
 )
 
 
@@ -63,6 +74,9 @@ def choice_names(codec: FrameCodec) -> dict[str, dict[int, str]]:
     """``{signal: {value: name}}`` from the DBC's value tables (``VAL_``)."""
     out: dict[str, dict[int, str]] = {}
     for frame, sig in _CHOICE_SIGNALS:
+        if frame not in codec.names:  # an older DBC (no FAULT_INJECT_ACK): codes shown as numbers
+            out[sig] = {}
+            continue
         choices: dict[int, Any] = codec.message(frame).get_signal_by_name(sig).choices or {}
         out[sig] = {int(k): str(v) for k, v in choices.items()}
     return out
@@ -128,6 +142,14 @@ class MonitorState:
         self.bits = 0
         self.rejected = 0
         self.injects_seen = 0
+        #: the emulator's answers to FAULT_INJECT (FAULT_INJECT_ACK), newest last
+        self.acks: deque[dict[str, Any]] = deque(maxlen=ACKS_KEPT)
+        self.acks_seen = 0
+        #: entries into the fail-safe (CTRL_STATUS State → FAULT) heard
+        self.failsafe_trips = 0
+        self.first_t_s = math.nan
+        #: receive time (s, epoch) of the controller's first ACTIVE cycle heard (run time 0)
+        self.start_t_s = math.nan
         self.last_t_s = math.nan
         self._next_row_t = -math.inf
         self._latest = _Latest()
@@ -146,6 +168,8 @@ class MonitorState:
         if not d.verdict.usable:
             self.rejected += 1
         self.last_t_s = t_s
+        if math.isnan(self.first_t_s):
+            self.first_t_s = t_s
         if d.values is not None and d.name is not None:
             handler = _HANDLERS.get(d.name)
             if handler is not None:
@@ -201,6 +225,7 @@ class MonitorState:
             # monitor that attached to an already ACTIVE controller never knows k and shows no
             # x_d rather than a shifted one
             self._cycle0 = self._cycle
+            self.start_t_s = t_s
         if self.reference is not None and self._cycle0 is not None:
             lat["x_d_m"], lat["y_m_m"] = self.reference.at(self._cycle - self._cycle0)
 
@@ -208,6 +233,11 @@ class MonitorState:
         lat = self._latest
         lat.values["k_loe_hat"] = float(v["KLoeHat"])
         lat.values["k_dft_hat"] = float(v["KDftHat"])
+        if int(v["State"]) == STATE_FAULT and lat.values["state"] != STATE_FAULT:
+            self.failsafe_trips += 1
+        lat.values["state"] = float(v["State"])
+        lat.values["failsafe_reason"] = float(v["FailsafeReason"])
+        lat.values["fallback"] = float(v["NominalFallback"])
         c = self.choices
         lat.status = {
             "state": _name(c["State"], v["State"]),
@@ -224,6 +254,7 @@ class MonitorState:
         self._latest.index[slot] = (float(v[f"J_{slot}"]), float(v[f"Theta_{slot}"]), t_s)
 
     def _ctrl_stats(self, v: dict[str, Any], t_s: float) -> None:
+        self._latest.values["fallback_reason"] = float(v["FallbackReason"])
         self._latest.stats = {
             "fallback_reason": _name(self.choices["FallbackReason"], v["FallbackReason"]),
             "overruns": int(v["Overruns"]),
@@ -233,12 +264,14 @@ class MonitorState:
 
     def _plant_truth(self, v: dict[str, Any], t_s: float) -> None:
         self._latest.values["x_true_m"] = float(v["Position"])
+        self._latest.values["stuck"] = float(v["Stuck"])
         self._latest.stuck = bool(v["Stuck"])
 
     def _plant_faults(self, v: dict[str, Any], t_s: float) -> None:
         lat = self._latest
         lat.values["k_loe_true"] = float(v["KLoe"])
         lat.values["k_dft_true"] = float(v["KDft"])
+        lat.values["k_q_true"] = float(v["KQ"])
         lat.faults = {"k_q": float(v["KQ"])}
 
     def _heartbeat_ctrl(self, v: dict[str, Any], t_s: float) -> None:
@@ -250,6 +283,18 @@ class MonitorState:
     def _fault_inject(self, v: dict[str, Any], t_s: float) -> None:
         self.injects_seen += 1
 
+    def _fault_inject_ack(self, v: dict[str, Any], t_s: float) -> None:
+        self.acks_seen += 1
+        self.acks.append(
+            {
+                "n": self.acks_seen,
+                "t_s": t_s,
+                "kind": _name(self.choices["FaultKind"], v["FaultKind"]),
+                "value": _json_float(float(v["Value"])),
+                "status": _name(self.choices["Status"], v["Status"]),
+            }
+        )
+
     def _reference_state(self) -> str:
         """``aligned``, ``none`` (no reference given), ``waiting`` (no enabled command yet) or
         ``attached late`` (the controller was ACTIVE before the monitor heard it: k unknown)."""
@@ -260,6 +305,10 @@ class MonitorState:
         return "attached late" if self._cycle_raw is not None and not self._saw_disabled else "waiting"
 
     # ---- output --------------------------------------------------------------------------------
+    def status_t0(self) -> float:
+        """Run time 0 (s, epoch): the controller's first ACTIVE cycle heard, else the first frame."""
+        return self.start_t_s if math.isfinite(self.start_t_s) else self.first_t_s
+
     def rows_since(self, seq: int) -> dict[str, list[float | None]]:
         """The rows after sequence number ``seq``, by column (NaN as None)."""
         new = [row for s, row in self.rows if s > seq]
@@ -294,6 +343,10 @@ class MonitorState:
             "nmt": dict(lat.nmt),
             "emcy": [],  # no EMCY frame in the DBC yet: the banner shows codes once there is one
             "injects_seen": self.injects_seen,
+            "inject_acks": list(self.acks),
+            "failsafe_trips": self.failsafe_trips,
+            "t0_s": _json_float(self.status_t0()),
+            "t0_from": "controller start" if math.isfinite(self.start_t_s) else "first frame heard",
             "silent_s": _json_float(silent_s) if math.isfinite(silent_s) else None,
             "seq": self.seq,
             "reference": self._reference_state(),
@@ -334,6 +387,7 @@ _HANDLERS: dict[str, Any] = {
     "PLANT_TRUTH": MonitorState._plant_truth,
     "PLANT_FAULTS": MonitorState._plant_faults,
     "FAULT_INJECT": MonitorState._fault_inject,
+    "FAULT_INJECT_ACK": MonitorState._fault_inject_ack,
     "HEARTBEAT_CTRL": MonitorState._heartbeat_ctrl,
     "HEARTBEAT_EMU": MonitorState._heartbeat_emu,
 }

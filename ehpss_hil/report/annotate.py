@@ -7,14 +7,22 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .result import SimResult
 
+if TYPE_CHECKING:
+    from ..codec import FrameCodec
+
 #: a gain change smaller than this is no event (the DBC's PLANT_FAULTS LSB is 1e-4)
 GAIN_STEP = 5e-5
+#: a time within this (s) of where a scenario event the bus cannot show is expected is that
+#: event's (a second labelling of the same run finds the time the first one placed)
+EVENT_MATCH_S = 0.1
+#: the scenario fields a change on the bus shows (PLANT_FAULTS gains, PLANT_TRUTH Stuck)
+BUS_VISIBLE = ("k_loe", "k_q", "k_dft", "stuck")
 
 
 @dataclass(frozen=True)
@@ -64,31 +72,128 @@ def describe_changes(changes: dict[str, Any]) -> str:
     return " + ".join(parts) or "fault change"
 
 
-def event_labels(r: SimResult, events: tuple[Any, ...] = ()) -> list[tuple[float, str]]:
-    """``(t, words)`` for each event of ``r``: from the scenario's events when given (their
-    fields as set), else from the true gains' change at that time (PLANT_FAULTS)."""
-    if events:
-        # the times the run saw (a log: PLANT_FAULTS on the controller's time) when they pair up
-        times = r.event_times_s if len(r.event_times_s) == len(events) else tuple(e.t_s for e in events)
-        out = []
-        for t, ev in zip(times, events, strict=True):
-            fields = {k: v for k, v in vars(ev).items() if k != "t_s" and v is not None}
-            out.append((float(t), describe_changes(fields)))
-        return out
-    labels = []
+def _changes_at(r: SimResult, t: float) -> dict[str, Any]:
+    """The true fault values that changed at ``t`` (s): gains (PLANT_FAULTS) and the stuck flag
+    (PLANT_TRUTH Stuck), as a scenario event would set them."""
     n = len(r.t_s)
-    for t in r.event_times_s:
-        k = min(round(t / r.ts_s), n - 1) if n else 0
-        changes: dict[str, Any] = {}
-        for key, arr in (("k_loe", r.true_k_loe), ("k_q", r.true_k_q), ("k_dft", r.true_k_dft)):
-            if n and 0 < k < n and math.isfinite(arr[k]) and math.isfinite(arr[k - 1]):
-                if (
-                    abs(arr[k] - arr[k - 1]) > GAIN_STEP
-                    or abs(arr[min(k + 1, n - 1)] - arr[k - 1]) > GAIN_STEP
-                ):
-                    changes[key] = round(float(arr[min(k + 1, n - 1)]), 4)
-        labels.append((float(t), describe_changes(changes)))
-    return labels
+    k = min(round(t / r.ts_s), n - 1) if n else 0
+    changes: dict[str, Any] = {}
+    if not 0 < k < n:
+        return changes
+    after = min(k + 1, n - 1)
+    for key, arr in (("k_loe", r.true_k_loe), ("k_q", r.true_k_q), ("k_dft", r.true_k_dft)):
+        if math.isfinite(arr[k]) and math.isfinite(arr[k - 1]):
+            if abs(arr[k] - arr[k - 1]) > GAIN_STEP or abs(arr[after] - arr[k - 1]) > GAIN_STEP:
+                changes[key] = round(float(arr[after]), 4)
+    st = r.stuck
+    if len(st) == n and (st[k] != st[k - 1] or st[after] != st[k - 1]):
+        changes["stuck"] = bool(st[after])
+    return changes
+
+
+def bus_event_times(
+    faults: dict[str, np.ndarray], truth: dict[str, np.ndarray], t_rows: np.ndarray, k: np.ndarray, ts: float
+) -> tuple[float, ...]:
+    """The controller times (s, ``k·Ts`` of the row received next; ``t_rows`` the rows' wall
+    receive times) at which PLANT_FAULTS reports a change of any gain or PLANT_TRUTH a
+    change of the Stuck flag (a stuck sensor leaves the gains as they are)."""
+    if len(t_rows) == 0:
+        return ()
+    changes: list[np.ndarray] = []
+    if len(faults["t_s"]) >= 2:
+        g = np.column_stack([faults[s] for s in ("KLoe", "KQ", "KDft")])
+        i = np.flatnonzero(np.any(np.abs(np.diff(g, axis=0)) > GAIN_STEP, axis=1)) + 1
+        changes.append(faults["t_s"][i])
+    if len(truth["t_s"]) >= 2 and "Stuck" in truth:
+        i = np.flatnonzero(np.diff(truth["Stuck"] > 0.5)) + 1
+        changes.append(truth["t_s"][i])
+    out = []
+    for t_wall in np.sort(np.concatenate(changes)) if changes else ():
+        j = min(int(np.searchsorted(t_rows, t_wall)), len(k) - 1)
+        out.append(float(k[j] * ts))
+    return tuple(out)
+
+
+def _nearest(times: list[float], t: float, tol: float = EVENT_MATCH_S) -> int | None:
+    """Index of the time in ``times`` nearest ``t`` within ``tol`` (s), or None."""
+    if not times:
+        return None
+    i = min(range(len(times)), key=lambda j: abs(times[j] - t))
+    return i if abs(times[i] - t) <= tol else None
+
+
+def _agrees(seen: dict[str, Any], fields: dict[str, Any]) -> bool:
+    """Whether a change seen on the bus is the scenario event's: some field of the event
+    changed to its value, and none changed to another."""
+    common = [k for k in BUS_VISIBLE if k in fields and k in seen]
+    return bool(common) and all(abs(float(seen[k]) - float(fields[k])) <= GAIN_STEP * 2 for k in common)
+
+
+#: injected kinds no other frame shows (PLANT_FAULTS has the gains, PLANT_TRUTH the stuck flag)
+INJECTED_ONLY = ("position_bias_m", "frame_loss", "current_limit_a")
+
+
+def injection_events(
+    acks: dict[str, np.ndarray], codec: FrameCodec, t_rows: np.ndarray, k: np.ndarray, ts: float
+) -> list[tuple[float, str]]:
+    """``(t, words)`` of the injections the emulator applied (FAULT_INJECT_ACK frames ``acks``
+    with ``Status`` APPLIED, names from ``codec``'s DBC) of a kind only that frame shows
+    (:data:`INJECTED_ONLY`: a frame loss, a bias, a current limit), on the controller's time
+    (``k·Ts`` of the row received next; ``t_rows`` the rows' wall receive times)."""
+    if len(acks["t_s"]) == 0 or len(t_rows) == 0:
+        return []
+    msg = codec.message("FAULT_INJECT_ACK")
+    kinds = {int(c): str(n) for c, n in (msg.get_signal_by_name("FaultKind").choices or {}).items()}
+    codes = {str(n): int(c) for c, n in (msg.get_signal_by_name("Status").choices or {}).items()}
+    applied = codes.get("APPLIED", -1)
+    out = []
+    for t_wall, kind, status, value in zip(
+        acks["t_s"], acks["FaultKind"], acks["Status"], acks["Value"], strict=True
+    ):
+        name = kinds.get(int(kind), "")
+        if int(status) != applied or name not in INJECTED_ONLY:
+            continue
+        j = min(int(np.searchsorted(t_rows, t_wall)), len(k) - 1)
+        out.append((float(k[j] * ts), describe_changes({name: float(value)})))
+    return out
+
+
+def event_labels(
+    r: SimResult, events: tuple[Any, ...] = (), known: tuple[tuple[float, str], ...] = ()
+) -> list[tuple[float, str]]:
+    """``(t, words)`` for each event of ``r``, sorted by t (s, the run's time axis).
+
+    Every change the run saw (``r.event_times_s``: a log's PLANT_FAULTS gains and PLANT_TRUTH
+    Stuck flag) is one event. A scenario event (``events``) is the next change that agrees
+    with it (same new value: a real-time emulator's clock runs ahead of the controller's, so
+    times differ by its start-up offset) and takes the scenario's words; a scenario event the
+    bus cannot show (a bias, a frame loss, a current limit) is placed at its time plus that
+    offset. The changes no scenario event explains (an injection from the monitor) are named
+    from what changed; ``known``: times whose words are known already (:func:`injection_events`).
+    Calling it again on times it produced gives the same events.
+    """
+    named = {float(t): words for t, words in known}
+    free = [float(t) for t in r.event_times_s if float(t) not in named]
+    seen = {t: _changes_at(r, t) for t in free}
+    placed: list[tuple[float, str, float]] = []  # (time seen or NaN, words, scenario time)
+    after = -math.inf
+    for ev in events:
+        fields = {k: v for k, v in vars(ev).items() if k != "t_s" and v is not None}
+        i = next((j for j, t in enumerate(free) if t >= after and _agrees(seen[t], fields)), None)
+        t = free.pop(i) if i is not None else math.nan
+        after = t if i is not None else after
+        placed.append((t, describe_changes(fields), float(ev.t_s)))
+    offsets = [t - t_ev for t, _, t_ev in placed if math.isfinite(t)]
+    offset = float(np.median(offsets)) if offsets else 0.0
+    out = []
+    for t, words, t_ev in placed:
+        if not math.isfinite(t):
+            i = _nearest(free, t_ev + offset)
+            t = free.pop(i) if i is not None else t_ev + offset
+        out.append((t, words))
+    out += [(t, describe_changes(seen[t])) for t in free]
+    out += [(t, w) for t, w in named.items() if t in {float(x) for x in r.event_times_s}]
+    return sorted(out, key=lambda e: e[0])
 
 
 def runs_of(mask: np.ndarray) -> list[tuple[int, int]]:

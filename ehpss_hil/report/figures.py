@@ -2,7 +2,9 @@
 tracking error, control input, active models, estimates.
 
 Every fault event is a dashed line named above the top panel ("LOE 50 %", "drift 0.8"); the
-intervals a run spent in FAULT or on its nominal fallback are shaded with their reason; samples
+intervals a run spent in FAULT or on its nominal fallback are shaded in their reason's colour
+(:mod:`ehpss_hil.reasons`) and named in the legend; modes without an estimator (NRC) draw no
+k̂ or active-model trace; samples
 the metrics did not count are drawn as gaps over a grey band, never as if they counted. Legends
 sit outside the axes, never over data. matplotlib is optional (``pip install ehpss-hil[plot]``);
 it is imported only when a figure is made.
@@ -17,13 +19,20 @@ from typing import Any
 import numpy as np
 
 from ..extras import require
+from ..reasons import reason_color
 from .annotate import Interval, event_labels, fallback_intervals, runs_of
 from .result import SimResult
 
 #: line colour per controller mode (the same mode keeps its colour in every figure)
 MODE_COLORS = {"nrc": "C3", "smac": "C2", "mmac-paper": "C4", "mmac": "C0", "oracle": "C5"}
-#: shading per interval kind
-SHADE_COLORS = {"FAULT": "red", "fallback": "orange"}
+#: modes whose controller has no estimator: no k̂ and no active-model trace is drawn for them
+#: (NRC reports the nominal values, which would read as an estimate that never moves)
+MODES_WITHOUT_ESTIMATOR = frozenset({"nrc"})
+
+
+def has_estimator(mode: str) -> bool:
+    """Whether a run of controller ``mode`` has estimates (k̂, an active model) to draw."""
+    return mode not in MODES_WITHOUT_ESTIMATOR
 
 
 @dataclass
@@ -64,6 +73,17 @@ def _masked(v: np.ndarray, counted: np.ndarray) -> np.ndarray:
     return np.where(counted, v, np.nan)
 
 
+def estimating(v: RunView) -> np.ndarray:
+    """Per sample, whether the controller had an estimate in use: False inside its FAULT
+    intervals (it resets its estimators there; the reset values would read as a jump)."""
+    t = v.result.t_s
+    ok = np.ones(len(t), bool)
+    for iv in v.intervals:
+        if iv.kind == "FAULT":
+            ok &= (t < iv.t0_s) | (t >= iv.t1_s)
+    return ok
+
+
 def mark_events(axes: list[Any], events: list[tuple[float, str]]) -> None:
     """Dashed lines at the events on every axis; their names above the top one (not over data)."""
     for ax in axes:
@@ -83,8 +103,9 @@ def mark_events(axes: list[Any], events: list[tuple[float, str]]) -> None:
 
 
 def shade(axes: list[Any], views: list[RunView], several: bool) -> None:
-    """Shade each view's FAULT/fallback intervals (labelled once in the legend of the last axis,
-    with the mode when several runs are drawn) and the samples its metrics left out."""
+    """Shade each view's FAULT/fallback intervals in their reason's colour (labelled once in
+    the legend of the last axis, with the mode when several runs are drawn) and the samples its
+    metrics left out."""
     labelled: set[str] = set()
     for v in views:
         r = v.result
@@ -94,8 +115,8 @@ def shade(axes: list[Any], views: list[RunView], several: bool) -> None:
                 ax.axvspan(
                     iv.t0_s,
                     iv.t1_s,
-                    color=SHADE_COLORS.get(iv.kind, "0.5"),
-                    alpha=0.18,
+                    color=reason_color(iv.kind, iv.reason),
+                    alpha=0.22,
                     lw=0,
                     label=label if ax is axes[-1] and label not in labelled else None,
                 )
@@ -123,11 +144,12 @@ def _outside_legend(ax: Any) -> None:
         ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
 
 
-def plot_runs(views: list[RunView], path: str | Path, title: str | None = None) -> Path:
-    """Write a 5-panel PNG of one or several runs of one scenario: (a) x of each run with x_d
-    and y_m; (b) e = x − y_m; (c) coil current; (d) active model slot per channel; (e) k̂_LOE,
-    k̂_DFT with the true gains. Several runs share the reference and the events (the first
-    run's)."""
+def draw_runs(views: list[RunView], title: str | None = None) -> Any:
+    """The matplotlib figure of :func:`plot_runs` (the caller saves and closes it): (a) x of
+    each run with x_d and y_m; (b) e = x − y_m; (c) coil current; (d) active model slot per
+    channel; (e) k̂_LOE, k̂_DFT with the true gains, gaps in FAULT (panels (d), (e) without the
+    runs of a mode that has no estimator). Several runs share the reference and the events (the
+    first run's)."""
     plt = _pyplot()
     several = len(views) > 1
     first = views[0].result
@@ -140,12 +162,15 @@ def plot_runs(views: list[RunView], path: str | Path, title: str | None = None) 
         ax[0].plot(r.t_s, _masked(r.x_true_m, v.counted) * 1e3, color=c, ls="--", lw=1, label=f"x{name}")
         ax[1].plot(r.t_s, _masked(r.error_m, v.counted) * 1e6, color=c, lw=0.8, label=f"e{name}")
         ax[2].plot(r.t_s, r.current_a * 1e3, color=c, lw=0.8, label=f"i{name}")
+        if not has_estimator(r.controller):
+            continue
         if np.any(r.active_spool >= 0) or np.any(r.active_position >= 0):
             ax[3].step(r.t_s, r.active_spool, where="post", color=c, label=f"spool / joint{name}")
             if not np.array_equal(r.active_spool, r.active_position):
                 ax[3].step(r.t_s, r.active_position, where="post", color=c, ls="--", label=f"position{name}")
-        ax[4].plot(r.t_s, r.k_loe_hat, color=c, lw=0.9, label=f"k̂_LOE{name}")
-        ax[4].plot(r.t_s, r.k_dft_hat, color=c, lw=0.9, ls="-.", label=f"k̂_DFT{name}")
+        est = estimating(v)
+        ax[4].plot(r.t_s, np.where(est, r.k_loe_hat, np.nan), color=c, lw=0.9, label=f"k̂_LOE{name}")
+        ax[4].plot(r.t_s, np.where(est, r.k_dft_hat, np.nan), color=c, lw=0.9, ls="-.", label=f"k̂_DFT{name}")
     ax[4].plot(
         first.t_s, first.true_k_loe * first.true_k_q, "k-", lw=1.2, alpha=0.6, label="k_LOE·k_Q (true)"
     )
@@ -164,6 +189,13 @@ def plot_runs(views: list[RunView], path: str | Path, title: str | None = None) 
         _outside_legend(a)
     modes = " vs ".join(v.label or v.result.controller for v in views)
     fig.suptitle(title or f"{first.scenario} — {modes}")
+    return fig
+
+
+def plot_runs(views: list[RunView], path: str | Path, title: str | None = None) -> Path:
+    """Write the 5-panel PNG of :func:`draw_runs` of one or several runs of one scenario."""
+    plt = _pyplot()
+    fig = draw_runs(views, title)
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

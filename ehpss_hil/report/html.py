@@ -1,6 +1,7 @@
 """``report.html``: the lines of ``report.md`` as one self-contained page (figures embedded as
 base64 PNG, styles inline), to mail or archive as one file. Converts only the Markdown the
-report writer produces: headings, bullet lists, tables, images, paragraphs, `code`, **bold**.
+report writer produces: headings, bullet lists, tables, images (with the italic caption line
+under them as a ``<figcaption>``), paragraphs, `code`, **bold**.
 """
 
 from __future__ import annotations
@@ -15,10 +16,13 @@ body { font: 15px/1.45 system-ui, sans-serif; max-width: 1150px; margin: 2em aut
 table { border-collapse: collapse; margin: 0.6em 0; }
 th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: left; font-variant-numeric: tabular-nums; }
 th { background: #f2f2f2; }
+figure { margin: 1em 0; }
+figcaption { color: #444; font-size: 14px; }
 img { max-width: 100%; border: 1px solid #ddd; margin: 0.5em 0; }
 code { background: #f4f4f4; padding: 0 3px; }
 """
 _IMAGE = re.compile(r"^!\[([^\]]*)\]\(([^)]+)\)\s*$")
+_CAPTION = re.compile(r"^\*([^*].*)\*\s*$")
 
 
 def _inline(text: str) -> str:
@@ -27,13 +31,14 @@ def _inline(text: str) -> str:
     return re.sub(r"\*\*([^*]+)\*\*", r"<strong>\1</strong>", t)
 
 
-def _image(alt: str, src: str, base: Path) -> str:
+def _image(alt: str, src: str, base: Path, caption: str = "") -> str:
     path = base / src
     try:
         data = base64.b64encode(path.read_bytes()).decode("ascii")
     except OSError:
         return f"<p>(figure {html.escape(src)} missing)</p>"
-    return f'<p><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}"></p>'
+    cap = f"<figcaption>{_inline(caption)}</figcaption>" if caption else ""
+    return f'<figure><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">{cap}</figure>'
 
 
 def _table(rows: list[str]) -> str:
@@ -67,7 +72,10 @@ def markdown_to_html(lines: list[str], base: Path) -> str:
             i = j
             continue
         if m := _IMAGE.match(line):
-            out.append(_image(m.group(1), m.group(2), base))
+            cap = _CAPTION.match(lines[i + 1].rstrip("\n")) if i + 1 < len(lines) else None
+            out.append(_image(m.group(1), m.group(2), base, cap.group(1) if cap else ""))
+            i += 2 if cap else 1
+            continue
         elif line.startswith("#"):
             level = len(line) - len(line.lstrip("#"))
             out.append(f"<h{level}>{_inline(line[level:].strip())}</h{level}>")

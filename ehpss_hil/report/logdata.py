@@ -41,6 +41,7 @@ from ..physics.params import Params
 from ..physics.reference import ReferenceModel
 from ..runtime.status_frames import MODE_CODE
 from ..scenario import Scenario
+from .annotate import bus_event_times, event_labels, injection_events
 from .logbounds import check_sample_time, check_span
 from .logclock import undo_clock_steps, unwrap_counter
 from .logmeta import RunInfo, reference_of, run_info
@@ -72,6 +73,8 @@ class LogRun:
     notes: list[str] = field(default_factory=list)
     #: why the log gave no sample row (empty when it gave some)
     no_samples: str = ""
+    #: ``(t, words)`` of applied injections only FAULT_INJECT_ACK shows (a frame loss, a bias)
+    injections: tuple[tuple[float, str], ...] = ()
 
 
 # ---- helpers on decoded arrays ----------------------------------------------------------------
@@ -181,21 +184,6 @@ def _index_matrix(idx: dict[str, np.ndarray], t_rows: np.ndarray) -> np.ndarray:
     return out
 
 
-def _event_times(
-    faults: dict[str, np.ndarray], t_rows: np.ndarray, k: np.ndarray, ts: float
-) -> tuple[float, ...]:
-    """Reference times (s) at which PLANT_FAULTS reports a change of any gain."""
-    if len(faults["t_s"]) < 2 or len(t_rows) == 0:
-        return ()
-    g = np.column_stack([faults[s] for s in ("KLoe", "KQ", "KDft")])
-    changed = np.flatnonzero(np.any(np.abs(np.diff(g, axis=0)) > 5e-5, axis=1)) + 1
-    out = []
-    for i in changed:
-        j = min(int(np.searchsorted(t_rows, faults["t_s"][i])), len(k) - 1)
-        out.append(float(k[j] * ts))
-    return tuple(out)
-
-
 # ---- the whole log ----------------------------------------------------------------------------
 def load_log_run(
     path: str | os.PathLike[str],
@@ -241,10 +229,15 @@ def load_log_run(
             "unavailable; pass --scenario to recompute them"
         )
     result, has_truth = _assemble(frames, sc, info, k, t_rows, ts, x_d, y_m, notes)
+    injections = tuple(injection_events(_sorted(frames, "FAULT_INJECT_ACK"), codec, t_rows, k, ts))
+    if injections:  # events too: in the metrics' event table and on the figures
+        result.event_times_s = tuple(sorted({*result.event_times_s, *(t for t, _ in injections)}))
     for name in set(frames) - _VIEWED:  # laid out per sample: only the count is still read
         frames[name] = {"t_s": frames[name]["t_s"]}
     has_ref = ref is not None
-    return LogRun(log, result, side, has_truth, has_ref, sc, i_cmd, frames, verdicts, notes, empty)
+    return LogRun(
+        log, result, side, has_truth, has_ref, sc, i_cmd, frames, verdicts, notes, empty, injections
+    )
 
 
 def _assemble(
@@ -287,9 +280,7 @@ def _assemble(
     spool_m[np.isnan(spool_m)] = _NO_MODEL
     pos_m[np.isnan(pos_m)] = _NO_MODEL
     applied = np.append(col(aux, "CoilCurrent")[1:], np.nan)  # echo at k+1 = over [k, k+1)
-    events = _event_times(flt, t_rows, k, ts) if len(flt["t_s"]) else ()
-    if not events and sc is not None:
-        events = tuple(ev.t_s for ev in sc.events)
+    events = bus_event_times(flt, truth, t_rows, k, ts)
     mode = _mode(st, info)
     res = SimResult(
         scenario=sc.name if sc is not None else "log",
@@ -312,7 +303,10 @@ def _assemble(
         true_k_q=col(flt, "KQ"),
         true_k_dft=col(flt, "KDft"),
         fresh=_fresh(pos["t_s"], t_rows) if len(pos["t_s"]) else np.zeros(len(k), bool),
+        stuck=col(truth, "Stuck", 0.0) > 0.5 if has_truth else np.zeros(0, bool),
     )
+    if sc is not None:  # every scenario event, also those the bus cannot show (a bias, a loss)
+        res.event_times_s = tuple(t for t, _ in event_labels(res, sc.events))
     return res, has_truth
 
 

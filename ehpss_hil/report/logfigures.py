@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..extras import require
-from .figures import RunView, mark_events, plot_runs, shade
+from .figures import RunView, estimating, has_estimator, mark_events, plot_runs, shade
 from .logdata import LogRun
 from .logviews import log_view
 from .metrics import RECOVERY_BAND_M
@@ -145,9 +145,10 @@ def fig_current(run: LogRun, out_dir: Path, view: RunView) -> Path | None:
 
 
 def fig_models(run: LogRun, out_dir: Path, view: RunView) -> Path | None:
-    """Active model slot per channel (CTRL_STATUS, Fig 6 style)."""
+    """Active model slot per channel (CTRL_STATUS, Fig 6 style); none for a mode without an
+    estimator (its slot never moves)."""
     r = run.result
-    if "CTRL_STATUS" not in run.frames or len(r.t_s) == 0:
+    if "CTRL_STATUS" not in run.frames or len(r.t_s) == 0 or not has_estimator(r.controller):
         return None
     fig, (ax,) = _figure(view)
     ax.step(r.t_s, r.active_spool, where="post", label="spool channel")
@@ -160,22 +161,29 @@ def fig_models(run: LogRun, out_dir: Path, view: RunView) -> Path | None:
 
 
 def fig_estimates(run: LogRun, out_dir: Path, view: RunView) -> Path | None:
-    """k̂_LOE and k̂_DFT against the true fault gains (PLANT_FAULTS)."""
+    """k̂_LOE and k̂_DFT against the true fault gains (PLANT_FAULTS), gaps in FAULT; the true
+    gains alone for a mode without an estimator."""
     r = run.result
     if "CTRL_STATUS" not in run.frames and "PLANT_FAULTS" not in run.frames:
+        return None
+    estimates, est = has_estimator(r.controller), estimating(view)
+    if not estimates and not np.any(np.isfinite(r.true_k_loe)):
         return None
     fig, axs = _figure(view, 2, 2.6)
     for ax, hat, true, lab in (
         (axs[0], r.k_loe_hat, r.true_k_loe, "k_LOE"),
         (axs[1], r.k_dft_hat, r.true_k_dft, "k_DFT"),
     ):
-        ax.plot(r.t_s, hat, "C0", lw=1.0, label=f"{lab} estimate (CTRL_STATUS)")
+        if estimates:
+            ax.plot(r.t_s, np.where(est, hat, np.nan), "C0", lw=1.0, label=f"{lab} estimate (CTRL_STATUS)")
         if np.any(np.isfinite(true)):
             ax.step(r.t_s, true, "k--", where="post", lw=1.0, label=f"true {lab}")
         ax.set_ylabel(lab)
     if np.any(np.isfinite(r.true_k_q)) and np.any(r.true_k_q[np.isfinite(r.true_k_q)] != 1.0):
         axs[0].step(r.t_s, r.true_k_q, "C3:", where="post", label="true k_Q")
-    axs[0].set_title("estimates vs true faults")
+    axs[0].set_title(
+        "estimates vs true faults" if estimates else f"true faults ({r.controller}: no estimator)"
+    )
     return _save(fig, out_dir, "estimates.png", view)
 
 
@@ -193,6 +201,26 @@ def fig_index(run: LogRun, out_dir: Path, view: RunView) -> Path | None:
     ax.set_title("performance index per model (CTRL_INDEX)")
     return _save(fig, out_dir, "index.png", view)
 
+
+#: the caption under each figure in report.md / report.html, by file stem
+CAPTIONS: dict[str, str] = {
+    "overview": "The run at a glance: (a) piston position x against the reference x_d and the "
+    "reference model y_m; (b) tracking error; (c) coil current; (d) active model slot; (e) the "
+    "estimates k̂ against the true fault gains.",
+    "compare": "The modes of one scenario overlaid (the same panels as the overview); a mode "
+    "without an estimator (NRC) has no k̂ or model trace.",
+    "position": "Piston position x (PLANT_TRUTH) and the sensor reading y_s against the reference "
+    "model output y_m, mm.",
+    "error": "Tracking error e = x − y_m, µm; the green band is the ±20 µm recovery band of the "
+    "recovery times.",
+    "current": "Coil current: the controller's setpoint (VALVE_CMD) and what the amplifier "
+    "applied (SENSOR_AUX), mA.",
+    "models": "The model slot the supervisor uses per channel (CTRL_STATUS); a switch is a step.",
+    "estimates": "The estimates k̂_LOE and k̂_DFT in use against the fault gains the emulator "
+    "applied (PLANT_FAULTS).",
+    "index": "The performance index J of each model slot (CTRL_INDEX), log scale: the "
+    "supervisor selects the smallest J, with hysteresis.",
+}
 
 FIGURES: tuple[Callable[[LogRun, Path, RunView], Path | None], ...] = (
     fig_position,

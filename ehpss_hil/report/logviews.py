@@ -85,7 +85,7 @@ def log_view(run: LogRun, label: str = "") -> RunView:
     return RunView(
         run.result,
         label or run.result.controller,
-        event_labels(run.result, events),
+        event_labels(run.result, events, run.injections),
         status_intervals(run),
         counted_samples(run),
     )

@@ -12,6 +12,7 @@ from typing import Any
 from .annotate import Interval
 from .html import write_html
 from .logdata import LogRun
+from .logfigures import CAPTIONS
 from .logmetrics import LogMetrics
 from .logviews import log_view
 
@@ -47,7 +48,13 @@ def _extra_value(key: str, v: Any) -> str:
     return str(v)
 
 
-def _metrics_lines(m: LogMetrics) -> list[str]:
+def _words_at(events: list[tuple[float, str]], t: float) -> str:
+    """The words of the event at ``t`` (s; the same time list both come from)."""
+    near = min(events, key=lambda e: abs(e[0] - t), default=None)
+    return near[1] if near is not None and abs(near[0] - t) < 1e-6 else "—"
+
+
+def _metrics_lines(m: LogMetrics, events: list[tuple[float, str]]) -> list[str]:
     lines = ["## Metrics (docs/design.md §10)", ""]
     if m.run is not None:
         r = m.run
@@ -61,15 +68,19 @@ def _metrics_lines(m: LogMetrics) -> list[str]:
         ]
         if r.events:
             lines += [
-                "| event t (s) | peak error (0.3 s) | recovery (< 20 µm) | switches | active model at end |",
-                "|---|---|---|---|---|",
+                "| event t (s) | event | peak error (0.3 s) | recovery (< 20 µm) | switches | "
+                "active model at end |",
+                "|---|---|---|---|---|---|",
             ]
             lines += [
-                f"| {e.t_s:.3f} | {_um(e.peak_error_m)} | {_ms(e.recovery_s)} | "
+                f"| {e.t_s:.3f} | {_words_at(events, e.t_s)} | {_um(e.peak_error_m)} | {_ms(e.recovery_s)} | "
                 f"{e.switches} | {_models(e.active_model)} |"
                 for e in r.events
             ]
             lines.append("")
+    elif events:  # no metrics (no ground truth): the events alone
+        lines += ["| event t (s) | event |", "|---|---|"]
+        lines += [f"| {t:.3f} | {words} |" for t, words in events] + [""]
     for u in m.unavailable:
         lines.append(f"- **not available:** {u}")
     if m.unavailable:
@@ -99,6 +110,43 @@ def _interval_lines(items: list[Interval]) -> list[str]:
         return []
     lines = ["## Fail-safe and fallback intervals", "", "| from | to | state | reason |", "|---|---|---|---|"]
     lines += [f"| {seconds(iv.t0_s)} | {seconds(iv.t1_s)} | {iv.kind} | {iv.reason or '—'} |" for iv in items]
+    return [*lines, ""]
+
+
+#: the words the figures and tables use without explaining them (docs/design.md §3–5)
+GLOSSARY: tuple[tuple[str, str], ...] = (
+    ("FRA", "free-running adaptive model: a model whose gain θ is adapted all the time"),
+    ("RIA", "reinitialized adaptive model: adapted like FRA, restarted from the active model at a switch"),
+    ("θ", "a model's gain parameter: θ_L = k_LOE (spool channel), θ_D = k_DFT (position channel)"),
+    (
+        "J",
+        "performance index of a model: instantaneous plus fading-memory squared residual; the "
+        "supervisor selects the smallest",
+    ),
+    (
+        "k̂",
+        "the estimate in use of a fault gain (k̂_LOE: loss of valve effectiveness; k̂_DFT: "
+        "position-sensor gain, 0 = failed sensor)",
+    ),
+    ("y_m", "output of the reference model: the motion the loop should follow"),
+    (
+        "FAULT / fallback",
+        "the controller's fail-safe state (with its FailsafeReason) / the loop "
+        "held on nominal compensation by the do-no-harm monitor (with its FallbackReason)",
+    ),
+)
+
+
+def _figure_lines(figures: list[Path], out_dir: Path) -> list[str]:
+    """Each figure with its caption (an italic line under the image; report.html turns the pair
+    into a figure with a caption), then the glossary."""
+    if not figures:
+        return []
+    lines = ["## Figures", ""]
+    for n, p in enumerate(figures, 1):
+        caption = CAPTIONS.get(p.stem, p.stem)
+        lines += [f"![{p.stem}]({p.relative_to(out_dir).as_posix()})", f"*Figure {n}: {caption}*", ""]
+    lines += ["## Glossary", ""] + [f"- **{term}**: {words}" for term, words in GLOSSARY]
     return [*lines, ""]
 
 
@@ -154,11 +202,9 @@ def write_markdown(
     if run.notes:
         lines += ["## Notes", ""] + [f"- {n}" for n in run.notes] + [""]
     lines += _compare_lines(compare or [])
-    lines += _metrics_lines(m)
+    lines += _metrics_lines(m, view.events)
     lines += _interval_lines(view.intervals)
-    if figures:
-        lines += ["## Figures", ""]
-        lines += [f"![{p.stem}]({p.relative_to(out_dir).as_posix()})\n" for p in figures]
+    lines += _figure_lines(figures, out_dir)
     path = out_dir / "report.md"
     path.write_text("\n".join(lines), encoding="utf-8")
     write_html(lines, out_dir, path.with_suffix(".html"), title=f"Run report: {r.scenario} / {r.controller}")

@@ -22,8 +22,9 @@ class SimResult:
     ``current_a`` current applied over [k, k+1); ``active_spool``/``active_position`` model slots
     (−1: none); ``k_loe_hat``/``k_dft_hat`` estimates in use; ``true_k_loe``/``true_k_q``/
     ``true_k_dft`` fault values in force; ``fresh`` whether the sensor frame arrived;
-    ``fallback`` whether the do-no-harm monitor held the loop on nominal compensation (empty for
-    results that do not record it).
+    ``fallback`` whether the do-no-harm monitor held the loop on nominal compensation and
+    ``stuck`` whether the position sensor was stuck (both empty for results that do not record
+    them).
     """
 
     scenario: str
@@ -51,6 +52,8 @@ class SimResult:
     cpu_s: float = 0.0
     frame_counts: dict[str, int] = field(default_factory=dict)
     fallback: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    #: the position sensor stuck (PLANT_TRUTH Stuck) per sample; empty when not recorded
+    stuck: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     @property
     def error_m(self) -> Array:
