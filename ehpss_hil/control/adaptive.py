@@ -35,6 +35,9 @@ FOLLOWS_FACTOR = 2.0
 #: a re-base of x̂ larger than this many reference amplitudes at once is not a sensor gain
 #: having changed (x0 = y0/θ̂_D ≈ the piston where the seed was taken, within the motion's range)
 REBASE_LIMIT = 2.0
+#: the spool model in use must have stood this long (s) before a sample teaches the pressure
+#: baseline (k̂_LOE known: the pressure scales with it)
+BASELINE_SETTLE_S = 0.1
 #: an adaptive estimate within this of its clip counts as at its limit (dimensionless)
 AT_LIMIT_MARGIN = 0.01
 
@@ -75,6 +78,7 @@ class MmacController(LoopBase):
         self._flow_on = t.flow_gain_test
         self._flow_hold = max(1, round(FLOW_HOLD_S / ts))
         self._stop_hold = max(1, round(SPOOL_STOP_HOLD_S / ts))
+        self._baseline_settle = max(1, round(BASELINE_SETTLE_S / ts))
         self._inv_s_spool = 1.0 / self.scale_spool_m
         self._inv_s_pos = 1.0 / self.scale_pos_m
         self._rebase_limit_m = REBASE_LIMIT * self.scale_pos_m
@@ -103,6 +107,8 @@ class MmacController(LoopBase):
         #: position channel regresses y_s − y0 on x̂ − x0 (offset-free whatever k_DFT was then),
         #: and x0 = y0/(θ̂_D·k̂_Q) keeps x̂ absolute as the estimates move
         self._y0 = self._x0 = 0.0
+        self._spool_age = 0  # samples the spool model in use has been in use
+        self._spool_age_model = self.spool_sup.active
 
     def step(self, meas: Measurement) -> ValveCommand:
         """Predict, score both banks, supervise, compensate, PI."""
@@ -223,7 +229,17 @@ class MmacController(LoopBase):
             self._flow_spool_model = spool_model
             fl.restart()
             fl.hold_off(self._flow_hold)
-        fl.update(self.clock.echo, meas.load_pressure_pa, self._flow_theta_l(tl), prod, self.k_dft_hat)
+        self._spool_age = self._spool_age + 1 if spool_model == self._spool_age_model else 0
+        self._spool_age_model = spool_model
+        healthy = (
+            self._warm_left == 0
+            and not self.spool_sup.guarded
+            and not self.pos_sup.guarded
+            and self._spool_age >= self._baseline_settle
+        )
+        fl.update(
+            self.clock.echo, meas.load_pressure_pa, self._flow_theta_l(tl), prod, self.k_dft_hat, healthy
+        )
         if fl.flow_fault:
             self.k_q_hat = prod
             self.k_loe_hat = tl * prod

@@ -43,6 +43,15 @@ from ..physics.params import PlantParams
 from .estimator import per_sample_gain
 from .tuning import ControlTuning
 
+#: the healthy pressure baseline (:attr:`FlowGainMonitor.pressure_gain`) forgets with this time
+#: constant (s of healthy samples)
+BASELINE_WINDOW_S = 2.0
+#: … and is used once it holds this much healthy operation (s)
+BASELINE_MIN_S = 0.2
+#: … within these bounds (dimensionless): the pressure gain of a plant whose hydraulic natural
+#: frequency, mass or flow gain is off the model by up to a factor of 2
+BASELINE_LIMITS = (0.5, 2.0)
+
 
 class FlowGainMonitor:
     """Decides H_D / H_Q each sample; :attr:`k_q` is 1.0 (H_D) or the estimated product (H_Q).
@@ -53,6 +62,11 @@ class FlowGainMonitor:
 
     __slots__ = (
         "_anchor",
+        "_b_min",
+        "_b_up",
+        "_b_uu",
+        "_b_w",
+        "_bd",
         "_c",
         "_c2",
         "_d",
@@ -117,6 +131,8 @@ class FlowGainMonitor:
         inc = plant.velocity_gain_1_s * scale_m * self._m * ts_s
         self._c2 = (t.nlms_c_fraction * inc) ** 2
         self._floor = t.flow_gain_excitation * inc
+        self._bd = math.exp(-ts_s / BASELINE_WINDOW_S)
+        self._b_min = BASELINE_MIN_S / ts_s
         self.reset()
 
     def reset(self) -> None:
@@ -145,6 +161,7 @@ class FlowGainMonitor:
         #: H_D decided on this sample (Λ < −``flow_gain_sensor_threshold`` on enough evidence) or
         #: by :meth:`decide_sensor` since the last :meth:`update`
         self.sensor_current = False
+        self._b_uu = self._b_up = self._b_w = 0.0
         self.restart()
 
     @property
@@ -236,12 +253,20 @@ class FlowGainMonitor:
         )
 
     def update(
-        self, current_a: float, pressure_pa: float, theta_l: float, theta_pos: float, theta_level: float = 1.0
+        self,
+        current_a: float,
+        pressure_pa: float,
+        theta_l: float,
+        theta_pos: float,
+        theta_level: float = 1.0,
+        healthy: bool = False,
     ) -> float:
         """One sample: current echo (A), measured P_L (Pa), k̂_LOE, the product estimate
         θ_pos = k_DFT·k_Q and the position bank's level estimate θ_level (the gain its model in
         use gives the sensor); returns k̂_Q (1.0 under H_D). A decision ends only when neither
-        θ_pos nor θ_level deviates: θ_pos wanders at low excitation, the bank's model stands."""
+        θ_pos nor θ_level deviates: θ_pos wanders at low excitation, the bank's model stands.
+        ``healthy``: the spool channel has settled on its model (k̂_LOE is known), so a sample
+        with nothing deviating may teach the pressure baseline."""
         self.propagate(current_a)
         self.sensor_current = False
         if self.flow_fault and theta_pos < self._failed_below:
@@ -257,6 +282,8 @@ class FlowGainMonitor:
         if not self.flow_fault and abs(theta_pos - 1.0) < self._min_dev:
             # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
             # episode is over (the window starts afresh when a deviation appears)
+            if healthy and abs(theta_level - 1.0) < self._min_dev and not self.sensor_decided:
+                self._learn_baseline(theta_l, pressure_pa)
             if abs(theta_level - 1.0) < self._min_dev and (self._w > 0.0 or self.sensor_decided):
                 self._theta_ref = 1.0
                 self.sensor_decided = False
@@ -276,10 +303,31 @@ class FlowGainMonitor:
         self._sup = d * self._sup + u * pressure_pa
         self._spp = d * self._spp + pressure_pa * pressure_pa
         self._w = d * self._w + 1.0
-        self.llr = self._llr(theta_l, theta_l * theta_pos)
+        g = self.pressure_gain * theta_l
+        self.llr = self._llr(g, g * theta_pos)
         self._decide(theta_pos)
         self.k_q = theta_pos if self.flow_fault else 1.0
         return self.k_q
+
+    def _learn_baseline(self, theta_l: float, pressure_pa: float) -> None:
+        """One healthy sample into the pressure baseline: Σ(k̂_LOE·u)², Σ(k̂_LOE·u)·P_L."""
+        u = theta_l * self._pa * self.s[0]
+        d = self._bd
+        self._b_uu = d * self._b_uu + u * u
+        self._b_up = d * self._b_up + u * pressure_pa
+        self._b_w = d * self._b_w + 1.0
+
+    @property
+    def pressure_gain(self) -> float:
+        """The plant's load pressure over the model's, learned while nothing deviated (both
+        hypotheses predict with it): 1 until :data:`BASELINE_MIN_S` of healthy operation, then
+        the least-squares gain within :data:`BASELINE_LIMITS`. A plant whose hydraulic natural
+        frequency or mass is off the model answers the same current with another pressure; a
+        test against the model's own pressure takes that for a flow-gain change."""
+        if self._b_w < self._b_min or self._b_uu <= 0.0:
+            return 1.0
+        lo, hi = BASELINE_LIMITS
+        return min(max(self._b_up / self._b_uu, lo), hi)
 
     @property
     def sensor_favoured(self) -> bool:
