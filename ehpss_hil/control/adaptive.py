@@ -288,6 +288,24 @@ class MmacController(LoopBase):
     def _position_guarded(self) -> bool:
         return self.pos_sup.guarded and not self.flow.flow_fault
 
+    def _guarded_gain(self) -> float | None:
+        """x̂ carries the loop under the guard only while the sensor gives no better reading.
+        The guard says no level model explains the sensor against x̂; x̂ integrates the spool at
+        the model's flow gain, so on a plant off the model, or after a flow-gain change beside a
+        sensor fault, x̂ is the one that is off. Once the sensor's increments have followed the
+        spool for a full window (M excited increments) since the guard rose, at a live gain and
+        settled, and it is not dead, it is read through the gain the evidence gives it: the
+        gain its last jump went to, else θ_prod when the deviation was attributed to the sensor,
+        else 1 (raw, as the plain PI loop reads it)."""
+        fl, att = self.flow, self.attribution
+        if self._dead or not (fl.product_fresh and fl.product_settled and fl.theta_prod >= self._alive):
+            return None
+        if att.since_guard < fl.increment_window:
+            return None
+        if math.isfinite(att.jump_gain) and att.jump_gain >= self._alive:
+            return att.jump_gain
+        return fl.theta_prod if fl.sensor_favoured else 1.0
+
     def _sensor_live(self) -> bool:
         """The sensor follows the spool, so it may be fed back raw. Under the position guard
         with no jump of the reading since the guard rose (a flow-gain change or a slow drift:
