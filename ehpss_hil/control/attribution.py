@@ -126,7 +126,10 @@ class SensorAttribution:
         j = self.jump
         if broken:  # the spool integral does not span the samples missed
             j.break_chain()
-        elif j.update(position_m, fl.spool_integral_m, fl.theta_prod, fl.product_settled):
+        elif j.update(
+            position_m, fl.spool_integral_m + fl.creep_integral_m, fl.theta_prod, fl.product_settled
+        ):
+            fl.note_jump()
             self.jumped_since_guard = guarded
             if trusted and math.isfinite(j.ratio):  # a ratio to a gain the loop trusted
                 self._left = self._hold

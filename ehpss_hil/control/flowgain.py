@@ -40,6 +40,7 @@ import math
 from ..physics.discretize import zoh
 from ..physics.model import ACC, SPOOL, SPOOL_VEL, VEL, plant_matrices
 from ..physics.params import PlantParams
+from .creep import CreepEstimator
 from .estimator import per_sample_gain
 from .tuning import ControlTuning
 
@@ -88,15 +89,22 @@ class FlowGainMonitor:
         "_on",
         "_on_d",
         "_pa",
+        "_pend",
         "_prev",
+        "_since_jump",
         "_spp",
         "_stale",
         "_sup",
         "_suu",
+        "_t",
         "_theta_ref",
+        "_ts",
+        "_ts_ring",
         "_vs",
         "_w",
         "_ys",
+        "creep",
+        "creep_integral_m",
         "flow_fault",
         "k_q",
         "llr",
@@ -105,6 +113,7 @@ class FlowGainMonitor:
         "sensor_current",
         "sensor_decided",
         "spool_integral_m",
+        "still_samples",
         "theta_prod",
     )
 
@@ -133,6 +142,9 @@ class FlowGainMonitor:
         self._floor = t.flow_gain_excitation * inc
         self._bd = math.exp(-ts_s / BASELINE_WINDOW_S)
         self._b_min = BASELINE_MIN_S / ts_s
+        self._ts = ts_s
+        #: the piston's velocity with the spool at null (:mod:`.creep`)
+        self.creep = CreepEstimator(plant.velocity_gain_1_s * plant.spool_stroke_m)
         self.reset()
 
     def reset(self) -> None:
@@ -146,7 +158,18 @@ class FlowGainMonitor:
         self._theta_ref = 1.0
         self._ys = [0.0] * self._m
         self._vs = [0.0] * self._m
+        self._ts_ring = [0.0] * self._m
+        self._t = 0.0  # time the product has spanned (s)
         self._i = self._n = 0
+        self.creep.reset()
+        self._pend: tuple[float, float, float, float] | None = None  # the last increment
+        self._since_jump = self._m + 1  # samples since the reading last jumped
+        #: samples since the reading last moved by more than the excitation gate over an
+        #: increment (a stuck or failed sensor never does)
+        self.still_samples = 0
+        #: the creep's share of the piston's travel, ∫ĉ/θ_prod dt (m at the nominal flow gain,
+        #: beside :attr:`spool_integral_m`)
+        self.creep_integral_m = 0.0
         #: the running integral K_c·∫y_v of the measured spool (m of piston travel at the nominal
         #: flow gain), as of the last :meth:`product` call
         self.spool_integral_m = self._prev = 0.0
@@ -178,6 +201,19 @@ class FlowGainMonitor:
     def product_fresh(self) -> bool:
         """θ_prod had an excited increment within the last M updates."""
         return self._stale <= self._m
+
+    def forget_attribution(self) -> None:
+        """No hypothesis decided, no evidence (the plant model changed under them); the
+        product, the creep and the pressure baseline kept."""
+        self.flow_fault = self.sensor_decided = self.sensor_current = False
+        self.k_q = 1.0
+        self.llr = 0.0
+        self._theta_ref = 1.0
+        self.restart()
+
+    def note_jump(self) -> None:
+        """The reading jumped on the last sample: the increments spanning it teach no creep."""
+        self._since_jump = 0
 
     def decide_sensor(self) -> None:
         """Attribute the present deviation to the sensor without the pressure test (the caller
@@ -220,14 +256,26 @@ class FlowGainMonitor:
         (the spool taken linear over those not seen), so that both sides of an increment span
         the same time. ``excited`` False (the spool at its stop): the increment is not used."""
         self.spool_integral_m += self._h * samples * (spool_m + self._prev)
+        dt = samples * self._ts
+        self._t += dt
+        if self.theta_prod >= self._failed_below:
+            self.creep_integral_m += dt * self.creep.rate_m_s / self.theta_prod
         self._prev = spool_m
         i = self._i
         y = position_m - self._ys[i]
         phi = self.spool_integral_m - self._vs[i]
-        self._ys[i], self._vs[i] = position_m, self.spool_integral_m
+        tau = self._t - self._ts_ring[i]
+        self._ys[i], self._vs[i], self._ts_ring[i] = position_m, self.spool_integral_m, self._t
         self._i = (i + 1) % self._m
         self._n += 1
         self._stale += 1
+        self.still_samples = 0 if abs(y) > self._floor else self.still_samples + samples
+        # the creep learns from the last increment now that a jump inside it would be known
+        self._since_jump += 1
+        if self._pend is not None and self._since_jump > self._m:
+            self.creep.update(*self._pend)
+        self._pend = (y, phi, tau, self.theta_prod) if self._n > self._m and excited else None
+        y -= self.creep.rate_m_s * tau  # the creep's share of the increment is no gain
         if self._n > self._m and abs(phi) > self._floor and excited:
             self._stale = 0
             t = self.theta_prod
