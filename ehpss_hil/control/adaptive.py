@@ -35,6 +35,12 @@ FOLLOWS_FACTOR = 2.0
 #: a re-base of x̂ larger than this many reference amplitudes at once is not a sensor gain
 #: having changed (x0 = y0/θ̂_D ≈ the piston where the seed was taken, within the motion's range)
 REBASE_LIMIT = 2.0
+#: the spool model in use must have stood this long (s) before a sample teaches the pressure
+#: baseline (k̂_LOE known: the pressure scales with it)
+BASELINE_SETTLE_S = 0.1
+#: a reading that moved (an increment above the excitation gate) within this long (s) is a moving
+#: sensor
+MOVING_S = 0.1
 #: an adaptive estimate within this of its clip counts as at its limit (dimensionless)
 AT_LIMIT_MARGIN = 0.01
 
@@ -75,6 +81,8 @@ class MmacController(LoopBase):
         self._flow_on = t.flow_gain_test
         self._flow_hold = max(1, round(FLOW_HOLD_S / ts))
         self._stop_hold = max(1, round(SPOOL_STOP_HOLD_S / ts))
+        self._baseline_settle = max(1, round(BASELINE_SETTLE_S / ts))
+        self._moving_samples = max(1, round(MOVING_S / ts))
         self._inv_s_spool = 1.0 / self.scale_spool_m
         self._inv_s_pos = 1.0 / self.scale_pos_m
         self._rebase_limit_m = REBASE_LIMIT * self.scale_pos_m
@@ -103,6 +111,9 @@ class MmacController(LoopBase):
         #: position channel regresses y_s − y0 on x̂ − x0 (offset-free whatever k_DFT was then),
         #: and x0 = y0/(θ̂_D·k̂_Q) keeps x̂ absolute as the estimates move
         self._y0 = self._x0 = 0.0
+        self._spool_age = 0  # samples the spool model in use has been in use
+        self._creep_on = False  # a creep is in use (x̂ integrates it)
+        self._spool_age_model = self.spool_sup.active
 
     def step(self, meas: Measurement) -> ValveCommand:
         """Predict, score both banks, supervise, compensate, PI."""
@@ -223,7 +234,22 @@ class MmacController(LoopBase):
             self._flow_spool_model = spool_model
             fl.restart()
             fl.hold_off(self._flow_hold)
-        fl.update(self.clock.echo, meas.load_pressure_pa, self._flow_theta_l(tl), prod, self.k_dft_hat)
+        # x̂ moves with the creep, in its own units (x/k̂_Q: the sensor read through θ_prod)
+        self.xhat.creep_m_s = fl.creep.rate_m_s / prod if prod >= self._failed_below else 0.0
+        if (fl.creep.rate_m_s != 0.0) != self._creep_on:
+            self._creep_on = not self._creep_on
+            self._restart_position(meas.position_m)
+        self._spool_age = self._spool_age + 1 if spool_model == self._spool_age_model else 0
+        self._spool_age_model = spool_model
+        healthy = (
+            self._warm_left == 0
+            and not self.spool_sup.guarded
+            and not self.pos_sup.guarded
+            and self._spool_age >= self._baseline_settle
+        )
+        fl.update(
+            self.clock.echo, meas.load_pressure_pa, self._flow_theta_l(tl), prod, self.k_dft_hat, healthy
+        )
         if fl.flow_fault:
             self.k_q_hat = prod
             self.k_loe_hat = tl * prod
@@ -238,6 +264,24 @@ class MmacController(LoopBase):
             self.pos_bank.seed_ria(prod)
             self.pos_sup.force(self.pos_bank.ria)
             self.k_dft_hat = self.pos_bank.theta[self.pos_bank.ria]
+
+    def _restart_position(self, position_m: float) -> None:
+        """The plant model changed (a creep came into use or left it): what the position channel
+        concluded under the old model — its models, the guard, the attribution, a flow-gain
+        hypothesis — was reached on increments the creep was read into. Start it over from the
+        sensor as it reads now (x̂ = y_s, nominal), the spool channel and the creep kept."""
+        switches = self.pos_sup.switches
+        self.pos_bank.reset()
+        self.pos_sup.reset()
+        self.pos_sup.switches = switches
+        self.attribution.reset()
+        self.flow.forget_attribution()
+        self.monitor.reset()
+        self.xhat.x = position_m
+        self._y0 = self._x0 = position_m
+        self.sensor_held_off = self._in_flow = False
+        self.k_q_hat = 1.0
+        self.set_position_nominal(True, self._ramp_n)
 
     def _flow_theta_l(self, tl: float) -> float:
         """k̂_LOE for the pressure test: the spool model in use, or while the spool channel is
@@ -271,6 +315,31 @@ class MmacController(LoopBase):
 
     def _position_guarded(self) -> bool:
         return self.pos_sup.guarded and not self.flow.flow_fault
+
+    def _guarded_gain(self) -> float | None:
+        """x̂ carries the loop under the guard only while the sensor gives no better reading.
+        The guard says no level model explains the sensor against x̂; x̂ integrates the spool at
+        the model's flow gain, so on a plant off the model, or after a flow-gain change beside a
+        sensor fault, x̂ is the one that is off. Once the sensor's increments have followed the
+        spool for a full window (M excited increments) since the guard rose, at a live gain and
+        settled, and it is not dead, it is read through the gain the evidence gives it: the
+        gain its last jump went to, else θ_prod when the deviation was attributed to the sensor,
+        else 1 (raw, as the plain PI loop reads it)."""
+        fl, att = self.flow, self.attribution
+        if (
+            not (self._dead or fl.creep.judged or att.jumped_since_guard)
+            and fl.still_samples < self._moving_samples
+        ):
+            # before the creep is known, x̂ has no authority over a moving sensor that gave no
+            # sign of a fault (a jump, standing still)
+            return 1.0
+        if self._dead or not (fl.product_fresh and fl.product_settled and fl.theta_prod >= self._alive):
+            return None
+        if att.since_guard < fl.increment_window:
+            return None
+        if math.isfinite(att.jump_gain) and att.jump_gain >= self._alive:
+            return att.jump_gain
+        return fl.theta_prod if fl.sensor_favoured else 1.0
 
     def _sensor_live(self) -> bool:
         """The sensor follows the spool, so it may be fed back raw. Under the position guard

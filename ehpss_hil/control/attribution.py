@@ -58,8 +58,10 @@ class SensorAttribution:
         "_theta_before",
         "_to",
         "_unexplained",
+        "_was_guarded",
         "by_jump",
         "jump",
+        "jump_gain",
         "jumped_since_guard",
         "since_guard",
     )
@@ -89,6 +91,10 @@ class SensorAttribution:
         self.since_guard = 0
         #: the reading jumped since the position guard rose (False: not guarded)
         self.jumped_since_guard = False
+        #: the sensor gain the last jump of the reading went to (θ̂_D before it × its ratio),
+        #: kept until the position guard falls; NaN: none
+        self.jump_gain = math.nan
+        self._was_guarded = False
         #: the model in use is the gain a jump of the reading explained: the reading stepped, so
         #: its compensation applies at once (no ramp)
         self.by_jump = False
@@ -106,8 +112,11 @@ class SensorAttribution:
         if not guarded:
             self.since_guard = 0
             self.jumped_since_guard = False
+            if self._was_guarded:
+                self.jump_gain = math.nan
         elif fl.product_updated:
             self.since_guard += 1
+        self._was_guarded = guarded
         if fl.product_fresh:
             # the level model agreed with the increments when the motion stopped: a change at
             # rest is then the reading's; one that does not agree may still be adapting
@@ -117,11 +126,14 @@ class SensorAttribution:
         j = self.jump
         if broken:  # the spool integral does not span the samples missed
             j.break_chain()
-        elif j.update(position_m, fl.spool_integral_m, fl.theta_prod, fl.product_settled):
+        elif j.update(
+            position_m, fl.spool_integral_m + fl.creep_integral_m, fl.theta_prod, fl.product_settled
+        ):
+            fl.note_jump()
             self.jumped_since_guard = guarded
             if trusted and math.isfinite(j.ratio):  # a ratio to a gain the loop trusted
                 self._left = self._hold
-                self._to = self._kd_before * j.ratio
+                self._to = self.jump_gain = self._kd_before * j.ratio
         if self._left > 0:
             self._left -= 1
             moved = abs(theta_d - self._kd_before) > JUMP_MIN_CHANGE

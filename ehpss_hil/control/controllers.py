@@ -203,6 +203,7 @@ class LoopBase(Controller):
         td = self.k_dft_hat
         guarded = self._position_guarded()
         self._judge_failed(meas, td, guarded)
+        g: float | None = None
         model_trusted = (
             sensor_trusted(td, self._failed_below, guarded, meas.fresh) and not self.sensor_held_off
         )
@@ -211,8 +212,10 @@ class LoopBase(Controller):
             trusted = meas.fresh and (not guarded or self._sensor_live())
         elif model_trusted:
             trusted = True
-        else:  # the raw sensor, when the position channel compensates nominally and it is live
-            trusted = self.position_nominal and meas.fresh and self._sensor_live()
+        else:  # the raw sensor, when the position channel compensates nominally and it is live;
+            # under the guard, a live sensor read through the gain the evidence gives it
+            g = self._guarded_gain() if guarded and meas.fresh else None
+            trusted = g is not None or (self.position_nominal and meas.fresh and self._sensor_live())
         self.sensor_trusted = trusted
         self._apply()
         xh, kq = self.xhat, self.k_q_hat
@@ -227,7 +230,7 @@ class LoopBase(Controller):
                     xh.x = ym / kq
                 else:
                     xh.anchor(ym / kq)
-            fd = self._applied_dft
+            fd = self._applied_dft if g is None else g
             y = meas.position_m / fd if fd > 0.0 else meas.position_m
             b = self._blend
             if b < 1.0:
@@ -259,6 +262,11 @@ class LoopBase(Controller):
         elif self.sensor_held_off and meas.fresh:
             gap = abs(meas.position_m / theta_d - self.k_q_hat * self.xhat.x)
             self.sensor_held_off = gap > self._return_gap_m and not self._sensor_follows_spool()
+
+    def _guarded_gain(self) -> float | None:
+        """Under the position guard: the gain to read a live sensor through instead of handing
+        the loop to x̂ (None: x̂); never in the base loop."""
+        return None
 
     def _sensor_live(self) -> bool:
         """An independent witness says the sensor is alive and follows the spool with a steady

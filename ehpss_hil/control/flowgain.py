@@ -40,8 +40,18 @@ import math
 from ..physics.discretize import zoh
 from ..physics.model import ACC, SPOOL, SPOOL_VEL, VEL, plant_matrices
 from ..physics.params import PlantParams
+from .creep import CreepEstimator
 from .estimator import per_sample_gain
 from .tuning import ControlTuning
+
+#: the healthy pressure baseline (:attr:`FlowGainMonitor.pressure_gain`) forgets with this time
+#: constant (s of healthy samples)
+BASELINE_WINDOW_S = 2.0
+#: … and is used once it holds this much healthy operation (s)
+BASELINE_MIN_S = 0.2
+#: … within these bounds (dimensionless): the pressure gain of a plant whose hydraulic natural
+#: frequency, mass or flow gain is off the model by up to a factor of 2
+BASELINE_LIMITS = (0.5, 2.0)
 
 
 class FlowGainMonitor:
@@ -53,6 +63,11 @@ class FlowGainMonitor:
 
     __slots__ = (
         "_anchor",
+        "_b_min",
+        "_b_up",
+        "_b_uu",
+        "_b_w",
+        "_bd",
         "_c",
         "_c2",
         "_d",
@@ -74,15 +89,22 @@ class FlowGainMonitor:
         "_on",
         "_on_d",
         "_pa",
+        "_pend",
         "_prev",
+        "_since_jump",
         "_spp",
         "_stale",
         "_sup",
         "_suu",
+        "_t",
         "_theta_ref",
+        "_ts",
+        "_ts_ring",
         "_vs",
         "_w",
         "_ys",
+        "creep",
+        "creep_integral_m",
         "flow_fault",
         "k_q",
         "llr",
@@ -91,6 +113,7 @@ class FlowGainMonitor:
         "sensor_current",
         "sensor_decided",
         "spool_integral_m",
+        "still_samples",
         "theta_prod",
     )
 
@@ -117,6 +140,11 @@ class FlowGainMonitor:
         inc = plant.velocity_gain_1_s * scale_m * self._m * ts_s
         self._c2 = (t.nlms_c_fraction * inc) ** 2
         self._floor = t.flow_gain_excitation * inc
+        self._bd = math.exp(-ts_s / BASELINE_WINDOW_S)
+        self._b_min = BASELINE_MIN_S / ts_s
+        self._ts = ts_s
+        #: the piston's velocity with the spool at null (:mod:`.creep`)
+        self.creep = CreepEstimator(plant.velocity_gain_1_s * plant.spool_stroke_m)
         self.reset()
 
     def reset(self) -> None:
@@ -130,7 +158,18 @@ class FlowGainMonitor:
         self._theta_ref = 1.0
         self._ys = [0.0] * self._m
         self._vs = [0.0] * self._m
+        self._ts_ring = [0.0] * self._m
+        self._t = 0.0  # time the product has spanned (s)
         self._i = self._n = 0
+        self.creep.reset()
+        self._pend: tuple[float, float, float, float] | None = None  # the last increment
+        self._since_jump = self._m + 1  # samples since the reading last jumped
+        #: samples since the reading last moved by more than the excitation gate over an
+        #: increment (a stuck or failed sensor never does)
+        self.still_samples = 0
+        #: the creep's share of the piston's travel, ∫ĉ/θ_prod dt (m at the nominal flow gain,
+        #: beside :attr:`spool_integral_m`)
+        self.creep_integral_m = 0.0
         #: the running integral K_c·∫y_v of the measured spool (m of piston travel at the nominal
         #: flow gain), as of the last :meth:`product` call
         self.spool_integral_m = self._prev = 0.0
@@ -145,6 +184,7 @@ class FlowGainMonitor:
         #: H_D decided on this sample (Λ < −``flow_gain_sensor_threshold`` on enough evidence) or
         #: by :meth:`decide_sensor` since the last :meth:`update`
         self.sensor_current = False
+        self._b_uu = self._b_up = self._b_w = 0.0
         self.restart()
 
     @property
@@ -161,6 +201,19 @@ class FlowGainMonitor:
     def product_fresh(self) -> bool:
         """θ_prod had an excited increment within the last M updates."""
         return self._stale <= self._m
+
+    def forget_attribution(self) -> None:
+        """No hypothesis decided, no evidence (the plant model changed under them); the
+        product, the creep and the pressure baseline kept."""
+        self.flow_fault = self.sensor_decided = self.sensor_current = False
+        self.k_q = 1.0
+        self.llr = 0.0
+        self._theta_ref = 1.0
+        self.restart()
+
+    def note_jump(self) -> None:
+        """The reading jumped on the last sample: the increments spanning it teach no creep."""
+        self._since_jump = 0
 
     def decide_sensor(self) -> None:
         """Attribute the present deviation to the sensor without the pressure test (the caller
@@ -203,14 +256,26 @@ class FlowGainMonitor:
         (the spool taken linear over those not seen), so that both sides of an increment span
         the same time. ``excited`` False (the spool at its stop): the increment is not used."""
         self.spool_integral_m += self._h * samples * (spool_m + self._prev)
+        dt = samples * self._ts
+        self._t += dt
+        if self.theta_prod >= self._failed_below:
+            self.creep_integral_m += dt * self.creep.rate_m_s / self.theta_prod
         self._prev = spool_m
         i = self._i
         y = position_m - self._ys[i]
         phi = self.spool_integral_m - self._vs[i]
-        self._ys[i], self._vs[i] = position_m, self.spool_integral_m
+        tau = self._t - self._ts_ring[i]
+        self._ys[i], self._vs[i], self._ts_ring[i] = position_m, self.spool_integral_m, self._t
         self._i = (i + 1) % self._m
         self._n += 1
         self._stale += 1
+        self.still_samples = 0 if abs(y) > self._floor else self.still_samples + samples
+        # the creep learns from the last increment now that a jump inside it would be known
+        self._since_jump += 1
+        if self._pend is not None and self._since_jump > self._m:
+            self.creep.update(*self._pend)
+        self._pend = (y, phi, tau, self.theta_prod) if self._n > self._m and excited else None
+        y -= self.creep.rate_m_s * tau  # the creep's share of the increment is no gain
         if self._n > self._m and abs(phi) > self._floor and excited:
             self._stale = 0
             t = self.theta_prod
@@ -236,12 +301,20 @@ class FlowGainMonitor:
         )
 
     def update(
-        self, current_a: float, pressure_pa: float, theta_l: float, theta_pos: float, theta_level: float = 1.0
+        self,
+        current_a: float,
+        pressure_pa: float,
+        theta_l: float,
+        theta_pos: float,
+        theta_level: float = 1.0,
+        healthy: bool = False,
     ) -> float:
         """One sample: current echo (A), measured P_L (Pa), k̂_LOE, the product estimate
         θ_pos = k_DFT·k_Q and the position bank's level estimate θ_level (the gain its model in
         use gives the sensor); returns k̂_Q (1.0 under H_D). A decision ends only when neither
-        θ_pos nor θ_level deviates: θ_pos wanders at low excitation, the bank's model stands."""
+        θ_pos nor θ_level deviates: θ_pos wanders at low excitation, the bank's model stands.
+        ``healthy``: the spool channel has settled on its model (k̂_LOE is known), so a sample
+        with nothing deviating may teach the pressure baseline."""
         self.propagate(current_a)
         self.sensor_current = False
         if self.flow_fault and theta_pos < self._failed_below:
@@ -257,6 +330,8 @@ class FlowGainMonitor:
         if not self.flow_fault and abs(theta_pos - 1.0) < self._min_dev:
             # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
             # episode is over (the window starts afresh when a deviation appears)
+            if healthy and abs(theta_level - 1.0) < self._min_dev and not self.sensor_decided:
+                self._learn_baseline(theta_l, pressure_pa)
             if abs(theta_level - 1.0) < self._min_dev and (self._w > 0.0 or self.sensor_decided):
                 self._theta_ref = 1.0
                 self.sensor_decided = False
@@ -276,10 +351,31 @@ class FlowGainMonitor:
         self._sup = d * self._sup + u * pressure_pa
         self._spp = d * self._spp + pressure_pa * pressure_pa
         self._w = d * self._w + 1.0
-        self.llr = self._llr(theta_l, theta_l * theta_pos)
+        g = self.pressure_gain * theta_l
+        self.llr = self._llr(g, g * theta_pos)
         self._decide(theta_pos)
         self.k_q = theta_pos if self.flow_fault else 1.0
         return self.k_q
+
+    def _learn_baseline(self, theta_l: float, pressure_pa: float) -> None:
+        """One healthy sample into the pressure baseline: Σ(k̂_LOE·u)², Σ(k̂_LOE·u)·P_L."""
+        u = theta_l * self._pa * self.s[0]
+        d = self._bd
+        self._b_uu = d * self._b_uu + u * u
+        self._b_up = d * self._b_up + u * pressure_pa
+        self._b_w = d * self._b_w + 1.0
+
+    @property
+    def pressure_gain(self) -> float:
+        """The plant's load pressure over the model's, learned while nothing deviated (both
+        hypotheses predict with it): 1 until :data:`BASELINE_MIN_S` of healthy operation, then
+        the least-squares gain within :data:`BASELINE_LIMITS`. A plant whose hydraulic natural
+        frequency or mass is off the model answers the same current with another pressure; a
+        test against the model's own pressure takes that for a flow-gain change."""
+        if self._b_w < self._b_min or self._b_uu <= 0.0:
+            return 1.0
+        lo, hi = BASELINE_LIMITS
+        return min(max(self._b_up / self._b_uu, lo), hi)
 
     @property
     def sensor_favoured(self) -> bool:

@@ -71,18 +71,23 @@ class ModelPosition:
     It carries the loop through a position-sensor failure; K_c = flow_gain/hydraulic_stiffness.
     """
 
-    __slots__ = ("_anchor", "_h", "_mark", "_rate", "x")
+    __slots__ = ("_anchor", "_h", "_mark", "_rate", "_ts", "creep_m_s", "x")
 
     def __init__(self, plant: PlantParams, ts_s: float, anchor_rate_1_s: float) -> None:
         self._h = 0.5 * ts_s * plant.velocity_gain_1_s
+        self._ts = ts_s
         self._anchor = ts_s * anchor_rate_1_s
+        #: the piston's velocity with the spool at null (m/s in x̂'s units), integrated beside
+        #: the spool
+        self.creep_m_s = 0.0
         self.x = 0.0
         self._rate = 0.0
         self._mark = (0.0, 0.0)
 
     def reset(self) -> None:
-        """At rest at the origin."""
+        """At rest at the origin, no creep."""
         self.x = 0.0
+        self.creep_m_s = 0.0
         self._rate = 0.0
         self._mark = (0.0, 0.0)
 
@@ -95,8 +100,9 @@ class ModelPosition:
         self.x, self._rate = self._mark
 
     def integrate(self, spool_m: float) -> float:
-        """Trapezoid step with the actual spool at this sample (m); returns x̂ (m)."""
-        self.x += self._h * (spool_m + self._rate)
+        """Trapezoid step with the actual spool at this sample (m), plus the creep; returns
+        x̂ (m)."""
+        self.x += self._h * (spool_m + self._rate) + self._ts * self.creep_m_s
         self._rate = spool_m
         return self.x
 
@@ -107,7 +113,7 @@ class ModelPosition:
 
     def spool_to_x_m(self, spool_m: float, samples: int) -> float:
         """x̂'s change (m) from a spool of ``spool_m`` (m) held over ``samples`` periods."""
-        return 2.0 * self._h * samples * spool_m
+        return samples * (2.0 * self._h * spool_m + self._ts * self.creep_m_s)
 
     def anchor(self, position_m: float) -> None:
         """Pull x̂ toward a trusted position estimate ``position_m`` = y_s/θ̂_D (m)."""

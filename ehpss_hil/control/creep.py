@@ -1,0 +1,86 @@
+"""The piston's velocity with the spool at null (creep): a plant property the linear model leaves out.
+
+The design model moves the piston with the spool alone, ``ẋ = K_c·y_v``. A real cylinder also
+moves with the spool at null: a load or a spring pushes oil through the leakage, a single-rod
+cylinder's unequal areas leave a net force when both chambers leak to the same pressure, a spool
+null offset lets oil through (docs/physics.md "Nonlinear plant"). Left out, the creep is read as
+a gain: the single-rod plant's 5 mm/s put the increment gain θ_prod at 2.4 at power-on, then at 0
+as the spool reversed, and x̂ — integrating the spool alone — walked away from the piston.
+
+:class:`CreepEstimator` measures it where no gain can hide it: over increments taken while the
+spool was near null (``|φ/τ|`` below :data:`NULL_SHARE` of the full-flow velocity), the position
+moves by ``c·τ`` plus what the gain makes of the little flow there, ``θ·φ``. So the creep is the
+exponentially weighted mean of ``(Δy − θ_prod·φ)/τ`` over such increments — whatever the sensor's
+gain or the flow gain (both multiply a flow near zero). A jump of the reading is no creep: an
+increment further than :data:`OUTLIER_SIGMAS` spreads from the mean is left out. The creep is
+used once it exceeds :data:`CREEP_MIN_SHARE` of the full-flow velocity (the smallest worth
+modelling; a linear plant's stays far below) and stays in use until it falls below half of that.
+"""
+
+from __future__ import annotations
+
+import math
+
+#: an increment counts as "spool near null" when its spool integral moves the piston (at the
+#: nominal flow gain) by less than this share of the full-flow velocity over its span
+NULL_SHARE = 0.02
+#: the creep is averaged over about this many near-null increments
+CREEP_SAMPLES = 200
+#: … and judged only after this many
+CREEP_MIN_SAMPLES = 50
+#: an increment further than this many spreads from the mean is a jump, not creep
+OUTLIER_SIGMAS = 6.0
+#: a creep above this share of the full-flow velocity is modelled (and kept until below half of it)
+CREEP_MIN_SHARE = 0.03
+
+
+class CreepEstimator:
+    """Creep c (m/s of the sensor reading) from near-null increments ``(Δy, φ, τ)``."""
+
+    __slots__ = ("_n", "_null", "_on", "_var", "_w", "mean_m_s", "rate_m_s")
+
+    def __init__(self, full_flow_m_s: float) -> None:
+        """``full_flow_m_s``: the piston velocity at the full spool stroke, nominal flow gain (m/s)."""
+        self._null = NULL_SHARE * full_flow_m_s
+        self._on = CREEP_MIN_SHARE * full_flow_m_s
+        self._w = 1.0 / CREEP_SAMPLES
+        self.reset()
+
+    def reset(self) -> None:
+        """No creep, no samples."""
+        self._n = 0
+        self._var = 0.0
+        #: the mean of the near-null velocities (m/s)
+        self.mean_m_s = 0.0
+        #: the creep in use: the mean once it is worth modelling, else 0 (m/s)
+        self.rate_m_s = 0.0
+
+    def update(self, dy_m: float, phi_m: float, tau_s: float, theta: float) -> float:
+        """One increment: position increment Δy (m), spool-integral increment φ (m, nominal flow
+        gain), the time it spans τ (s), the gain θ_prod. Returns the creep in use (m/s)."""
+        if tau_s <= 0.0 or abs(phi_m) > self._null * tau_s:
+            return self.rate_m_s
+        v = (dy_m - theta * phi_m) / tau_s
+        n, m, var = self._n, self.mean_m_s, self._var
+        d = v - m
+        if n >= CREEP_MIN_SAMPLES and d * d > OUTLIER_SIGMAS * OUTLIER_SIGMAS * var:
+            return self.rate_m_s
+        n += 1
+        w = 1.0 / n if n < CREEP_SAMPLES else self._w
+        m += w * d
+        var += w * (d * (v - m) - var)
+        self._n, self.mean_m_s, self._var = n, m, var
+        if n >= CREEP_MIN_SAMPLES:
+            on = abs(m) > (0.5 * self._on if self.rate_m_s else self._on)
+            self.rate_m_s = m if on else 0.0
+        return self.rate_m_s
+
+    @property
+    def judged(self) -> bool:
+        """Enough near-null increments have been seen to say whether the plant creeps."""
+        return self._n >= CREEP_MIN_SAMPLES
+
+    @property
+    def spread_m_s(self) -> float:
+        """The spread of the near-null velocities about the mean (m/s)."""
+        return math.sqrt(max(self._var, 0.0))

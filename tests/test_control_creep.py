@@ -1,0 +1,82 @@
+"""The creep (the piston's velocity with the spool at null, control/creep.py) and what it does
+for mmac on a plant that creeps: measured where no gain can hide it, and x̂ integrating it."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from ehpss_hil import PROJECT_ROOT
+from ehpss_hil.control.creep import CREEP_MIN_SAMPLES, CreepEstimator
+from ehpss_hil.physics.params import load_params
+from ehpss_hil.report.metrics import RunMetrics, compute_metrics
+from ehpss_hil.scenario import load_scenario
+from ehpss_hil.sim import run_scenario
+
+FULL_FLOW = 0.033  # m/s
+TAU = 0.01  # s, an increment of 10 samples at 1 kHz
+UM = 1e-6
+
+
+def _feed(est: CreepEstimator, creep: float, gain: float, theta: float, n: int, seed: int = 1) -> None:
+    rnd = random.Random(seed)
+    for _ in range(n):
+        phi = rnd.uniform(-1.0, 1.0) * 0.01 * FULL_FLOW * TAU  # a spool near null
+        dy = gain * phi + creep * TAU + rnd.gauss(0.0, 1.4e-6)
+        est.update(dy, phi, TAU, theta)
+
+
+@pytest.mark.parametrize("gain", [0.5, 1.0, 2.0])
+def test_a_creep_is_measured_whatever_the_gain(gain: float) -> None:
+    est = CreepEstimator(FULL_FLOW)
+    _feed(est, 2e-3, gain, 1.0, 400)
+    assert est.judged
+    assert est.rate_m_s == pytest.approx(2e-3, abs=0.1e-3)
+
+
+def test_increments_with_flow_teach_nothing() -> None:
+    est = CreepEstimator(FULL_FLOW)
+    for _ in range(400):
+        est.update(0.5 * FULL_FLOW * TAU + 2e-3 * TAU, 0.5 * FULL_FLOW * TAU, TAU, 0.9)
+    assert not est.judged and est.rate_m_s == 0.0
+
+
+def test_a_creep_below_the_smallest_worth_modelling_is_not_used() -> None:
+    est = CreepEstimator(FULL_FLOW)
+    _feed(est, 0.3e-3, 1.0, 1.0, 400)
+    assert est.mean_m_s == pytest.approx(0.3e-3, abs=0.1e-3)
+    assert est.rate_m_s == 0.0
+
+
+def test_a_jump_is_no_creep() -> None:
+    est = CreepEstimator(FULL_FLOW)
+    _feed(est, 0.0, 1.0, 1.0, CREEP_MIN_SAMPLES + 10)
+    for _ in range(10):  # the ten increments that span a 0.4 mm step of the reading
+        est.update(0.4e-3, 0.0, TAU, 1.0)
+    assert abs(est.mean_m_s) < 0.05e-3 and est.rate_m_s == 0.0
+
+
+def _run(path: str, mode: str) -> RunMetrics:
+    sc = load_scenario(PROJECT_ROOT / "scenarios" / path)
+    return compute_metrics(run_scenario(sc, mode, load_params()))
+
+
+def test_a_load_that_pushes_through_the_leakage_does_no_harm() -> None:
+    """500 N of load and 100 N of Coulomb friction on the nonlinear plant: the piston creeps at
+    1.6 mm/s with the spool at null. Read as a gain, x̂ walked away and the loop followed it
+    (4964 µm RMS against nrc's 4.2)."""
+    mm, nrc = (
+        _run("plant/nonlinear-friction-load.yaml", "mmac"),
+        _run("plant/nonlinear-friction-load.yaml", "nrc"),
+    )
+    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
+    assert mm.max_error_m <= nrc.max_error_m + 10 * UM
+
+
+def test_a_single_rod_cylinder_is_no_longer_left_to_x_hat() -> None:
+    """Area ratio 0.6: a 5.3 mm/s creep from power-on. x̂ carried the loop away from a live
+    sensor (13.4 mm RMS); now the sensor keeps the loop until the creep is known (0.1 s), and x̂
+    integrates it after. Not yet harmless (nrc: 8.2 µm): what is left is the asymmetry of the
+    two directions taken for a drift before the creep is known (docs/control.md §9)."""
+    assert _run("plant/nonlinear-single-rod.yaml", "mmac").rms_error_m < 300 * UM
