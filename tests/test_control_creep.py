@@ -9,7 +9,7 @@ import pytest
 
 from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.control.creep import CREEP_MIN_SAMPLES, CreepEstimator
-from ehpss_hil.physics.params import load_params
+from ehpss_hil.physics.load import load_params
 from ehpss_hil.report.metrics import RunMetrics, compute_metrics
 from ehpss_hil.scenario import load_scenario
 from ehpss_hil.sim import run_scenario
