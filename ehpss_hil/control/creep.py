@@ -76,6 +76,11 @@ class CreepEstimator:
         return self.rate_m_s
 
     @property
+    def null_m_s(self) -> float:
+        """The velocity (m/s, nominal flow gain) below which a spool counts as near null."""
+        return self._null
+
+    @property
     def judged(self) -> bool:
         """Enough near-null increments have been seen to say whether the plant creeps."""
         return self._n >= CREEP_MIN_SAMPLES

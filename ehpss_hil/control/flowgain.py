@@ -86,6 +86,7 @@ class FlowGainMonitor:
         "_min_evidence",
         "_n",
         "_nsettled",
+        "_null_m_s",
         "_on",
         "_on_d",
         "_pa",
@@ -145,6 +146,7 @@ class FlowGainMonitor:
         self._ts = ts_s
         #: the piston's velocity with the spool at null (:mod:`.creep`)
         self.creep = CreepEstimator(plant.velocity_gain_1_s * plant.spool_stroke_m)
+        self._null_m_s = self.creep.null_m_s
         self.reset()
 
     def reset(self) -> None:
@@ -258,8 +260,9 @@ class FlowGainMonitor:
         self.spool_integral_m += self._h * samples * (spool_m + self._prev)
         dt = samples * self._ts
         self._t += dt
-        if self.theta_prod >= self._failed_below:
-            self.creep_integral_m += dt * self.creep.rate_m_s / self.theta_prod
+        rate = self.creep.rate_m_s
+        if rate and self.theta_prod >= self._failed_below:
+            self.creep_integral_m += dt * rate / self.theta_prod
         self._prev = spool_m
         i = self._i
         y = position_m - self._ys[i]
@@ -272,9 +275,12 @@ class FlowGainMonitor:
         self.still_samples = 0 if abs(y) > self._floor else self.still_samples + samples
         # the creep learns from the last increment now that a jump inside it would be known
         self._since_jump += 1
-        if self._pend is not None and self._since_jump > self._m:
-            self.creep.update(*self._pend)
-        self._pend = (y, phi, tau, self.theta_prod) if self._n > self._m and excited else None
+        pend = self._pend
+        if pend is not None and self._since_jump > self._m:
+            self.creep.update(*pend)
+        # only an increment with the spool near null teaches the creep (CreepEstimator.update)
+        near_null = abs(phi) <= self._null_m_s * tau
+        self._pend = (y, phi, tau, self.theta_prod) if near_null and self._n > self._m and excited else None
         y -= self.creep.rate_m_s * tau  # the creep's share of the increment is no gain
         if self._n > self._m and abs(phi) > self._floor and excited:
             self._stale = 0
