@@ -325,6 +325,8 @@ class MmacController(LoopBase):
         settled, and it is not dead, it is read through the gain the evidence gives it: the
         gain its last jump went to, else θ_prod when the deviation was attributed to the sensor,
         else 1 (raw, as the plain PI loop reads it)."""
+        if not self._flow_on:  # no increment evidence kept (the flow-gain test is off)
+            return None
         fl, att = self.flow, self.attribution
         if (
             not (self._dead or fl.creep.judged or att.jumped_since_guard)
