@@ -14,8 +14,7 @@ import multiprocessing as mp
 import os
 import signal
 import threading
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -147,16 +146,3 @@ def run_local(tasks: Sequence[RunTask], workers: int, on_result: OnResult) -> No
         raise
     finally:
         pool.join()
-
-
-@contextmanager
-def open_executor(workers: int = 1, scheduler: str | None = None, retries: int = 0) -> Iterator[Executor]:
-    """The executor of ``--workers``/``--scheduler`` (Dask connected, or its LocalCluster up,
-    on entry: ClusterError when it cannot be); closed on exit."""
-    if not scheduler:
-        yield LocalPool(workers)
-        return
-    from .cluster import DaskExecutor
-
-    with DaskExecutor(scheduler, retries) as ex:
-        yield ex

@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("", "--retries", f"expected 0 … {MAX_RETRIES}, got {args.retries}")
     if args.retries and not args.scheduler:
         raise ConfigError("", "--retries", "needs --scheduler (a local run that fails stops the campaign)")
-    from ..campaign.executors import open_executor
+    from ..campaign.choice import open_executor
     from ..campaign.session import run_campaign
 
     camp = load_campaign(args.file)
