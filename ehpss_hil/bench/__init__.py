@@ -16,5 +16,6 @@ BENCHES: tuple[str, ...] = (
     "loop",
     "monitor",
     "plant",
+    "resolution",
     "soak",
 )
