@@ -72,7 +72,12 @@ def judge(ctrl: BringupController, plant: PlantParams) -> list[Finding]:
         Finding(
             "sensors",
             got >= MIN_SAMPLES_SHARE * len(rows),
-            f"{got} of {len(rows)} sensor samples arrived",
+            f"{got} of {len(rows)} sensor samples arrived"
+            + (
+                ""
+                if got >= MIN_SAMPLES_SHARE * len(rows)
+                else " (a watchdog fail-safe stops them: see the summary)"
+            ),
         )
     ]
     if not out[0].ok or ctrl.reason:
