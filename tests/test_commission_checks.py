@@ -15,8 +15,10 @@ from pathlib import Path
 import can
 import pytest
 from _cia408 import Cia408Rig
+from _proc import EHPSS_HIL, FIRMWARE_SIM, Proc
 
 from ehpss_hil.bus.bitrate import check_bitrate, parse_ip_link
+from ehpss_hil.bus.netns import PrivateNetns, netns_unavailable_reason
 from ehpss_hil.config import BusConfig, CanIds, Cia408Config, load_controller_config
 from ehpss_hil.errors import ConfigError, NodeError
 from ehpss_hil.physics.params import load_params
@@ -26,6 +28,7 @@ from ehpss_hil.protocol.cia408.codec import Cia408Codec
 from ehpss_hil.runtime.cia408_master import MasterSession
 
 ROOT = Path(__file__).resolve().parent.parent
+NETNS_SKIP = netns_unavailable_reason()
 VENDOR_DBC = ROOT / "dbc" / "vendor-example.dbc"
 VENDOR_CFG = ROOT / "configs" / "controller-vendor.yaml"
 
@@ -220,3 +223,53 @@ def test_the_bit_rate_is_checked_where_the_interface_has_one() -> None:
     lo = BusConfig(interface="socketcan", channel="lo")
     assert check_bitrate(lo, "c") == "bit rate: socketcan:lo exposes none; bus.bitrate 1000000 not checked"
     assert "exposes none" in check_bitrate(BusConfig(), "c")
+
+
+def _cia408_configs(tmp: Path, valve_product: int, expect_product: int) -> tuple[Path, Path]:
+    """The shipped CiA 408 pair, the emulated valve impersonating ``valve_product`` and the
+    master expecting ``expect_product``."""
+    fix = {
+        "params: params.yaml": f"params: {ROOT / 'configs' / 'params.yaml'}",
+        "dbc: ../dbc/ehpss.dbc": f"dbc: {ROOT / 'dbc' / 'ehpss.dbc'}",
+        "../scenarios/": f"{ROOT / 'scenarios'}/",
+    }
+    out = []
+    for name, product in (
+        ("emulator-cia408.yaml", valve_product),
+        ("controller-cia408.yaml", expect_product),
+    ):
+        text = (ROOT / "configs" / name).read_text()
+        for old, new in fix.items():
+            text = text.replace(old, new)
+        text = text.replace("cia408:\n", f"cia408:\n  valve_identity: {{product_code: {product:#x}}}\n", 1)
+        p = tmp / name
+        p.write_text(text)
+        out.append(p)
+    return out[0], out[1]
+
+
+@pytest.mark.skipif(NETNS_SKIP is not None, reason=f"cross-process test: {NETNS_SKIP}")
+def test_the_controller_waits_for_the_valve_then_refuses_its_identity(tmp_path: Path) -> None:
+    """The controller starts first (the valve boots later): one 'waiting' line, no canopen abort
+    line; the valve that then answers is product 0x409 where the config expects 0x408: one
+    line naming it, exit 3."""
+    emu_cfg, ctl_cfg = _cia408_configs(tmp_path, 0x409, 0x408)
+    with PrivateNetns() as ns:
+        ctl = Proc(ns.prefix() + EHPSS_HIL + ["controller", "-c", str(ctl_cfg), "--duration", "5"])
+        emu = None
+        try:
+            assert ctl.wait_for("no SDO answer yet", 120.0), ctl.text
+            emu = Proc(ns.prefix() + FIRMWARE_SIM + ["-c", str(emu_cfg), "--duration", "300"])
+            assert ctl.wait(180.0) == 3, ctl.text
+        finally:
+            ctl.kill()
+            if emu is not None:
+                emu.kill()
+    err = "".join(ctl.err)
+    assert "Transfer aborted" not in err and "Traceback" not in err, err
+    assert err.count("valve node 32: no SDO answer yet; waiting up to 120 s") == 1, err
+    last = [line for line in ctl.err if "error:" in line]
+    assert last == [
+        "ehpss-hil controller: error: valve node 32: 0x1018.2 product_code is 0x00000409, the config "
+        "(cia408.valve_identity.product_code) expects 0x00000408\n"
+    ], err
