@@ -16,6 +16,7 @@ from typing import Any
 
 from .blas import limit_blas_threads
 from .bus import open_bus
+from .bus.bitrate import check_bitrate
 from .config import (
     DAEMON_MODES,
     ControllerConfig,
@@ -27,6 +28,7 @@ from .control.base import Controller
 from .errors import ConfigError
 from .physics.load import load_params
 from .physics.params import Params
+from .protocol.travel import check_controller_travel
 from .runtime.controller_loop import CIA408_OWN_FRAMES, OWN_FRAMES, ControllerLoop, LoopOptions
 from .runtime.frameio import FrameIO, limit_sensor_rate, open_process_logger, process_codec
 from .runtime.loop_run import loop_summary, run_lockstep, run_realtime
@@ -169,6 +171,7 @@ def run_daemon(a: DaemonArgs) -> int:
         plant.spool_stroke_m,
         plant.stroke_current_a,
     )
+    check_controller_travel(codec, cfg, str(a.config))
     limit_sensor_rate(codec, params.plant.piston_speed_max_m_s, 1.0 / cfg.rate_hz)
     factory = a.factory or load_factory(a.controller_factory)
     controller = factory(cfg.mode, params, 1.0 / cfg.rate_hz, cfg)
@@ -178,6 +181,7 @@ def run_daemon(a: DaemonArgs) -> int:
             "--controller-factory",
             f"returned a {type(controller).__name__}, not a Controller",
         )
+    log.info(check_bitrate(cfg.bus, str(a.config)))  # a bit rate other than the interface's: exit 2
     bus = open_bus(cfg.bus)
     try:  # until the loop's own shutdown takes over: the bus (and the log) closed on any error
         logger = open_process_logger(

@@ -100,6 +100,13 @@ class NodeError(EhpssError, OSError):
     exit_code = 3
 
 
+class BringupRefused(EhpssError, RuntimeError):
+    """A bring-up check found the valve not as the controller expects it (a reversed polarity,
+    a spool far off null, no motion, sensors missing): do not enable it (``ehpss-hil bringup``)."""
+
+    exit_code = 3
+
+
 class InjectError(EhpssError, ValueError):
     """The monitor refuses a fault injection request (off, unknown kind, bad value, not sent)."""
 

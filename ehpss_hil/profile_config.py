@@ -60,6 +60,17 @@ class DbcMap:
 
 
 @dataclass(frozen=True)
+class NodeIdentityConfig:
+    """A CANopen node's identity (0x1018.1–3) as the config expects it; a key left out is not
+    checked. The master refuses a node that says otherwise (exit 3, naming the node and the
+    entry); the emulator impersonates a node with these values."""
+
+    vendor_id: int | None = field(default=None, metadata=rng(0, 0xFFFFFFFF))
+    product_code: int | None = field(default=None, metadata=rng(0, 0xFFFFFFFF))
+    revision: int | None = field(default=None, metadata=rng(0, 0xFFFFFFFF))
+
+
+@dataclass(frozen=True)
 class Cia408Config:
     """``protocol: cia408``: a CiA 408 valve and a CiA 406 linear encoder — the nodes firmware-sim
     impersonates, and the nodes the controller masters (docs/hardware.md). Node ids 1…127; times
@@ -75,7 +86,8 @@ class Cia408Config:
     or from an INTEGER32 object of the valve (``valve``: ``valve_position_object``/``_sub`` in
     steps of ``valve_position_step_nm``, mapped into the valve's TPDO 2; no encoder node).
     EDS paths: empty = the shipped files (``eds/``). The resolution and the EDS files are
-    checked by ``ehpss_hil.protocol.cia408.check``."""
+    checked by ``ehpss_hil.protocol.cia408.check``. ``valve_identity``/``encoder_identity``:
+    the 0x1018 vendor, product and revision the nodes must have (:class:`NodeIdentityConfig`)."""
 
     valve_node: int = field(default=32, metadata=rng(1, 127))
     encoder_node: int = field(default=33, metadata=rng(1, 127))
@@ -92,6 +104,8 @@ class Cia408Config:
     valve_position_step_nm: int = field(default=100, metadata=rng(1, 1_000_000))
     valve_eds: str = ""
     encoder_eds: str = ""
+    valve_identity: NodeIdentityConfig = field(default_factory=NodeIdentityConfig)
+    encoder_identity: NodeIdentityConfig = field(default_factory=NodeIdentityConfig)
 
     def __post_init__(self) -> None:
         if self.encoder_node == self.valve_node:

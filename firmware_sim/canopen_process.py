@@ -20,6 +20,7 @@ from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import Cia408Config
 from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.protocol.cia408 import cobid
+from ehpss_hil.protocol.cia408.identity import identity_overrides
 from ehpss_hil.protocol.cia408.objects import CONSUMER_HEARTBEAT, PRODUCER_HEARTBEAT, RPDO_COMM
 from ehpss_hil.runtime.rawio import RawFrameIO
 from ehpss_hil.runtime.signals import StopFlag
@@ -46,7 +47,7 @@ def build_nodes(
     c: Cia408Config, valve_od: Any, encoder_od: Any, io: RawFrameIO, stroke_m: float
 ) -> tuple[ValveNode, EncoderNode]:
     """The two nodes from the config and their object dictionaries; the config's times are the
-    power-on values of 0x1017, 0x1016.1 and 0x1400.5."""
+    power-on values of 0x1017, 0x1016.1 and 0x1400.5, its identities (where given) 0x1018's."""
     hb = {(PRODUCER_HEARTBEAT, 0): c.heartbeat_time_ms}
     valve = ValveNode(
         c.valve_node,
@@ -60,9 +61,12 @@ def build_nodes(
             if c.master_heartbeat_timeout_ms
             else 0,
             (RPDO_COMM, 5): c.setpoint_timeout_ms,
+            **identity_overrides(c.valve_identity),
         },
     )
-    encoder = EncoderNode(c.encoder_node, encoder_od, io.send, hb)
+    encoder = EncoderNode(
+        c.encoder_node, encoder_od, io.send, {**hb, **identity_overrides(c.encoder_identity)}
+    )
     return valve, encoder
 
 

@@ -25,7 +25,6 @@ from ehpss_hil.bus import open_bus
 from ehpss_hil.canlog.formats import add_process_log_arguments
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import EmulatorConfig, apply_overrides, load_emulator_config
-from ehpss_hil.emulation import PlantEmulation
 from ehpss_hil.errors import ConfigError, run_console
 from ehpss_hil.physics.load import load_params
 from ehpss_hil.runtime.frameio import FrameIO, open_process_logger, process_codec
@@ -35,6 +34,7 @@ from ehpss_hil.runtime.stats import publish_summary, rejects_text
 from ehpss_hil.scenario import Scenario, load_scenario
 
 from .process import OWN_FRAMES, EmulatorOptions, EmulatorProcess
+from .wiring import REVERSIBLE, make_emulation
 
 log = logging.getLogger("firmware_sim")
 CLOCK_NOTE = (
@@ -75,6 +75,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=5.0,
         help="lockstep: give up when no VALVE_CMD arrives for this long (s)",
+    )
+    p.add_argument(
+        "--reverse",
+        action="append",
+        choices=REVERSIBLE,
+        help="impersonate a miswired valve: the coil current, the spool LVDT or the position "
+        "sensor reversed (bring-up tests; repeatable)",
     )
     p.add_argument("--summary-json", type=Path, help="write the final counters as JSON here")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -207,7 +214,7 @@ def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenari
 
     params = load_params(cfg.params or None)
     valve_od, encoder_od = check_nodes(cfg.nodes, str(args.config))
-    emu = PlantEmulation(params, scenario)
+    emu = make_emulation(params, scenario, args.reverse)
     logging.getLogger("canopen").setLevel(logging.WARNING)  # its SDO server logs every transfer
     bus = open_bus(cfg.bus)
     logger = open_process_logger(
@@ -263,7 +270,7 @@ def run(args: argparse.Namespace) -> int:
         cfg.dbc_map,
         stroke_current_a=params.plant.stroke_current_a,
     )
-    emu = PlantEmulation(params, scenario)
+    emu = make_emulation(params, scenario, args.reverse)
     bus = open_bus(cfg.bus)
     try:  # until the run's own shutdown takes over: the bus (and the log) closed on any error
         logger = open_process_logger(

@@ -223,7 +223,7 @@ def test_the_daemon_refuses_lockstep_with_cia408_in_one_line() -> None:
     [
         ({"valve_position_object": 0x2101}, "cia408.valve_position_object"),  # not in the EDS
         ({"valve_position_object": 0x6301, "valve_position_sub": 1}, "cia408.valve_position_object"),  # INT16
-        ({"valve_position_step_nm": 2000}, "cia408.valve_position_step_nm"),  # coarser than 1 µm
+        ({"valve_position_step_nm": 5000}, "cia408.valve_position_step_nm"),  # coarser than 3 µm
     ],
 )
 def test_a_valve_position_the_master_cannot_use_is_refused(changes: dict[str, int], key: str) -> None:

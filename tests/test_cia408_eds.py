@@ -58,7 +58,7 @@ def test_shipped_config_checks_and_loads() -> None:
 @pytest.mark.parametrize(
     ("change", "key", "text"),
     [
-        ({"full_scale_current_a": 0.2}, "cia408.full_scale_current_a", "12.21 µA LSB, coarser than"),
+        ({"full_scale_current_a": 0.5}, "cia408.full_scale_current_a", "30.52 µA LSB, coarser than"),
         ({"valve_eds": str(ENCODER_EDS)}, "cia408.valve_eds", "the EDS has no object 0x1400.5"),
         ({"encoder_eds": str(VALVE_EDS)}, "cia408.encoder_eds", "the EDS has no object 0x6004"),
         ({"valve_eds": str(ROOT / "README.md")}, "cia408.valve_eds", "cannot load EDS"),

@@ -166,7 +166,7 @@ def test_counter_only_and_no_e2e(tmp_path: Path, profile: str, e2e: str) -> None
 def _coarse_dbc(tmp: Path) -> Path:
     text = VENDOR_DBC.read_text().replace(
         'SG_ PistonPos : 23|22@0- (0.0005,0) [-500|500] "mm"',
-        'SG_ PistonPos : 23|22@0- (0.002,0) [-500|500] "mm"',
+        'SG_ PistonPos : 23|22@0- (0.005,0) [-500|500] "mm"',
     )
     p = tmp / "coarse.dbc"
     p.write_text(text)
@@ -190,7 +190,7 @@ BAD_MAPS: list[tuple[str, dict[str, str], str, str]] = [
         "too coarse",
         {"dbc": "coarse"},
         f"{_SIG}.position",
-        "LSB of 2e-06 (factor 0.002 mm), coarser than the 1e-06",
+        "LSB of 5e-06 (factor 0.005 mm), coarser than the 3e-06",
     ),
     ("unit", {"dbc": "unit"}, f"{_SIG}.position", "has unit 'in'"),
     (
@@ -275,13 +275,13 @@ def test_a_valve_without_spool_actual_is_refused(tmp_path: Path) -> None:
 
 def test_current_resolution_leaves_the_sample_clock_its_echo_match() -> None:
     """A setpoint and its echo, each rounded to half of the coarsest LSB accepted, differ by at
-    most one such LSB: within the sample clock's WIRE_MATCH_A, so the echo still confirms."""
+    most half of each LSB: within the sample clock's WIRE_MATCH_A, so the echo still confirms."""
     from ehpss_hil.control.sampleclock import WIRE_MATCH_A
-    from ehpss_hil.protocol.logical import CURRENT_RESOLUTION_A, LOGICAL_SIGNALS
+    from ehpss_hil.protocol.logical import COIL_CURRENT_RESOLUTION_A, CURRENT_RESOLUTION_A, LOGICAL_SIGNALS
 
-    assert CURRENT_RESOLUTION_A / 2 + CURRENT_RESOLUTION_A / 2 < WIRE_MATCH_A
+    assert CURRENT_RESOLUTION_A / 2 + COIL_CURRENT_RESOLUTION_A / 2 < WIRE_MATCH_A
     assert {s.key: s.resolution for s in LOGICAL_SIGNALS if s.quantity == "current"} == {
-        "coil_current": CURRENT_RESOLUTION_A,
+        "coil_current": COIL_CURRENT_RESOLUTION_A,
         "current_setpoint": CURRENT_RESOLUTION_A,
     }
 
@@ -299,7 +299,7 @@ BO_ 301 P5_AUX: 8 AMP
  SG_ Crc : 0|16@1+ (1,0) [0|65535] "" PLC
  SG_ Alive : 16|8@1+ (1,0) [0|255] "" PLC
  SG_ PL : 24|16@1- (100,0) [-3000000|3000000] "Pa" PLC
- SG_ I : 40|20@1- (5e-06,0) [-1|1] "A" PLC
+ SG_ I : 40|20@1- (2e-06,0) [-1|1] "A" PLC
 BO_ 302 P5_CMD: 8 PLC
  SG_ Crc : 0|16@1+ (1,0) [0|65535] "" AMP
  SG_ Alive : 16|8@1+ (1,0) [0|255] "" AMP
@@ -331,12 +331,12 @@ def test_p05_with_an_8_bit_counter(tmp_path: Path) -> None:
     for k in range(300):
         if k == 200:
             emu.skip("SENSOR_AUX")  # one lost on the way
-        f = emu.encode("SENSOR_AUX", {"LoadPressure": 1e5, "CoilCurrent": 0.012345})
+        f = emu.encode("SENSOR_AUX", {"LoadPressure": 1e5, "CoilCurrent": 0.012346})
         assert end_to_end.check_profile5_crc(bytes(f.data), 4661)
         d = ctrl.classify(f)
         verdicts.append(d.verdict)
         assert d.counter == (k + (k >= 200)) % 256 & 0x0F
-        assert d.values is not None and d.values["CoilCurrent"] == pytest.approx(0.012345)
+        assert d.values is not None and d.values["CoilCurrent"] == pytest.approx(0.012346)
     assert verdicts.count(Verdict.OK_SOME_LOST) == 1 and verdicts[200] is Verdict.OK_SOME_LOST
     assert verdicts.count(Verdict.OK) == 299
     bad = emu.encode("SENSOR_AUX", {"LoadPressure": 1e5, "CoilCurrent": 0.0})

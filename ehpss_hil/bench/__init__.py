@@ -17,5 +17,6 @@ BENCHES: tuple[str, ...] = (
     "loop",
     "monitor",
     "plant",
+    "resolution",
     "soak",
 )

@@ -13,6 +13,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "bench",
         f"benchmarks: {', '.join(BENCHES)} (figures beside their targets; exit 1 when a target fails)",
     ),
+    "bringup": (
+        "bringup",
+        "checks before the first enable: bit rate, node identity, sensor zero, spool/piston polarity",
+    ),
     "campaign": (
         "campaign",
         "Monte-Carlo fault campaign (sampled faults × nrc/mmac/oracle) on local cores or a Dask cluster",

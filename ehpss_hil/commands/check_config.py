@@ -65,13 +65,15 @@ def _prepare_scenario(s: Scenario, params: Params) -> None:
 def _prepare_controller(path: Path, c: ControllerConfig) -> None:
     """What ``ehpss-hil controller`` does with its config before opening the bus."""
     from ..daemon import default_factory, loop_options
+    from ..protocol.travel import check_controller_travel
     from ..runtime.frameio import process_codec
 
     params = load_params(c.params or None)
     plant = params.plant
-    process_codec(
+    codec = process_codec(
         c.dbc, c.ids, str(path), c.protocol, c.dbc_map, c.nodes, plant.spool_stroke_m, plant.stroke_current_a
     )
+    check_controller_travel(codec, c, str(path))
     loop_options(c)
     default_factory(c.mode, params, 1.0 / c.rate_hz, c)
 

@@ -8,6 +8,7 @@ import math
 import time
 from pathlib import Path
 
+from ..codec import FrameCodec
 from ..control.registry import MODES
 from ..extras import require
 from ..report.metrics import RunMetrics
@@ -136,6 +137,18 @@ def write_plots(outcomes: list[JobOutcome], base: Path) -> list[Path]:
     ]
 
 
+def _check_travel(codec: FrameCodec, protocol_config: str, paths: list[str]) -> None:
+    """Each scenario's reference fits the profile's position field (a ConfigError naming it)."""
+    from ..config import load_controller_config
+    from ..protocol.travel import check_position_range, reference_extent_m
+    from ..scenario import load_scenario
+
+    cfg = load_controller_config(protocol_config)
+    for p in paths:
+        travel = reference_extent_m(load_scenario(p).reference)
+        check_position_range(codec, travel, f"the reference of {p}", protocol_config, cfg)
+
+
 def run(args: argparse.Namespace) -> int:
     if args.plot:
         require("plot", "--plot")
@@ -145,7 +158,8 @@ def run(args: argparse.Namespace) -> int:
     if args.protocol:
         from ..sim.lockstep import config_codec
 
-        config_codec(args.protocol)  # a bad config or map: exit 2 before any run
+        codec = config_codec(args.protocol)  # a bad config or map: exit 2 before any run
+        _check_travel(codec, args.protocol, paths)
     params = plant = None
     if args.params:
         from ..physics.load import load_params

@@ -11,6 +11,7 @@ from ..config import CanIds, ControllerConfig
 from ..physics.load import load_params
 from ..runtime.frameio import process_codec
 from .listener import BusListener
+from .profiles import monitor_codec
 from .reference import ReferenceTrack
 from .state import MonitorState, choice_names
 
@@ -24,10 +25,11 @@ def build_listener(
     allow_inject: bool = False,
     capture_dir: Path | None = None,
 ) -> BusListener:
-    """The listener (not started) with its state: the config's DBC and ID layout, and x_d/y_m
-    from its reference and rate when ``cfg`` is given. ``bitrate``: bit/s, for the bus load."""
+    """The listener (not started) with its state: the config's DBC, ID layout and protocol
+    profile (:mod:`.profiles`), and x_d/y_m from its reference and rate when ``cfg`` is given.
+    ``bitrate``: bit/s, for the bus load."""
     dbc, ids, where = (cfg.dbc, cfg.ids, str(cfg_path)) if cfg is not None else ("", CanIds(), "")
-    codec = process_codec(dbc, ids, where)
+    codec = monitor_codec(cfg, cfg_path)
     track = None
     if cfg is not None:
         track = ReferenceTrack(cfg.reference, load_params(cfg.params or None), 1.0 / cfg.rate_hz)

@@ -207,18 +207,20 @@ class MonitorState:
 
     def _sensor_aux(self, v: dict[str, Any], t_s: float) -> None:
         self._latest.values["i_applied_a"] = float(v["CoilCurrent"])
-        self._latest.aux_flags = {
-            k: bool(v[k]) for k in ("ValveEnabled", "CmdTimeout", "CurrentSaturated", "CommandConflict")
+        self._latest.aux_flags = {  # a vendor or CiA 408 valve reports none of them (False)
+            k: bool(v.get(k, 0))
+            for k in ("ValveEnabled", "CmdTimeout", "CurrentSaturated", "CommandConflict")
         }
 
     def _valve_cmd(self, v: dict[str, Any], t_s: float) -> None:
         lat = self._latest.values
         lat["i_cmd_a"] = float(v["CurrentSetpoint"])
-        raw = int(v["CycleCount"])
+        # a vendor or CiA 408 command carries no cycle count: each command is one cycle
+        raw = int(v.get("CycleCount", ((self._cycle_raw or 0) + 1) % 65536))
         if self._cycle_raw is not None:
             self._cycle += (raw - self._cycle_raw) % 65536
         self._cycle_raw = raw
-        if not v["Enable"]:
+        if not v.get("Enable", 1):
             self._saw_disabled = True
         elif self._cycle0 is None and self._saw_disabled:
             # the controller's first ACTIVE cycle, seen: its reference starts here (k = 0). A

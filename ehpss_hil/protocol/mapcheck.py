@@ -47,6 +47,8 @@ CRC_FIELDS = {"p02": (0, 8), "p05": (0, 16)}
 P02_COUNTER = (8, 4)
 #: DataIDs a profile takes per frame, and their largest value
 DATA_IDS = {"p02": (16, 0xFF), "p05": (1, 0xFFFF)}
+#: the widths of a DBC float field (SIG_VALTYPE_ 1: IEEE 754 single, 2: double)
+FLOAT_BITS = (32, 64)
 
 
 @dataclass(frozen=True)
@@ -115,6 +117,13 @@ def _signal(db: Database, ref: str, src: str, key: str) -> tuple[DbcMessage, Any
         raise ConfigError(src, key, f"message {msg_name} has no signal {sig_name!r}") from None
     if msg.length > 8:
         raise ConfigError(src, key, f"{msg_name} is {msg.length} bytes: CAN FD is not supported")
+    if sig.conversion.is_float and sig.length not in FLOAT_BITS:
+        raise ConfigError(
+            src,
+            key,
+            f"{sig_name} is a {sig.length}-bit float; a DBC float is IEEE 754 single (32 bits) "
+            "or double (64 bits)",
+        )
     return msg, sig
 
 
@@ -200,12 +209,18 @@ def _page(msg: DbcMessage, sig: Any) -> tuple[tuple[str, int], ...]:
     return tuple(reversed(out))
 
 
+def _page_text(page: tuple[tuple[str, int], ...]) -> str:
+    return ", ".join(f"{m}={v}" for m, v in page) or "no page (not multiplexed)"
+
+
 def _frame_signals(
     db: DbcMap, vdb: Database, src: str, role: str, stroke_current_a: float
 ) -> tuple[DbcMessage, list[MappedSignal], Any]:
+    """The message, the mapped signals and the multiplexer page of logical frame ``role``. The
+    frame's page is the lowest of its signals' pages; a signal on another one is named."""
     msg: DbcMessage | None = None
     mapped: list[MappedSignal] = []
-    page: Any = None
+    pages: list[tuple[str, Any, tuple[tuple[str, int], ...]]] = []
     for ls in LOGICAL_SIGNALS:
         if ls.frame != role:
             continue
@@ -218,15 +233,21 @@ def _frame_signals(
             raise ConfigError(
                 src, key, f"{role}'s signals must share one message ({m.name} here, {msg.name} before)"
             )
-        p = _page(m, sig)
-        if page is not None and p != page:
-            raise ConfigError(
-                src, key, f"{sig.name} is on another multiplexer page than {role}'s other signals"
-            )
-        msg, page = m, p
+        msg = m
+        pages.append((ls.key, sig, _page(m, sig)))
         si = _si_per_unit(ls, sig, src, key, stroke_current_a)
         mapped.append(MappedSignal(ls.signal, sig.name, si))
     assert msg is not None  # position, load_pressure and current_setpoint are required keys
+    page = min(p for _, _, p in pages)
+    for key, sig, p in pages:
+        if p != page:
+            other_key, other, _ = next(x for x in pages if x[2] == page)
+            raise ConfigError(
+                src,
+                f"dbc_map.signals.{key}",
+                f"{sig.name} is on multiplexer page {_page_text(p)}, {other.name} ({other_key}) on "
+                f"{_page_text(page)}: {role}'s signals must share one page",
+            )
     return msg, mapped, page
 
 

@@ -29,6 +29,8 @@ class Job:
     keep_result: bool = False
     #: a controller config whose protocol profile both sides speak (frames transport); "": native
     protocol_config: str = ""
+    #: a native DBC other than the shipped one on both sides (another scaling); "": the shipped one
+    dbc: str = ""
 
 
 @dataclass
@@ -55,7 +57,9 @@ def _init(params: Params | None, tuning: ControlTuning | None, plant: PlantParam
 def _run(job: Job) -> JobOutcome:
     sc = job.scenario if isinstance(job.scenario, Scenario) else load_scenario(job.scenario)
     try:
-        res = run_scenario(sc, job.mode, _PARAMS, _TUNING, job.transport, job.protocol_config, _PLANT)
+        res = run_scenario(
+            sc, job.mode, _PARAMS, _TUNING, job.transport, job.protocol_config, _PLANT, job.dbc
+        )
     except ConfigError as exc:  # e.g. a plant section whose mapping fails: name the file
         if exc.source or isinstance(job.scenario, Scenario):
             raise

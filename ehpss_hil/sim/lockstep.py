@@ -41,13 +41,18 @@ TRANSPORTS = ("quantize", "frames")
 
 
 _QUANTIZE: QuantizeTransport | None = None
+_QUANTIZE_DBC: dict[str, QuantizeTransport] = {}
 _Y_M: dict[tuple[Params, float, bytes], np.ndarray] = {}
 
 
-def _transport(kind: str, protocol_config: str = "") -> QuantizeTransport | FramesTransport | Cia408Transport:
+def _transport(
+    kind: str, protocol_config: str = "", dbc: str = ""
+) -> QuantizeTransport | FramesTransport | Cia408Transport:
     global _QUANTIZE  # stateless, built once per process (the DBC parse is slow)
     if protocol_config and kind != "frames":
         raise ConfigError("", "transport", "a protocol profile runs with the frames transport only")
+    if dbc:
+        return _native_dbc_transport(kind, protocol_config, dbc)
     if kind == "quantize":
         if _QUANTIZE is None:
             _QUANTIZE = QuantizeTransport(FrameCodec())
@@ -60,6 +65,18 @@ def _transport(kind: str, protocol_config: str = "") -> QuantizeTransport | Fram
             return FramesTransport(emu, ctrl)
         return FramesTransport(FrameCodec(), FrameCodec())
     raise ConfigError("", "transport", f"unknown transport {kind!r}; choose {', '.join(TRANSPORTS)}")
+
+
+def _native_dbc_transport(kind: str, protocol_config: str, dbc: str) -> QuantizeTransport | FramesTransport:
+    """The transport of another native DBC (same frames, other scaling: ``bench resolution``)."""
+    if protocol_config:
+        raise ConfigError("", "dbc", "a protocol config brings its own DBC")
+    if kind == "frames":
+        return FramesTransport(FrameCodec(dbc), FrameCodec(dbc))
+    tr = _QUANTIZE_DBC.get(dbc)
+    if tr is None:
+        tr = _QUANTIZE_DBC[dbc] = QuantizeTransport(FrameCodec(dbc))
+    return tr
 
 
 def config_codec(path: str) -> FrameCodec:
@@ -102,6 +119,7 @@ def run_scenario(
     transport: str = "quantize",
     protocol_config: str = "",
     plant_params: PlantParams | None = None,
+    dbc: str = "",
 ) -> SimResult:
     """Simulate ``scenario`` with controller ``mode``; returns every per-sample array.
     ``params`` are the controller's (its models and y_m); the emulated plant is the scenario's
@@ -109,7 +127,8 @@ def run_scenario(
     the scenario says otherwise).
     ``protocol_config``: a controller config whose protocol profile the frames transport speaks
     on both sides (the emulator impersonating the mapped electronics); its tuning is the one
-    used when ``tuning`` is None (cia408 needs mmac without its flow-gain test)."""
+    used when ``tuning`` is None (cia408 needs mmac without its flow-gain test). ``dbc``: a
+    native DBC other than the shipped one (the same frames, another scaling) on both sides."""
     limit_blas_threads(1)
     prm = params if params is not None else load_params()
     if protocol_config and tuning is None:
@@ -119,7 +138,7 @@ def run_scenario(
     ts = scenario.sample_time_s
     ctrl = make_controller(mode, prm, ts, tuning, scenario.reference)
     emu = PlantEmulation(prm, scenario, plant_params)
-    tr = _transport(transport, protocol_config)
+    tr = _transport(transport, protocol_config, dbc)
     x_d = scenario.reference_samples()
     y_m = reference_output(prm, ts, x_d)
     rows: list[tuple] = []

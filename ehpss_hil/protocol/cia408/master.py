@@ -56,6 +56,7 @@ from .cyclic import Scaling, frame, step_of_nm, unpack_emcy, unpack_heartbeat
 from .drive import DeviceDrive
 from .eds import ENCODER_EDS, VALVE_EDS
 from .history import ErrorHistoryReader
+from .identity import check_expected, expected_for
 from .objects import (
     BIT_D,
     CONTROL_WORD,
@@ -66,6 +67,7 @@ from .objects import (
     NmtCommand,
     NmtState,
 )
+from .sdolog import quiet_sdo_timeouts
 from .startup import SDO_TIMEOUT_S, NodeIdentity, check_identity, go_operational, stop_nodes
 
 log = logging.getLogger("ehpss_hil.controller")
@@ -119,27 +121,36 @@ class MasterSession:
         ``codec``'s scaling. Raises :class:`NodeError`."""
         self.net.notifier = can.Notifier(self.bus, self.net.listeners, NOTIFIER_CYCLE_S)
         enc = self.encoder
-        try:
-            for node, role in ((self.valve, "valve"), (enc, "encoder")):
-                if node is not None:
-                    _await_node(node, role, self.wait_s)
-            ids = [check_identity(self.valve, PROFILE_VALVE, "valve")]
-            if enc is not None:
-                ids.append(check_identity(enc, PROFILE_ENCODER, "encoder"))
-            configure_valve(self.valve, self.c)
-            if enc is not None:
-                step_nm = configure_encoder(enc, self.c)
-                sc = codec.scaling
-                codec.scaling = Scaling(sc.full_scale_current_a, sc.spool_stroke_m, step_of_nm(step_nm))
-            go_operational(self.valve, "valve")
-            if enc is not None:
-                go_operational(enc, "encoder")
-        finally:
-            self.net.notifier.stop(NOTIFIER_CYCLE_S * 20)
-            self.net.notifier = None
+        with quiet_sdo_timeouts():  # each time-out is handled here (protocol/cia408/sdolog.py)
+            try:
+                ids = self._identify(enc)
+                configure_valve(self.valve, self.c)
+                if enc is not None:
+                    step_nm = configure_encoder(enc, self.c)
+                    sc = codec.scaling
+                    codec.scaling = Scaling(sc.full_scale_current_a, sc.spool_stroke_m, step_of_nm(step_nm))
+                go_operational(self.valve, "valve")
+                if enc is not None:
+                    go_operational(enc, "encoder")
+            finally:
+                self.net.notifier.stop(NOTIFIER_CYCLE_S * 20)
+                self.net.notifier = None
         self.identities = tuple(ids)
         log.info("cia408 start-up: %s", "; ".join(i.text() for i in ids))
         return self.identities
+
+    def _identify(self, enc: Any) -> list[NodeIdentity]:
+        """Each node awaited, its profile and its identity against the config checked."""
+        ids = []
+        nodes = ((self.valve, "valve", PROFILE_VALVE), (enc, "encoder", PROFILE_ENCODER))
+        for node, role, _ in nodes:
+            if node is not None:
+                _await_node(node, role, self.wait_s)
+        for node, role, profile in nodes:
+            if node is not None:
+                ids.append(check_identity(node, profile, role))
+                check_expected(ids[-1], expected_for(self.c, role), role)
+        return ids
 
     def stop(self) -> None:
         """NMT stop of the nodes (nothing awaited)."""
@@ -155,6 +166,7 @@ def _await_node(node: Any, role: str, wait_s: float) -> None:
 
     node.sdo.RESPONSE_TIMEOUT = SDO_TIMEOUT_S
     end = time.monotonic() + wait_s
+    waiting = False
     while True:
         try:  # a booting node's boot-up message, a running one's heartbeat: ask at once
             node.nmt.wait_for_heartbeat(NODE_POLL_S)
@@ -166,6 +178,9 @@ def _await_node(node: Any, role: str, wait_s: float) -> None:
         except SdoCommunicationError as exc:
             if time.monotonic() > end:
                 raise NodeError(f"{role} node {node.id}: no answer within {wait_s:g} s") from exc
+            if not waiting:
+                log.info("%s node %d: no SDO answer yet; waiting up to %g s", role, node.id, wait_s)
+                waiting = True
 
 
 class CyclicMaster:
