@@ -52,6 +52,10 @@ BASELINE_MIN_S = 0.2
 #: … within these bounds (dimensionless): the pressure gain of a plant whose hydraulic natural
 #: frequency, mass or flow gain is off the model by up to a factor of 2
 BASELINE_LIMITS = (0.5, 2.0)
+#: … and only where it differs from 1 by more than this (dimensionless): the least-squares gain
+#: of a load pressure quantized at the coarsest accepted resolution (0.2 bar, with a 3 µA echo) is
+#: 2–3 % off the plant's; the plants this baseline is for are 6–50 % off the model
+BASELINE_DEADBAND = 0.05
 
 
 class FlowGainMonitor:
@@ -375,13 +379,15 @@ class FlowGainMonitor:
     def pressure_gain(self) -> float:
         """The plant's load pressure over the model's, learned while nothing deviated (both
         hypotheses predict with it): 1 until :data:`BASELINE_MIN_S` of healthy operation, then
-        the least-squares gain within :data:`BASELINE_LIMITS`. A plant whose hydraulic natural
+        the least-squares gain within :data:`BASELINE_LIMITS`, where it is off 1 by more than
+        :data:`BASELINE_DEADBAND`. A plant whose hydraulic natural
         frequency or mass is off the model answers the same current with another pressure; a
         test against the model's own pressure takes that for a flow-gain change."""
         if self._b_w < self._b_min or self._b_uu <= 0.0:
             return 1.0
         lo, hi = BASELINE_LIMITS
-        return min(max(self._b_up / self._b_uu, lo), hi)
+        g = min(max(self._b_up / self._b_uu, lo), hi)
+        return g if abs(g - 1.0) > BASELINE_DEADBAND else 1.0
 
     @property
     def sensor_favoured(self) -> bool:
