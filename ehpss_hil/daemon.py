@@ -16,7 +16,7 @@ from typing import Any
 
 from .blas import limit_blas_threads
 from .bus import open_bus
-from .bus.bitrate import check_bitrate
+from .bus.bitrate import BITRATE_UNCHECKED, check_bitrate
 from .config import (
     DAEMON_MODES,
     ControllerConfig,
@@ -181,7 +181,9 @@ def run_daemon(a: DaemonArgs) -> int:
             "--controller-factory",
             f"returned a {type(controller).__name__}, not a Controller",
         )
-    log.info(check_bitrate(cfg.bus, str(a.config)))  # a bit rate other than the interface's: exit 2
+    note = check_bitrate(cfg.bus, str(a.config))  # a bit rate other than the interface's: exit 2
+    # an interface without a bit rate (vcan, udp_multicast, virtual) is not news on every start
+    log.log(logging.DEBUG if note.endswith(BITRATE_UNCHECKED) else logging.INFO, note)
     bus = open_bus(cfg.bus)
     try:  # until the loop's own shutdown takes over: the bus (and the log) closed on any error
         logger = open_process_logger(

@@ -62,6 +62,10 @@ def interface_bitrate(cfg: BusConfig) -> int | None:
     return parse_ip_link(out.stdout) if out.returncode == 0 else None
 
 
+#: how a note ends when the interface exposes no bit rate to check against
+BITRATE_UNCHECKED = "not checked"
+
+
 def check_bitrate(cfg: BusConfig, src: str, actual: int | None = None) -> str:
     """``cfg.bitrate`` against the interface's (``actual``, read when None): a one-line note
     when they agree or the interface exposes none, a ConfigError naming ``bus.bitrate`` when
@@ -69,7 +73,7 @@ def check_bitrate(cfg: BusConfig, src: str, actual: int | None = None) -> str:
     rate = actual if actual is not None else interface_bitrate(cfg)
     where = f"{cfg.interface}:{cfg.channel}"
     if rate is None:
-        return f"bit rate: {where} exposes none; bus.bitrate {cfg.bitrate} not checked"
+        return f"bit rate: {where} exposes none; bus.bitrate {cfg.bitrate} {BITRATE_UNCHECKED}"
     if rate != cfg.bitrate:
         raise ConfigError(
             src,
