@@ -1,11 +1,13 @@
 """``plant: {model: fmu}`` with an FMI 3.0 FMU: the same test plant as tests/test_fmu_plant.py
 built by pythonfmu3 (``Float64`` variables, ``fmi3DoStep``) and run by fmpy's FMU3Slave — lockstep
-equivalence with the built-in plant on the paper's cases, the unit check on ``Float64``, and the
-hostile FMUs specific to FMI 3.0: a step that returns fmi3OK but asks to terminate, and a step
-that returns fmi3Discard (one line each, never a traceback)."""
+equivalence with the built-in plant on the paper's cases, sub-steps from FMI 3.0's
+``fixedInternalStepSize``, the unit check on ``Float64``, and the hostile FMUs specific to FMI
+3.0: a step that returns fmi3OK but asks to terminate, and a step that returns fmi3Discard (one
+line each, never a traceback)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
@@ -21,6 +23,7 @@ from ehpss_hil.physics.fmuplant import FmuPlant
 from ehpss_hil.physics.fmutest import TEST_FMU_MAP, UNITS, build_test_fmu
 from ehpss_hil.physics.load import load_params
 from ehpss_hil.physics.plant import make_plant
+from ehpss_hil.physics.plantspec import PlantSpec
 from ehpss_hil.scenario import load_scenario
 
 
@@ -33,6 +36,7 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "fail_1s": build_test_fmu(d, fmi_version=3, fail_at_s=1.0),
         "term_1s": build_test_fmu(d, fmi_version=3, terminate_at_s=1.0),
         "mm": build_test_fmu(d / "mm", fmi_version=3, units={**UNITS, "position_m": "mm"}),
+        "fixed_500us": build_test_fmu(d, fmi_version=3, fixed_step_s=5e-4),
     }
 
 
@@ -57,6 +61,26 @@ def test_sim_with_the_fmi3_fmu_matches_the_builtin_plant(fmus: dict[str, Path], 
     assert e.position_diff <= 0.01 and e.rms_diff <= 0.01, e
     if case == "case1-loe":
         assert e.rms_fmu_m > 10e-6  # LOE 80 % uncompensated: tens of µm (fault-free: ~4 µm)
+
+
+def test_a_fixed_internal_step_is_taken_in_sub_steps(fmus: dict[str, Path]) -> None:
+    """FMI 3.0's ``fixedInternalStepSize`` (0.5 ms, before the default experiment's 1 ms): two
+    sub-steps per 1 ms sample, matching the built-in plant at 1 ms (the same 8 integration
+    sub-steps of 125 µs over the sample); the FMU without it takes one step per sample."""
+    prm = load_params().plant
+    plain = make_plant(fmu_spec(fmus["good"], TEST_FMU_MAP), prm, 1e-3)
+    assert isinstance(plain, FmuPlant) and plain.substeps == 1
+    plain.close()
+    fmu = make_plant(fmu_spec(fmus["fixed_500us"], TEST_FMU_MAP), prm, 1e-3)
+    ref = make_plant(PlantSpec(model="nonlinear"), prm, 1e-3)
+    assert isinstance(fmu, FmuPlant) and fmu.substeps == 2
+    for k in range(500):
+        i = 2e-5 * math.sin(2.0 * math.pi * 5.0 * k * 1e-3)
+        assert fmu.step(i) == ref.step(i)
+    assert ref.position_m != 0.0
+    assert fmu.position_m == pytest.approx(ref.position_m, rel=1e-9)
+    assert fmu.load_pressure_pa == pytest.approx(ref.load_pressure_pa, rel=1e-9)
+    fmu.close()
 
 
 def test_a_float64_unit_mismatch_is_refused(fmus: dict[str, Path], tmp_path: Path) -> None:

@@ -60,6 +60,7 @@ def build_test_fmu(
     fail_at_s: float | None = None,
     terminate_at_s: float | None = None,
     units: dict[str, str] | None = None,
+    fixed_step_s: float | None = None,
 ) -> Path:
     """Build the test FMU (FMI ``fmi_version``: 2 or 3) into the folder ``dest``; returns the
     ``.fmu`` path.
@@ -68,18 +69,23 @@ def build_test_fmu(
     FMU). ``terminate_at_s`` (FMI 3.0 only): the step at that time (s) returns OK with
     ``terminateSimulation`` set. A variant's model is written under its own module name, so
     variants load in one process. ``units``: the unit each variable declares (default
-    :data:`UNITS`; a test gives a wrong one).
+    :data:`UNITS`; a test gives a wrong one). ``fixed_step_s`` (FMI 3.0 only): the
+    ``fixedInternalStepSize`` the FMU declares (s), written into the file name too.
     """
     script_src, builder = _SCRIPTS[fmi_version]
     require("fmu", "building the test FMU", (builder,))
     if terminate_at_s is not None and fmi_version != 3:
         raise ValueError("terminate_at_s: the terminateSimulation flag is FMI 3.0's")
+    if fixed_step_s is not None and fmi_version != 3:
+        raise ValueError("fixed_step_s: fixedInternalStepSize is FMI 3.0's")
     dest.mkdir(parents=True, exist_ok=True)
     stem = script_src.stem
     if fail_at_s is not None:
         stem += f"_fail_{round(fail_at_s * 1e3)}ms"
     if terminate_at_s is not None:
         stem += f"_term_{round(terminate_at_s * 1e3)}ms"
+    if fixed_step_s is not None:
+        stem += f"_fixed_{round(fixed_step_s * 1e6)}us"
     with tempfile.TemporaryDirectory(prefix="ehpss-fmu-build-") as tmp:
         script = Path(tmp) / f"{stem}.py"
         text = script_src.read_text()
@@ -96,7 +102,7 @@ def build_test_fmu(
                 sys.path.remove(tmp)
         out = dest / f"{stem}.fmu"
         shutil.move(fmu, out)
-    _declare_units(out, UNITS if units is None else units)
+    _declare_units(out, UNITS if units is None else units, fixed_step_s)
     return out
 
 
@@ -112,11 +118,11 @@ def _build(fmi_version: int, script: Path, out: Path) -> Path:
     return Path(FmuBuilder.build_FMU(script, dest=out / f"{script.stem}.fmu"))
 
 
-def _declare_units(fmu: Path, units: dict[str, str]) -> None:
+def _declare_units(fmu: Path, units: dict[str, str], fixed_step_s: float | None = None) -> None:
     """Rewrite ``fmu``'s modelDescription.xml with a ``unit`` on each variable named in
     ``units`` (FMI 2.0: its ``Real`` element; FMI 3.0: its ``Float64`` element) and the matching
     ``UnitDefinitions`` (placed where both schemas want them: after the interface type
-    elements)."""
+    elements); and FMI 3.0's ``fixedInternalStepSize`` (s) on ``CoSimulation`` when given."""
     with zipfile.ZipFile(fmu) as zf:
         entries = {name: zf.read(name) for name in zf.namelist()}
     root = ET.fromstring(entries["modelDescription.xml"])
@@ -128,6 +134,9 @@ def _declare_units(fmu: Path, units: dict[str, str]) -> None:
         ET.SubElement(unit, "BaseUnit", _BASE_UNITS.get(name, {}))
     last_interface = max(i for i, child in enumerate(root) if child.tag in ("ModelExchange", "CoSimulation"))
     root.insert(last_interface + 1, defs)
+    cosim = root.find("CoSimulation")
+    if fixed_step_s is not None and cosim is not None:
+        cosim.set("fixedInternalStepSize", repr(fixed_step_s))
     for var in root.iter("ScalarVariable"):
         real = var.find("Real")
         if real is not None and var.get("name") in units:
