@@ -3,15 +3,18 @@ the valve does what a real valve does on an internal fault — FAULT with EMCY 0
 word and on the bus, 0 A, a fault a reset cannot clear — while the nodes keep running, and the
 emulator exits 1 with ``plant_failure`` in its summary. Checked with ``canopen``'s own master on a
 python-can virtual bus, and with the controller as CANopen master in real processes under
-``ehpss-hil run`` (its fail-safe, reason EMCY). Nothing is timed."""
+``ehpss-hil run`` (its fail-safe, reason EMCY; a plant failed at power-on outlasts the master's
+fault resets: DEVICE_FAULT). Nothing is timed."""
 
 from __future__ import annotations
 
 import json
 import struct
 import warnings
+from itertools import pairwise
 from pathlib import Path
 
+import can
 import pytest
 
 pytest.importorskip("fmpy")
@@ -54,6 +57,40 @@ NETNS_SKIP = netns_unavailable_reason()
 @pytest.fixture(scope="module")
 def failing_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return build_test_fmu(tmp_path_factory.mktemp("fmu"), fail_at_s=FAIL_AT_S)
+
+
+def _run(tmp_path: Path, fmu: Path) -> tuple[Path, dict[str, int | None], dict, dict]:
+    """``ehpss-hil run`` (realtime, CiA 408 configs, 2 s) with ``fmu`` as the emulator's plant:
+    the run folder, the exit codes, the emulator's and the controller's summaries."""
+    sc = scenario(tmp_path / "sc", fmu, events=[], duration_s=2.0)
+    out = tmp_path / "run"
+    plan = RunPlan(
+        scenario_path=sc,
+        mode="mmac",
+        out_dir=out,
+        controller_yaml=ROOT / "configs" / "controller-cia408.yaml",
+        emulator_yaml=ROOT / "configs" / "emulator-cia408.yaml",
+        truth=False,
+        startup_timeout_s=STARTUP_LIMIT_S,
+    )
+    res = execute(plan)
+    assert res.unfinished_after_s is None
+    emu = json.loads((out / "emulator-summary.json").read_text())
+    ctl = json.loads((out / "controller-summary.json").read_text())
+    return out, res.exit_codes, emu, ctl
+
+
+def _codes(log: list[can.Message], node: int) -> list[int]:
+    """The EMCY codes ``node`` sent, in order."""
+    return [struct.unpack_from("<H", bytes(m.data))[0] for m in log if m.arbitration_id == cobid.EMCY + node]
+
+
+def _active_setpoint(m: can.Message) -> bool:
+    """An RPDO asking for ACTIVE with a set-point: the controller steps."""
+    if m.arbitration_id != cobid.RPDO1 + VALVE:
+        return False
+    word, setpoint = struct.unpack("<Hh", bytes(m.data))
+    return word == BIT_D | BIT_H | BIT_M and setpoint != 0
 
 
 def _sync(r: Cia408Rig) -> tuple[int, int]:
@@ -114,21 +151,8 @@ def test_realtime_the_controller_fails_safe_when_the_emulated_plant_fails(
     the emulator logs one error line, keeps its nodes up to the end of the run and exits 1
     (``plant_failure``, valve FAULT); on the bus the valve's EMCY 0x6100 and FAULT status words;
     the controller fails safe with reason EMCY and asks for DISABLED within two cycles."""
-    sc = scenario(tmp_path / "sc", failing_fmu, events=[], duration_s=2.0)
-    out = tmp_path / "run"
-    plan = RunPlan(
-        scenario_path=sc,
-        mode="mmac",
-        out_dir=out,
-        controller_yaml=ROOT / "configs" / "controller-cia408.yaml",
-        emulator_yaml=ROOT / "configs" / "emulator-cia408.yaml",
-        truth=False,
-        startup_timeout_s=STARTUP_LIMIT_S,
-    )
-    res = execute(plan)
-    assert res.unfinished_after_s is None
-    assert res.exit_codes["emulator"] == 1 and res.exit_codes["controller"] == 0, res.exit_codes
-    emu = json.loads((out / "emulator-summary.json").read_text())
+    out, codes, emu, ctl = _run(tmp_path, failing_fmu)
+    assert codes["emulator"] == 1 and codes["controller"] == 0, codes
     assert FAILED_STEP in emu["plant_failure"] and emu["valve_state"] == "FAULT"
     assert emu["periods"] == 2000  # the nodes ran to the end of the run
     errors = [ln for ln in (out / "emulator.out").read_text().splitlines() if ": ERROR: " in ln]
@@ -147,15 +171,38 @@ def test_realtime_the_controller_fails_safe_when_the_emulated_plant_fails(
         if m.arbitration_id == cobid.TPDO1 + VALVE
     ]
     assert status and state_of_status(status[-1]) == DeviceState.FAULT
-    ctl = json.loads((out / "controller-summary.json").read_text())
     assert ctl["cia408"]["emcy"] == {"node": VALVE, "code": EMCY_INTERNAL_SOFTWARE, "register": 1}
-    first = next(m for m in log if m.arbitration_id == cobid.EMCY + VALVE)
-    if struct.unpack_from("<H", bytes(first.data))[0] != EMCY_INTERNAL_SOFTWARE:  # a starved master
+    if _codes(log, VALVE)[0] != EMCY_INTERNAL_SOFTWARE:  # a starved master
         warnings.warn(
             "the valve faulted before its plant failed (a starved master): not judged", stacklevel=1
         )
+        return
+    if not any(_active_setpoint(m) for m in log[:at]):  # a slow start-up: the fault met while enabling
+        # the master's drive resets it (at most 3 times); the valve faults again after each reset
+        assert ctl["cia408"]["fault_reason"] == "DEVICE_FAULT" and ctl["cia408"]["fault_resets"] == 3, ctl
+        warnings.warn("the plant failed before the valve was ACTIVE (slow start-up)", stacklevel=1)
         return
     assert ctl["failsafe_reason"] == "EMCY"
     after = [struct.unpack("<Hh", bytes(m.data)) for m in log[at:] if m.arbitration_id == cobid.RPDO1 + VALVE]
     n = next(i for i, d in enumerate(after, start=1) if d == (BIT_D, 0))
     assert n <= FAILSAFE_CYCLES, n
+
+
+@pytest.mark.netns
+@pytest.mark.skipif(NETNS_SKIP is not None, reason=f"cross-process test: {NETNS_SKIP}")
+def test_realtime_a_plant_failed_at_power_on_outlasts_the_masters_fault_resets(tmp_path: Path) -> None:
+    """The plant fails 20 ms after the emulator's start, before any master can enable the
+    valve: the controller's drive meets FAULT while enabling and resets it three times; each
+    reset (EMCY 0) is followed by FAULT again (EMCY 0x6100), so the master gives up with
+    DEVICE_FAULT — the valve never drives the plant."""
+    fmu = build_test_fmu(tmp_path / "fmu", fail_at_s=0.02)
+    out, codes, emu, ctl = _run(tmp_path, fmu)
+    assert codes["emulator"] == 1 and codes["controller"] == 0, codes
+    assert "(step at t = 0.0200 s)" in emu["plant_failure"] and emu["valve_state"] == "FAULT"
+    assert ctl["cia408"]["fault_reason"] == "DEVICE_FAULT" and ctl["cia408"]["fault_resets"] == 3, ctl
+    assert ctl["cia408"]["error_history"]["codes"][:3] == [EMCY_INTERNAL_SOFTWARE] * 3
+    log = list(read_log(out / "bus.log"))
+    emcy = _codes(log, VALVE)  # a reset edge met in FAULT_REACTION is not taken: no EMCY 0 for it
+    assert set(emcy) == {EMCY_INTERNAL_SOFTWARE, EMCY_NO_ERROR} and emcy[-1] == EMCY_INTERNAL_SOFTWARE, emcy
+    assert all(nxt == EMCY_INTERNAL_SOFTWARE for c, nxt in pairwise(emcy) if c == EMCY_NO_ERROR)
+    assert not any(_active_setpoint(m) for m in log)
