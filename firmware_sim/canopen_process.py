@@ -8,6 +8,14 @@ current (ACTIVE: set-point × full scale, else 0 A) → measure y[k]: spool actu
 value → one round of synchronous TPDOs per SYNC received → PLANT_TRUTH (``truth``: the native
 DBC frame, for the bench's judgement of the piston; no CANopen node sends it) → advance the plant
 over [k, k+1). The TPDOs answering a SYNC thus carry the sample of the period in which it arrived.
+
+When the plant cannot advance (an FMU's step failed: PlantStepError) the valve does what a real
+one does on an internal fault: a persistent FAULT with EMCY 0x6100 (its status word shows it in
+every TPDO, 0 A), so the master sees a fault and fails safe. The plant is no longer measured or
+advanced; the nodes keep running on the loop's clock (NMT, SDO, heartbeats, TPDOs with the last
+sample's values: a valve in FAULT centres its spool, the piston holds); PLANT_TRUTH stops; the
+reason is logged on one line and kept for the summary (``plant_failure``), and the emulator
+exits 1 at the end of its run.
 """
 
 from __future__ import annotations
@@ -18,7 +26,8 @@ from typing import Any
 
 from ehpss_hil.codec import FrameCodec
 from ehpss_hil.config import Cia408Config
-from ehpss_hil.emulation import PlantEmulation
+from ehpss_hil.emulation import PlantEmulation, SensorSample
+from ehpss_hil.errors import PlantStepError
 from ehpss_hil.protocol.cia408 import cobid
 from ehpss_hil.protocol.cia408.identity import identity_overrides
 from ehpss_hil.protocol.cia408.objects import CONSUMER_HEARTBEAT, PRODUCER_HEARTBEAT, RPDO_COMM
@@ -93,13 +102,16 @@ class CanopenEmulatorProcess:
         self.syncs = 0
         self.unused_frames = 0
         self.applied_a = 0.0
+        #: why the plant stopped (an FMU's failed step), or "" while it runs
+        self.plant_failure = ""
         self._truth = opts.truth
         self._truth_bounds = opts.truth.signal_bounds("PLANT_TRUTH") if opts.truth is not None else {}
 
     @property
     def t_s(self) -> float:
-        """Plant time of the current sample (s)."""
-        return self.emu.k * self.emu.ts_s
+        """Loop time of the current period (s): the plant's time k·Ts while the plant runs (one
+        plant sample per period); it goes on after a plant failure."""
+        return self.periods * self.emu.ts_s
 
     def boot(self) -> None:
         """Power-on of both nodes: boot-up messages, PRE-OPERATIONAL."""
@@ -125,7 +137,7 @@ class CanopenEmulatorProcess:
         return syncs
 
     def _due_faults(self) -> None:
-        while self._device_faults and self._device_faults[0][0] <= self.emu.k:
+        while self._device_faults and self._device_faults[0][0] <= self.periods:
             _, code = self._device_faults.pop(0)
             log.info("t=%.4f s: device fault 0x%04X", self.t_s, code)
             self.valve.inject_fault(code)
@@ -138,6 +150,38 @@ class CanopenEmulatorProcess:
         for node in self.nodes:
             node.tick(self.t_s)
         current = self.valve.current_a()
+        y: SensorSample | None = None
+        if self.plant_failure:
+            self.periods += skipped
+            self.skipped_periods += skipped
+        else:
+            start = self.periods
+            try:
+                y = self._measure(current, skipped)
+            except PlantStepError as exc:  # in a skipped period: the rest of them counted too
+                self.skipped_periods += start + skipped - self.periods
+                self.periods = start + skipped
+                self._plant_failed(exc)
+        for length in syncs:
+            for node in self.nodes:
+                node.on_sync(length)
+        self.syncs += syncs.count(0)
+        if y is not None and self._truth is not None:
+            self._send_truth(y.true_position_m, y.true_spool_m, bool(y.faults.stuck))
+        if y is not None:
+            try:
+                self.applied_a = self.emu.advance(current)
+            except PlantStepError as exc:
+                self._plant_failed(exc)
+        if self.plant_failure:
+            self.applied_a = 0.0
+        self.periods += 1
+        self.io.idle()
+        return self.applied_a
+
+    def _measure(self, current: float, skipped: int) -> SensorSample:
+        """The periods slept through (the plant advanced with ``current``), then this period's
+        sample, handed to the nodes and returned."""
         for _ in range(skipped):
             self.emu.measure()  # the noise streams stay on the sample grid
             self.emu.advance(current)
@@ -147,16 +191,19 @@ class CanopenEmulatorProcess:
         self.valve.measure(y.spool_m)
         self.valve.measure_position(y.position_m)
         self.encoder.measure(y.position_m)
-        for length in syncs:
-            for node in self.nodes:
-                node.on_sync(length)
-        self.syncs += syncs.count(0)
-        if self._truth is not None:
-            self._send_truth(y.true_position_m, y.true_spool_m, bool(y.faults.stuck))
-        self.applied_a = self.emu.advance(current)
-        self.periods += 1
-        self.io.idle()
-        return self.applied_a
+        return y
+
+    def _plant_failed(self, exc: PlantStepError) -> None:
+        """The plant cannot advance: the valve's persistent internal fault (EMCY 0x6100), the
+        reason on one line and in the summary (module docstring)."""
+        self.plant_failure = str(exc)
+        log.error(
+            "t=%.4f s: %s; plant stopped, valve %d in FAULT (fail-safe: EMCY, status word)",
+            self.t_s,
+            exc,
+            self.valve.node_id,
+        )
+        self.valve.internal_fault()
 
     def _send_truth(self, position_m: float, spool_m: float, stuck: bool) -> None:
         """PLANT_TRUTH of this sample (values clipped to the DBC's ranges)."""
@@ -197,6 +244,7 @@ class CanopenEmulatorProcess:
                 for n in self.nodes
             },
             "valve_state": v.device.state.name,
+            "plant_failure": self.plant_failure,
             "valve_transitions": v.device.transitions,
             "stats": self.stats.summary(),
         }

@@ -152,17 +152,18 @@ def format_canopen_summary(s: dict[str, object]) -> str:
     lat = st["lateness_s"]
     nodes = s["nodes"]
     assert isinstance(nodes, dict)
-    return "\n".join(
-        [
-            f"firmware-sim (cia408): periods {s['periods']}, SYNCs {s['syncs']}, valve {s['valve_state']}",
-            f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
-            f"  frames received: {s['frames_received']} (for no node: {s['unused_frames']})",
-            *(f"  {name}: {', '.join(f'{k} {v}' for k, v in n.items())}" for name, n in nodes.items()),
-            f"  overruns {st['overruns']} (skipped periods {st['skipped']}), wake-up lateness "
-            f"p50 {lat['p50'] * 1e6:.1f} µs p99 {lat['p99'] * 1e6:.1f} µs, compute p99 "
-            f"{st['compute_s']['p99'] * 1e6:.1f} µs",
-        ]
-    )
+    lines = [
+        f"firmware-sim (cia408): periods {s['periods']}, SYNCs {s['syncs']}, valve {s['valve_state']}",
+        f"  frames sent: {s['frames_sent']} (tx errors {s['tx_errors']})",
+        f"  frames received: {s['frames_received']} (for no node: {s['unused_frames']})",
+        *(f"  {name}: {', '.join(f'{k} {v}' for k, v in n.items())}" for name, n in nodes.items()),
+        f"  overruns {st['overruns']} (skipped periods {st['skipped']}), wake-up lateness "
+        f"p50 {lat['p50'] * 1e6:.1f} µs p99 {lat['p99'] * 1e6:.1f} µs, compute p99 "
+        f"{st['compute_s']['p99'] * 1e6:.1f} µs",
+    ]
+    if s.get("plant_failure"):
+        lines.append(f"  plant failure (valve FAULT, EMCY): {s['plant_failure']}")
+    return "\n".join(lines)
 
 
 def _sidecar(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenario) -> dict[str, object]:
@@ -206,7 +207,8 @@ def _truth_codec(cfg: EmulatorConfig, src: str) -> FrameCodec:
 
 
 def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenario) -> int:
-    """``protocol: cia408``: the plant behind an emulated CiA 408 valve and CiA 406 encoder."""
+    """``protocol: cia408``: the plant behind an emulated CiA 408 valve and CiA 406 encoder;
+    1 when the plant failed (the valve went to FAULT and the run went on), else 0."""
     from ehpss_hil.protocol.cia408.check import check_nodes
     from ehpss_hil.runtime.rawio import RawFrameIO
 
@@ -251,7 +253,7 @@ def run_canopen(args: argparse.Namespace, cfg: EmulatorConfig, scenario: Scenari
         io.close()
         bus.shutdown()
     publish_summary(format_canopen_summary, proc.summary(), args.summary_json)
-    return 0
+    return 1 if proc.plant_failure else 0
 
 
 def run(args: argparse.Namespace) -> int:

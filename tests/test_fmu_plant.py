@@ -13,12 +13,13 @@ import zipfile
 from pathlib import Path
 
 import pytest
-import yaml
 
 pytest.importorskip("fmpy")
 pytest.importorskip("pythonfmu")
 
-from _proc import EHPSS_HIL, ENV, FIRMWARE_SIM, ROOT
+from _fmu import cli as _cli
+from _fmu import scenario as _scenario
+from _proc import EHPSS_HIL, FIRMWARE_SIM, ROOT
 
 from ehpss_hil.bench.fmu import equivalence, fmu_spec
 from ehpss_hil.emulation import PlantEmulation
@@ -60,35 +61,6 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
             )
     out["not_zip"].write_bytes(b"\x7fELF not a zip at all")
     return out
-
-
-def _scenario(
-    d: Path,
-    fmu: Path,
-    *,
-    fmap: dict[str, str] | None = None,
-    events: list[dict[str, float]] | None = None,
-    duration_s: float = 2.0,
-) -> Path:
-    """A scenario file in ``d`` with the FMU plant (its path relative to the file)."""
-    data = {
-        "name": f"fmu-{fmu.stem}",
-        "duration_s": duration_s,
-        "reference": {"kind": "sine", "amplitude_m": 0.001, "omega_rad_s": 5.0},
-        "noise": {"position_m": 1.0e-6, "spool_m": 1.52e-6, "pressure_pa": 1.0e4},
-        "events": events if events is not None else [{"t_s": 0.5, "k_loe": 0.5}],
-        "plant": {"model": "fmu", "path": fmu.name, "fmu_map": TEST_FMU_MAP if fmap is None else fmap},
-    }
-    d.mkdir(parents=True, exist_ok=True)
-    if fmu.exists() and fmu.parent != d:
-        (d / fmu.name).write_bytes(fmu.read_bytes())
-    path = d / f"{data['name']}.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return path
-
-
-def _cli(argv: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(argv, capture_output=True, text=True, cwd=cwd, env=ENV, timeout=300)
 
 
 # ---- equivalence --------------------------------------------------------------------------------

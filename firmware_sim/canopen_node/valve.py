@@ -9,7 +9,9 @@ the master's heartbeat lost (0x1016) or the set-point RPDO late (0x1400.5 event 
 ACTIVE → FAULT_HOLD with EMCY 0x8130 / 0x8250, then the NMT state 0x1029.1 names; the node
 leaving NMT OPERATIONAL (an NMT Stop or Enter Pre-operational, from whichever node) while enabled
 (HOLD or ACTIVE) → FAULT_HOLD with 0x8100 (no PDO set-point reaches it any more; in STOPPED the
-EMCY cannot be sent, the error register holds it); an injected device fault → FAULT with its code.
+EMCY cannot be sent, the error register holds it); an injected device fault → FAULT with its code;
+a persistent internal fault (the emulated plant stopped: :meth:`ValveNode.internal_fault`) →
+FAULT with 0x6100, entered again whenever a reset (the R bit, an NMT reset) clears it.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from ehpss_hil.protocol.cia408.objects import (
     DEVICE_MODE,
     EMCY_COMMUNICATION,
     EMCY_HEARTBEAT,
+    EMCY_INTERNAL_SOFTWARE,
     EMCY_NO_ERROR,
     EMCY_RPDO_TIMEOUT,
     ERR_REG_COMMUNICATION,
@@ -55,6 +58,8 @@ from .spoolloop import DeviationMonitor, SpoolLoop
 from .store import Key
 
 log = logging.getLogger("firmware_sim")
+#: device states a persistent internal fault waits out (power-on: control words not obeyed yet)
+_NOT_YET_RUNNING = (DeviceState.NOT_READY, DeviceState.INIT)
 _INT16_MAX = 32767
 _INT32_MAX = 2**31 - 1
 
@@ -82,6 +87,8 @@ class ValveNode(CanopenSlave):
         self.spool_loop = SpoolLoop(full_scale_current_a)
         self.monitor = DeviationMonitor()
         self._tick_s: float | None = None
+        #: the EMCY code of a persistent internal fault (0: none)
+        self.internal_fault_code = 0
         super().__init__(node_id, od, send, overrides)
         self.setpoint = SetpointPath(self.store)
         self.store.live[(STATUS_WORD, 0)] = self.status_word
@@ -142,6 +149,8 @@ class ValveNode(CanopenSlave):
         self.device.tick(t_s)
         if self.device.state != was:
             log.info("valve %d: %s -> %s", self.node_id, was.name, self.device.state.name)
+        if self.internal_fault_code and self.device.state not in _NOT_YET_RUNNING:
+            self._fault(self.internal_fault_code, ERR_REG_GENERIC, hold=False)  # a reset cleared it
         super().tick(t_s)
         state = self.device.state
         self.setpoint.tick(state, t_s)
@@ -196,10 +205,19 @@ class ValveNode(CanopenSlave):
         """A device fault with EMCY ``code`` (a scenario's ``device_fault`` event) → FAULT."""
         self._fault(code, ERR_REG_GENERIC, hold=False)
 
-    def _fault(self, code: int, register: int, hold: bool) -> None:
+    def internal_fault(self, code: int = EMCY_INTERNAL_SOFTWARE) -> None:
+        """A persistent internal fault with EMCY ``code`` (the emulated plant stopped): FAULT now
+        (0 A after the fault reaction) and again at each tick a reset left it out of a fault
+        state. The EMCY goes out even when another fault latched first: a new error (CiA 301)."""
+        self.internal_fault_code = code
+        if not self._fault(code, ERR_REG_GENERIC, hold=False):
+            self.send_emcy(code, ERR_REG_GENERIC)
+
+    def _fault(self, code: int, register: int, hold: bool) -> bool:
+        """Enter the fault reaction with EMCY ``code``; False when a fault was latched already."""
         was = self.device.state
-        if self.device.fault(code, hold):
-            log.warning(
-                "valve %d: %s -> %s (EMCY 0x%04X)", self.node_id, was.name, self.device.state.name, code
-            )
-            self.send_emcy(code, register)
+        if not self.device.fault(code, hold):
+            return False
+        log.warning("valve %d: %s -> %s (EMCY 0x%04X)", self.node_id, was.name, self.device.state.name, code)
+        self.send_emcy(code, register)
+        return True

@@ -167,6 +167,9 @@ EMCY_HEARTBEAT = 0x8130  #: life guard or heartbeat error (the master's heartbea
 EMCY_RPDO_TIMEOUT = 0x8250  #: an RPDO (the set-point) did not arrive within its event timer
 EMCY_PDO_LENGTH = 0x8210  #: a PDO not processed: shorter than its mapping
 EMCY_SYNC_LENGTH = 0x8240  #: a SYNC with a data length other than the one configured (0: no counter)
+#: internal software: the emulated valve's plant stopped (an FMU's step failed); a persistent
+#: internal fault, so a reset does not clear it (firmware_sim's ValveNode.internal_fault)
+EMCY_INTERNAL_SOFTWARE = 0x6100
 ERR_REG_GENERIC = 0x01
 ERR_REG_COMMUNICATION = 0x10
 
