@@ -325,3 +325,38 @@ def test_the_valves_own_spool_loop_and_its_deviation_monitoring(stepper: Stepper
     stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0001, 0))  # DISABLED: no current
     stepper.step()
     assert valve.current_a() == 0.0
+
+
+def test_the_monitoring_window_is_one_sided(stepper: Stepper) -> None:
+    """Type 2 in the valve's own spool loop: during a +50 % step the deviation is positive, so a
+    window [−16384, 500] alarms (bit 11) while one of [−500, 16384] does not."""
+    v, valve = stepper.cfg.valve_node, stepper.proc.valve
+
+    def sdo(index: int, value: int, size: int) -> None:
+        cmd = {1: 0x2F, 2: 0x2B}[size]
+        data = (value & 0xFFFF_FFFF).to_bytes(4, "little")
+        stepper.send(cobid.SDO_RX + v, struct.pack("<BHB", cmd, index, 0) + data)
+        stepper.step()
+
+    for index, value, size in ((0x6043, 2, 1), (0x6351, 2, 1), (0x6352, 1, 2)):
+        sdo(index, value, size)
+    sdo(0x6354, 16384, 2)
+    sdo(0x6355, -500, 2)
+    _activate(stepper)
+
+    def step_to(setpoint: int) -> list[int]:
+        words = []
+        for _ in range(40):
+            stepper.send(cobid.RPDO1 + v, struct.pack("<Hh", 0x0007, setpoint))
+            stepper.step()
+            words.append(valve.status_word())
+        return words
+
+    assert not any(w & 0x0800 for w in step_to(8192))  # deviation > 0 inside [−500, 16384]
+    assert abs(valve.deviation()) < 164
+    sdo(0x6354, 500, 2)
+    sdo(0x6355, -16384, 2)
+    assert valve.monitoring_band() == (-16384, 500)
+    assert not step_to(-8192)[-1] & 0x0800  # a negative step stays inside [−16384, 500]
+    words = step_to(8192)
+    assert any(w & 0x0800 for w in words[:20]) and not words[-1] & 0x0800

@@ -1,7 +1,8 @@
 """The emulated nodes' identification, error history and encoder objects (issue #28 item 5),
 each read by ``canopen``'s own master (not our code) over a virtual bus: versions 0x1009/0x100A,
 the CiA 408 valve identification 0x6050–0x6057, the error history 0x1003 filled by the valve's
-EMCYs and cleared by writing 0, and the CiA 406 encoder's 0x6000/0x6002/0x6003/0x6030/
+EMCYs and cleared by writing 0, the control deviation monitoring 0x6350–0x6355 with its window's
+effect on the status word, and the CiA 406 encoder's 0x6000/0x6002/0x6003/0x6030/
 0x6500–0x650B with a preset that moves the position value. Nothing is timed."""
 
 from __future__ import annotations
@@ -100,6 +101,36 @@ def test_the_control_mode_and_deviation_monitoring_objects_by_sdo() -> None:
         with pytest.raises(canopen.SdoAbortedError):
             sdo[0x6043].raw = 3
         assert [sdo[0x6350].raw, sdo[0x6351].raw, sdo[0x6352].raw, sdo[0x6353].raw] == [0, 0, 0, 1638]
+        assert [sdo[0x6354].raw, sdo[0x6355].raw] == [1638, -1638]
         sdo[0x6353].raw = 800
         sdo[0x6351].raw = 1
         assert sdo[0x6353].raw == 800 and sdo[0x6351].raw == 1 and sdo[0x6041].raw & 0x0800 == 0
+        sdo[0x6354].raw, sdo[0x6355].raw = 300, -16384
+        sdo[0x6351].raw = 2
+        assert [sdo[0x6351].raw, sdo[0x6354].raw, sdo[0x6355].raw] == [2, 300, -16384]
+        for index, bad in ((0x6351, 3), (0x6354, 16385), (0x6355, -16385)):
+            with pytest.raises(canopen.SdoAbortedError):
+                sdo[index].raw = bad
+
+
+def test_the_monitoring_window_sets_and_clears_status_bit_11() -> None:
+    """Type 2 judges the deviation (0 at rest) against the window [0x6355, 0x6354]: a window
+    that excludes 0 on either side sets bit 11 after the delay, one around 0 clears it, and the
+    symmetric type 1 ignores the window."""
+    with _rig("window") as r:
+        sdo = r.valve.sdo
+        assert sdo[0x6350].raw == 0
+        sdo[0x6352].raw = 5  # ms
+        sdo[0x6355].raw, sdo[0x6354].raw = 100, 200  # deviation 0 is below the window
+        sdo[0x6351].raw = 2
+        assert wait_until(lambda: sdo[0x6041].raw & 0x0800)
+        sdo[0x6355].raw = -100  # [-100, 200] holds 0
+        assert wait_until(lambda: not sdo[0x6041].raw & 0x0800)
+        sdo[0x6355].raw, sdo[0x6354].raw = -200, -100  # 0 above the window
+        assert wait_until(lambda: sdo[0x6041].raw & 0x0800)
+        sdo[0x6351].raw = 1  # symmetric ±0x6353 (1638) holds 0
+        assert wait_until(lambda: not sdo[0x6041].raw & 0x0800)
+        sdo[0x6351].raw = 2
+        assert wait_until(lambda: sdo[0x6041].raw & 0x0800)
+        sdo[0x6351].raw = 0  # off
+        assert wait_until(lambda: not sdo[0x6041].raw & 0x0800)

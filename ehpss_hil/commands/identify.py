@@ -33,6 +33,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="with -c: one loop cycle per received sensor pair (the emulator in lockstep too)",
     )
+    p.add_argument(
+        "--rt-priority",
+        type=int,
+        metavar="N",
+        help="with -c: SCHED_FIFO priority 1..99 for the loop (0 = none; overrides rt.priority)",
+    )
+    p.add_argument(
+        "--cpu", type=int, metavar="N", help="with -c: pin the loop to this CPU (overrides rt.cpu)"
+    )
     p.add_argument("--out", metavar="P.yaml", required=True, help="the params file to write")
     p.add_argument("--report", metavar="DIR", help="write report.md, frf.csv (and frf.png) here")
     p.add_argument(
@@ -67,7 +76,9 @@ def run(args: argparse.Namespace) -> int:
         logging.basicConfig(
             level=logging.INFO, stream=sys.stderr, format="ehpss-hil identify: %(levelname)s: %(message)s"
         )
-        ident = run_on_bus(Path(args.config), Path(args.out), report, exc, args.lockstep)
+        ident = run_on_bus(
+            Path(args.config), Path(args.out), report, exc, args.lockstep, args.rt_priority, args.cpu
+        )
     else:
         ident = run_lockstep(args.scenario, Path(args.out), report, args.params, exc)
     print(format_table(ident.result, ident.truth))

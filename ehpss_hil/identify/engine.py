@@ -73,13 +73,20 @@ def run_lockstep(
 
 
 def run_on_bus(
-    config: Path, out: Path, report_dir: Path | None, exc: Excitation | None = None, lockstep: bool = False
+    config: Path,
+    out: Path,
+    report_dir: Path | None,
+    exc: Excitation | None = None,
+    lockstep: bool = False,
+    rt_priority: int | None = None,
+    cpu: int | None = None,
 ) -> Identification:
     """The live-bus form: the experiment with the daemon's loop on controller config ``config``'s
-    bus (:mod:`.live`), the fit from the config's params, ``out`` (and the report) written."""
+    bus (:mod:`.live`; ``rt_priority``/``cpu`` override its ``rt`` section), the fit from the
+    config's params, ``out`` (and the report) written."""
     from .live import run_live
 
-    rec, params = run_live(config, exc or Excitation(), lockstep)
+    rec, params = run_live(config, exc or Excitation(), lockstep, rt_priority, cpu)
     res = fit(rec, params)
     check(res)
     write_params(out, res, str(config))

@@ -1,5 +1,5 @@
 """The emulated valve's own spool position loop (device control mode 0x6043 = 2) and its
-control deviation monitoring (0x6350–0x6353); pure: no bus, loop time passed in.
+control deviation monitoring (0x6350–0x6355); pure: no bus, loop time passed in.
 
 Closed loop, the demand value is a spool position (±16384 = ±stroke) and the valve computes the
 coil current each period from the spool it measured in the period before: a PI law
@@ -8,9 +8,11 @@ scale current. The gains were picked on the plant of params.yaml (spool ω ≈ 2
 sampled at 1 kHz): a +50 % step settles without overshoot within 20 periods.
 
 The control deviation is demand − spool actual value, in set-point units (meaningful closed
-loop; open loop it compares a current with a spool position). With monitoring on (0x6351 = 1)
-the status word's bit 11 is set while |deviation| has exceeded the threshold 0x6353 for longer
-than the delay 0x6352 (ms).
+loop; open loop it compares a current with a spool position). The monitoring type 0x6351 picks
+the band the deviation must stay in: 1 the symmetric band ±0x6353, 2 the window [0x6355 lower,
+0x6354 upper] (an asymmetric band, e.g. tighter on the side where an overshoot hurts; lower >
+upper is an empty window: always outside). The status word's bit 11 is set while the deviation
+has been outside the band for longer than the delay 0x6352 (ms); 0 switches monitoring off.
 """
 
 from __future__ import annotations
@@ -42,15 +44,16 @@ class SpoolLoop:
 
 
 class DeviationMonitor:
-    """|deviation| beyond a threshold for longer than a delay (loop time, s)."""
+    """The deviation outside a band [lower, upper] for longer than a delay (loop time, s)."""
 
     def __init__(self) -> None:
         self.alarm = False
         self._since_s: float | None = None
 
-    def update(self, on: bool, deviation: int, threshold: int, delay_s: float, t_s: float) -> bool:
-        """One period; returns the alarm (status word bit 11)."""
-        if not on or abs(deviation) <= threshold:
+    def update(self, band: tuple[int, int] | None, deviation: int, delay_s: float, t_s: float) -> bool:
+        """One period with the band ``(lower, upper)`` in set-point units (None: monitoring off);
+        returns the alarm (status word bit 11)."""
+        if band is None or band[0] <= deviation <= band[1]:
             self._since_s, self.alarm = None, False
         else:
             if self._since_s is None:

@@ -36,6 +36,9 @@ from ehpss_hil.protocol.cia408.objects import (
     EMCY_RPDO_TIMEOUT,
     ERR_REG_COMMUNICATION,
     ERR_REG_GENERIC,
+    MONITORING_OFF,
+    MONITORING_SYMMETRIC,
+    MONITORING_WINDOW,
     SCALE_100_PERCENT,
     STATUS_WORD,
     VALVE_POSITION,
@@ -44,8 +47,10 @@ from ehpss_hil.protocol.cia408.objects import (
     VPOC_DEMAND,
     VPOC_DEVIATION,
     VPOC_MONITORING_DELAY,
+    VPOC_MONITORING_LOWER,
     VPOC_MONITORING_THRESHOLD,
     VPOC_MONITORING_TYPE,
+    VPOC_MONITORING_UPPER,
     VPOC_SETPOINT,
     VPOC_SUB,
     DeviceState,
@@ -161,11 +166,21 @@ class ValveNode(CanopenSlave):
             self.spool_loop.step(demand / SCALE_100_PERCENT * self._stroke_m, self._spool_m, dt)
         else:
             self.spool_loop.reset()
-        st = self.store
-        on = int(st.values.get((VPOC_MONITORING_TYPE, 0), 0)) == 1
-        threshold = int(st.values.get((VPOC_MONITORING_THRESHOLD, 0), SCALE_100_PERCENT))
-        delay_s = int(st.values.get((VPOC_MONITORING_DELAY, 0), 0)) * 1e-3
-        self.monitor.update(on, self.deviation(), threshold, delay_s, t_s)
+        delay_s = int(self.store.values.get((VPOC_MONITORING_DELAY, 0), 0)) * 1e-3
+        self.monitor.update(self.monitoring_band(), self.deviation(), delay_s, t_s)
+
+    def monitoring_band(self) -> tuple[int, int] | None:
+        """The band (lower, upper) the deviation must stay in (set-point units) for the
+        monitoring type 0x6351: ±0x6353, or [0x6355, 0x6354]; None when monitoring is off."""
+        values = self.store.values
+        kind = int(values.get((VPOC_MONITORING_TYPE, 0), MONITORING_OFF))
+        if kind == MONITORING_SYMMETRIC:
+            threshold = int(values.get((VPOC_MONITORING_THRESHOLD, 0), SCALE_100_PERCENT))
+            return -threshold, threshold
+        if kind == MONITORING_WINDOW:
+            lower = int(values.get((VPOC_MONITORING_LOWER, 0), -SCALE_100_PERCENT))
+            return lower, int(values.get((VPOC_MONITORING_UPPER, 0), SCALE_100_PERCENT))
+        return None
 
     def _control_word(self, word: int) -> None:
         was = self.device.state

@@ -59,12 +59,17 @@ DEVICE_MODE_SETPOINT_VIA_BUS = 1
 CONTROL_MODE_SPOOL_OPEN_LOOP = 1
 #: the valve's own spool position loop: the set-point is a spool position (±16384 = ±stroke)
 CONTROL_MODE_SPOOL_CLOSED_LOOP = 2
-#: control deviation monitoring: deviation (demand − actual, INTEGER16), type (INTEGER8: 0 off,
-#: 1 on), delay (UNSIGNED16 ms), threshold (INTEGER16)
+#: control deviation monitoring: deviation (demand − actual, INTEGER16), type (INTEGER8, one of
+#: MONITORING_*), delay (UNSIGNED16 ms), threshold (INTEGER16, the symmetric band ±threshold),
+#: upper and lower threshold (INTEGER16, the window [lower, upper] of MONITORING_WINDOW)
 VPOC_DEVIATION = 0x6350
 VPOC_MONITORING_TYPE = 0x6351
 VPOC_MONITORING_DELAY = 0x6352
 VPOC_MONITORING_THRESHOLD = 0x6353
+VPOC_MONITORING_UPPER = 0x6354
+VPOC_MONITORING_LOWER = 0x6355
+#: 0x6351 values: off; |deviation| against ±0x6353; deviation against [0x6355, 0x6354]
+MONITORING_OFF, MONITORING_SYMMETRIC, MONITORING_WINDOW = 0, 1, 2
 #: the CiA 408 16-bit value of 100 % (set-point, actual value)
 SCALE_100_PERCENT = 16384
 
