@@ -227,3 +227,8 @@ class ClusterError(EhpssError, ConnectionError):
     reached or used."""
 
     exit_code = 3
+
+
+class WorkerLostError(EhpssError, RuntimeError):
+    """A campaign run kept losing its local worker process (killed from outside: the OOM killer,
+    ``kill -9``) more often than the campaign allows; the runs finished before are kept."""
