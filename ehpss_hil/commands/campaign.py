@@ -13,13 +13,12 @@ from ..campaign.spec import load_campaign
 from ..campaign.workers import default_workers
 from ..errors import ConfigError, WorkerLostError
 from ..extras import EXTRAS, require
+from ..interrupt import INTERRUPTED_EXIT
 
 if TYPE_CHECKING:
     from ..campaign.session import Outcome
 
 NAME = "campaign"
-#: exit code after Ctrl-C (the shell's 128 + SIGINT)
-INTERRUPTED_EXIT = 130
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
