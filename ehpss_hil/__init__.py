@@ -5,9 +5,13 @@ supervisor), ``frames`` (DBC codec + AUTOSAR E2E), ``bus`` (python-can factory),
 (real-time loop), ``canlog`` (candump logs), ``report``/``bench`` (metrics, figures, benchmarks).
 """
 
-from pathlib import Path
+from .interrupt import guard_startup
 
-from . import _mf4import
+guard_startup()  # first: a Ctrl-C while a program starts exits 130 (ehpss_hil/interrupt.py)
+
+from pathlib import Path  # noqa: E402
+
+from . import _mf4import  # noqa: E402
 
 __version__ = "0.1.0"
 

@@ -14,6 +14,7 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
+from .interrupt import INTERRUPTED_EXIT, ended_by_interrupt, release_startup
 from .limits import MAX_MESSAGE_CHARS, MAX_SHOWN_CHARS
 
 _SHOW = reprlib.Repr()
@@ -168,7 +169,8 @@ THREADED_BLAS_MIN_ADDRESS_SPACE = 512 * 2**20
 
 def run_console(prog: str, fn: Callable[[], int]) -> int:
     """Run a console command's body: an :class:`EhpssError` becomes one line on stderr
-    (``<prog>: error: …``) and its class's exit code; Ctrl-C exits 130; running out of memory
+    (``<prog>: error: …``) and its class's exit code; Ctrl-C exits 130 (whatever error it
+    caused: :func:`~ehpss_hil.interrupt.ended_by_interrupt`); running out of memory
     (a small ``ulimit -v``) is one line naming the limit, exit :data:`EXIT_OUT_OF_MEMORY`, and
     so is a multi-threaded OpenBLAS under an address-space limit it cannot fit, before anything
     runs; running out of file descriptors (``ulimit -n``) is one line naming the limit, exit
@@ -177,12 +179,16 @@ def run_console(prog: str, fn: Callable[[], int]) -> int:
         print(f"{prog}: error: out of memory (refused at start){_memory_limits()}", file=sys.stderr)
         return EXIT_OUT_OF_MEMORY
     try:
-        return fn()
+        release_startup()  # a Ctrl-C from here on is a KeyboardInterrupt, exit 130 below
+        try:
+            return fn()
+        except BaseException as exc:
+            if ended_by_interrupt(exc):
+                return INTERRUPTED_EXIT
+            raise
     except EhpssError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        return 130
     except MemoryError as exc:
         what = f" ({one_line(str(exc))})" if str(exc) else ""
         print(f"{prog}: error: out of memory{what}{_memory_limits()}", file=sys.stderr)
@@ -234,3 +240,8 @@ class ClusterError(EhpssError, ConnectionError):
     reached or used."""
 
     exit_code = 3
+
+
+class WorkerLostError(EhpssError, RuntimeError):
+    """A campaign run kept losing its local worker process (killed from outside: the OOM killer,
+    ``kill -9``) more often than the campaign allows; the runs finished before are kept."""

@@ -21,12 +21,12 @@ from _proc import EHPSS_HIL, ENV, ROOT
 from distributed import Client, LocalCluster
 
 from ehpss_hil.campaign.cluster import DaskExecutor
-from ehpss_hil.campaign.executors import Tally
 from ehpss_hil.campaign.journal import JOURNAL_NAME
 from ehpss_hil.campaign.runs import RunTask
 from ehpss_hil.campaign.sampling import plan_runs
 from ehpss_hil.campaign.session import run_campaign
 from ehpss_hil.campaign.spec import load_campaign
+from ehpss_hil.campaign.workers import Tally
 from ehpss_hil.errors import ModelError
 
 #: runs of the campaign a worker is killed in: enough that many are left after the kill
@@ -140,7 +140,7 @@ def test_an_unreachable_scheduler_leaves_nothing_and_the_plain_rerun_works(
         (["--scheduler", "local:0"], "--scheduler"),
         (["--scheduler", "local:two"], "--scheduler"),
         (["--scheduler", "local:100000"], "--scheduler"),
-        (["--retries", "2"], "--retries"),
+        (["--retries", "101"], "--retries"),
         (["--scheduler", "local:1", "--retries", "-1"], "--retries"),
     ],
 )

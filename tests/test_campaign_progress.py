@@ -7,10 +7,10 @@ from __future__ import annotations
 import io
 from pathlib import Path
 
-from ehpss_hil.campaign.executors import Tally
 from ehpss_hil.campaign.journal import JOURNAL_NAME, Journal
 from ehpss_hil.campaign.progress import LOG_PERIOD_S, Progress
 from ehpss_hil.campaign.session import prepare_out
+from ehpss_hil.campaign.workers import Tally
 
 
 class _Clock:

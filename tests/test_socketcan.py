@@ -14,8 +14,9 @@ import can
 import pytest
 from _proc import STARTUP_LIMIT_S
 from _scenarios import short_scenario_yaml
+from _vcan import vcan_reason
 
-from ehpss_hil.bus import af_can_available, open_bus
+from ehpss_hil.bus import open_bus
 from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.config import BusConfig
 from ehpss_hil.orchestrate import RunPlan, check_exit_codes, execute
@@ -24,17 +25,9 @@ from ehpss_hil.run_metrics import metrics_from_run
 pytestmark = pytest.mark.socketcan
 
 
-def _vcan_reason(channel: str = "vcan0") -> str | None:
-    if not af_can_available():
-        return "this kernel has no SocketCAN (socket(AF_CAN) fails): run via ../shared/tools/vcan-vm/run"
-    if not Path(f"/sys/class/net/{channel}").exists():
-        return f"{channel} does not exist (modprobe vcan; ip link add dev {channel} type vcan; up)"
-    return None
-
-
 @pytest.fixture
 def vcan0() -> str:
-    reason = _vcan_reason()
+    reason = vcan_reason()
     if reason is not None:
         pytest.skip(reason)
     return "vcan0"

@@ -18,9 +18,10 @@ from dataclasses import replace
 from typing import Any
 
 from .. import PROJECT_ROOT
-from ..campaign.executors import Tally, run_local
+from ..campaign.localpool import run_local
 from ..campaign.runs import RunTask, execute
 from ..campaign.spec import load_campaign
+from ..campaign.workers import Tally
 from ..extras import EXTRAS, require
 from .common import Scorecard, write_json
 from .control import SPEED_TARGET

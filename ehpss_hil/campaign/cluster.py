@@ -24,8 +24,8 @@ from typing import Any
 from distributed import WorkerPlugin
 
 from ..errors import ClusterError, ConfigError, EhpssError
-from .executors import OnResult, Tally, default_workers
 from .runs import RunTask, execute
+from .workers import OnResult, Tally, default_workers
 
 #: ``--scheduler`` value that starts a LocalCluster here (``local`` or ``local:N``)
 LOCAL = "local"

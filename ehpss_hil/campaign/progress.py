@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
-from .executors import Tally
+from .workers import Tally
 
 #: least time between two redraws of the line on a terminal (s)
 TTY_PERIOD_S = 0.2

@@ -20,8 +20,7 @@ from typing import Any
 from ..canlog.sidecar import write_json_atomic
 from ..errors import OutputError
 from ..outputs import MANIFEST, exists, foreign, manifest_files, refuse_foreign, write_manifest
-from .choice import open_executor
-from .executors import Executor, Tally
+from .executors import Executor, Tally, open_executor
 from .figures import FIGURE_NAMES, write_figures
 from .journal import JOURNAL_NAME, Expected, Journal, read_journal
 from .progress import Progress

@@ -9,17 +9,16 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..campaign.executors import default_workers
 from ..campaign.spec import load_campaign
-from ..errors import ConfigError
+from ..campaign.workers import default_workers
+from ..errors import ConfigError, WorkerLostError
 from ..extras import EXTRAS, require
+from ..interrupt import INTERRUPTED_EXIT
 
 if TYPE_CHECKING:
     from ..campaign.session import Outcome
 
 NAME = "campaign"
-#: exit code after Ctrl-C (the shell's 128 + SIGINT)
-INTERRUPTED_EXIT = 130
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -42,8 +41,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         type=int,
         default=0,
         metavar="N",
-        help="with --scheduler: submit a run that fails (or whose workers keep dying) again up to N "
-        "times (default 0; Dask reruns a lost worker's runs itself)",
+        help="submit a run that fails (or whose workers keep dying) again up to N times (default 0; "
+        "a lost worker's runs run again anyway, local or on Dask)",
     )
     p.add_argument("--out", "-o", metavar="DIR", help="output directory (default: runs/campaign-<name>)")
     p.add_argument("--resume", action="store_true", help="continue in DIR: runs already finished are skipped")
@@ -69,9 +68,7 @@ def run(args: argparse.Namespace) -> int:
     require("campaign", "ehpss-hil campaign", EXTRAS["campaign"] if args.scheduler else LOCAL_MODULES)
     if not 0 <= args.retries <= MAX_RETRIES:
         raise ConfigError("", "--retries", f"expected 0 … {MAX_RETRIES}, got {args.retries}")
-    if args.retries and not args.scheduler:
-        raise ConfigError("", "--retries", "needs --scheduler (a local run that fails stops the campaign)")
-    from ..campaign.choice import open_executor
+    from ..campaign.executors import open_executor
     from ..campaign.session import run_campaign
 
     camp = load_campaign(args.file)
@@ -96,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print(f"\ninterrupted: the finished runs are kept in {out}; continue with --resume", file=sys.stderr)
         return INTERRUPTED_EXIT
+    except WorkerLostError as exc:
+        raise WorkerLostError(f"{exc}; the finished runs are kept in {out}: continue with --resume") from None
     _report(res, time.perf_counter() - t0)
     return 0
 

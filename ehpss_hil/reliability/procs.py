@@ -109,16 +109,21 @@ class Child:
 
 
 class Trial:
-    """A trial directory and a private network namespace holding its processes."""
+    """A trial directory and a private network namespace holding its processes (``netns``
+    False: this process's namespace, for a bus that lives there, SocketCAN's vcan0)."""
 
-    def __init__(self, out_dir: Path) -> None:
+    def __init__(self, out_dir: Path, netns: bool = True) -> None:
         self.dir = out_dir
         self.dir.mkdir(parents=True, exist_ok=True)
         self.children: dict[str, Child] = {}
+        self.netns = netns
         self._ns: PrivateNetns | None = None
+        self._open = False
 
     def __enter__(self) -> Trial:
-        self._ns = PrivateNetns().start()
+        if self.netns:
+            self._ns = PrivateNetns().start()
+        self._open = True
         return self
 
     def __exit__(
@@ -133,15 +138,17 @@ class Trial:
         if self._ns is not None:
             self._ns.close()
             self._ns = None
+        self._open = False
 
     def spawn(self, name: str, argv: list[str]) -> Child:
         """Start ``argv`` inside the namespace (cwd: the project root)."""
-        assert self._ns is not None, "use Trial as a context manager"
+        assert self._open, "use Trial as a context manager"
+        prefix = self._ns.prefix() if self._ns is not None else []
         out = self.dir / f"{name}.out"
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         with open(out, "wb") as f:
             p = subprocess.Popen(
-                [*self._ns.prefix(), *argv],
+                [*prefix, *argv],
                 stdout=f,
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,

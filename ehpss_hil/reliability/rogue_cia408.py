@@ -43,6 +43,22 @@ ROGUE_RATE_HZ = 1000.0
 ACTIVE_WORD = 0x0007
 #: the encoder's position value step (m) of the shipped EDS (0x6005.1 = 100 nm)
 ENCODER_STEP_M = 1e-7
+#: how long a process of a trial may take to start or end (s): a hang guard only (the vcan VM
+#: runs Python ~10× slower than the host)
+STARTUP_LIMIT_S = 300.0
+#: the settings of a trial on a host where Python runs ~10× slower and the processes share two
+#: slow cores (the vcan VM): both loops at 50 Hz (the emulator too: the piston moves for one such
+#: period of the rogue's +100 % before the master shuts the valve out), no starvation fault, and
+#: the valve's and the master's timeouts at their largest, far beyond that host's stalls, so that
+#: only the rogue makes the master disable the valve
+SLOW_HOST: dict[str, Any] = {
+    "rate_hz": 50.0,
+    "watchdog.timeout_cycles": 100,
+    "watchdog.starvation_late_fraction": 1.0,
+    "cia408.setpoint_timeout_ms": 65535,
+    "cia408.master_heartbeat_timeout_ms": 65535,
+    "cia408.node_heartbeat_timeout_ms": 65535,
+}
 
 
 class RogueCase(NamedTuple):
@@ -220,27 +236,49 @@ def _failsafe_cycles(log: Path, first_s: float, rogue: bytes) -> int | None:
 
 
 def rogue_cia408_trial(
-    out: Path, case: str, rogue_s: float = 1.0, duration_s: float = 6.0, truth: bool = True
+    out: Path,
+    case: str,
+    rogue_s: float = 1.0,
+    duration_s: float = 6.0,
+    truth: bool = True,
+    socketcan: str | None = None,
+    slow: bool = False,
 ) -> RogueCanopenResult:
     """Controller + emulator (``duration_s`` of plant time; ``truth``: with PLANT_TRUTH) and
-    ``rogue_s`` of the rogue (a single frame for ``nmt-stop``) once the controller is ACTIVE."""
+    ``rogue_s`` of the rogue (a single frame for ``nmt-stop``) once the controller is ACTIVE.
+    ``socketcan``: on that SocketCAN channel (vcan0) in this network namespace instead of the
+    configs' embedded bus in a private one. ``slow`` (the vcan VM): with :data:`SLOW_HOST`, and
+    the emulator runs until the valve has taken the master's NMT Stop (then SIGTERM), not for
+    ``duration_s``: the controller's start there can outlast any fixed duration."""
     from ..schema import load_yaml
 
     res = RogueCanopenResult(case)
     bus = (load_yaml(CONTROLLER_YAML) or {}).get("bus", {})
-    with Trial(out) as t:
+    common: dict[str, Any] = {"rate_hz": SLOW_HOST["rate_hz"]} if slow else {}
+    rogue_bus = ["--channel", str(bus.get("channel", BusConfig().channel))]
+    if socketcan is not None:
+        common |= {"bus.interface": "socketcan", "bus.channel": socketcan}
+        rogue_bus = ["--interface", "socketcan", "--channel", socketcan]
+    with Trial(out, netns=socketcan is None) as t:
         ctl = t.controller(
-            {"reference": {"kind": "step", "amplitude_m": 0.0}, "watchdog.timeout_cycles": 10},
+            {
+                "reference": {"kind": "step", "amplitude_m": 0.0},
+                "watchdog.timeout_cycles": 10,
+                **common,
+                **(SLOW_HOST if slow else {}),
+            },
             base=CONTROLLER_YAML,
         )
-        args = ("--truth",) if truth else ()
-        emu = t.emulator({}, *args, "--duration", repr(duration_s), base=EMULATOR_YAML)
-        if not ctl.wait_text("first sensor data", 120.0):
+        args = ["--truth"] if truth else []
+        if not slow:  # slow: the emulator runs until it is stopped (the controller may start longer)
+            args += ["--duration", repr(duration_s)]
+        emu = t.emulator(common, *args, base=EMULATOR_YAML)
+        if not ctl.wait_text("first sensor data", STARTUP_LIMIT_S):
             res.error = "controller had no sensor data"
             return res
         argv = [PY, "-m", "ehpss_hil.reliability.rogue_cia408", "--case", case, "--seconds", repr(rogue_s)]
-        rogue = t.spawn("rogue", [*argv, "--channel", str(bus.get("channel", BusConfig().channel))])
-        rogue.wait(60.0 + rogue_s)
+        rogue = t.spawn("rogue", [*argv, *rogue_bus])
+        rogue.wait(STARTUP_LIMIT_S + rogue_s)
         try:
             words = rogue.text().split()
             res.sent, res.first_s = (
@@ -249,7 +287,12 @@ def rogue_cia408_trial(
             )
         except (ValueError, IndexError):
             res.error = f"rogue: {rogue.text()[-200:]}"
-        res.exits["emulator"] = emu.wait(120.0 + duration_s)
+        if slow:  # stopped once the master shut the valve out and the valve took the NMT Stop
+            ctl.wait_text(f"valve {VALVE} shut out", STARTUP_LIMIT_S)
+            emu.wait_text(f"node {VALVE}: NMT OPERATIONAL -> STOPPED", STARTUP_LIMIT_S)
+            res.exits["emulator"] = emu.terminate()
+        else:
+            res.exits["emulator"] = emu.wait(STARTUP_LIMIT_S + duration_s)
         res.exits["controller"] = ctl.terminate()
     res.controller = read_json_object(out / "controller.json")
     res.emulator = read_json_object(out / "emulator.json")
@@ -287,17 +330,23 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--case", choices=sorted(CASES), required=True)
     p.add_argument("--seconds", type=float, default=1.0)
+    p.add_argument("--interface", choices=("udp_multicast", "socketcan"), default=BusConfig().interface)
     p.add_argument("--channel", default=BusConfig().channel)
     p.add_argument("--port", type=int, default=BusConfig().port)
     p.add_argument("--trial", type=Path, help="run a whole trial in this directory")
     p.add_argument("--no-truth", action="store_true", help="trial: the piston from the encoder")
+    p.add_argument("--socketcan", metavar="CHANNEL", help="trial: on this SocketCAN channel (vcan0)")
+    p.add_argument("--slow", action="store_true", help="trial: settings for a slow host (the vcan VM)")
     a = p.parse_args(argv)
     if a.trial is not None:
-        res = rogue_cia408_trial(a.trial, a.case, rogue_s=a.seconds, truth=not a.no_truth)
+        res = rogue_cia408_trial(
+            a.trial, a.case, rogue_s=a.seconds, truth=not a.no_truth, socketcan=a.socketcan, slow=a.slow
+        )
         print(res.line())
         print("PASS" if res.ok else "FAIL")
         return 0 if res.ok else 1
-    n, first = send_rogue(a.case, a.seconds, BusConfig(channel=a.channel, port=a.port))
+    bus = BusConfig(interface=a.interface, channel=a.channel, port=a.port)
+    n, first = send_rogue(a.case, a.seconds, bus)
     print(f"sent {n} first {first!r}", flush=True)
     return 0
 
