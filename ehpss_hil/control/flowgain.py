@@ -58,6 +58,14 @@ BASELINE_LIMITS = (0.5, 2.0)
 BASELINE_DEADBAND = 0.05
 
 
+#: an increment excites the product only where the motion the spool explains is this many times
+#: the reading's noise over one sample (at 20 µm of position noise a 10-sample increment of a
+#: slow motion is mostly noise, and θ_prod swung between 0.9 and 2.5 on a held position)
+EXCITATION_SNR = 2.0
+#: the reading's noise is averaged over about 1/this many samples
+NOISE_WEIGHT = 0.01
+
+
 class FlowGainMonitor:
     """Decides H_D / H_Q each sample; :attr:`k_q` is 1.0 (H_D) or the estimated product (H_Q).
 
@@ -89,11 +97,13 @@ class FlowGainMonitor:
         "_min_dev",
         "_min_evidence",
         "_n",
+        "_noise_var",
         "_nsettled",
         "_null_m_s",
         "_on",
         "_on_d",
         "_pa",
+        "_p1",
         "_pend",
         "_prev",
         "_since_jump",
@@ -165,6 +175,9 @@ class FlowGainMonitor:
         self._ys = [0.0] * self._m
         self._vs = [0.0] * self._m
         self._ts_ring = [0.0] * self._m
+        self._p1 = (math.nan, 0.0)  # the last call's position and spool integral (m)
+        #: the variance of one sample's position increment about what the spool explains (m²)
+        self._noise_var = 0.0
         self._t = 0.0  # time the product has spanned (s)
         self._i = self._n = 0
         self.creep.reset()
@@ -268,6 +281,11 @@ class FlowGainMonitor:
         if rate and self.theta_prod >= self._failed_below:
             self.creep_integral_m += dt * rate / self.theta_prod
         self._prev = spool_m
+        y1, v1 = self._p1
+        if samples == 1 and y1 == y1:  # one sample's increment: the reading's noise
+            r = position_m - y1 - self.theta_prod * (self.spool_integral_m - v1) - rate * dt
+            self._noise_var += NOISE_WEIGHT * (r * r - self._noise_var)
+        self._p1 = (position_m, self.spool_integral_m)
         i = self._i
         y = position_m - self._ys[i]
         phi = self.spool_integral_m - self._vs[i]
@@ -286,7 +304,8 @@ class FlowGainMonitor:
         near_null = abs(phi) <= self._null_m_s * tau
         self._pend = (y, phi, tau, self.theta_prod) if near_null and self._n > self._m and excited else None
         y -= self.creep.rate_m_s * tau  # the creep's share of the increment is no gain
-        if self._n > self._m and abs(phi) > self._floor and excited:
+        floor = max(self._floor, EXCITATION_SNR * math.sqrt(self._noise_var))
+        if self._n > self._m and abs(phi) > floor and excited:
             self._stale = 0
             t = self.theta_prod
             t += self._g * (y - t * phi) * phi / (self._c2 + phi * phi)
