@@ -61,7 +61,8 @@ def test_streamed_metrics_equal_the_whole_logs(path: Path, tmp_path: Path) -> No
 
 
 def test_the_fallback_intervals_cross_chunk_boundaries(tmp_path: Path) -> None:
-    """case 4's fallback intervals are (80–120 samples long) cut by chunks of 37 commands and come out whole."""
+    """case 4's fallback intervals (80–120 samples long), cut by chunks of 37 commands, come
+    out whole."""
     log = write_lockstep_log(
         load_scenario(PROJECT_ROOT / "scenarios" / "case4-disturbance.yaml"), "mmac", tmp_path / "r.log"
     )

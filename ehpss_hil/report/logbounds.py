@@ -11,9 +11,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .. import limits
 from ..canlog import LogError
 from ..canlog.decode import TooLongError
-from .. import limits
 from ..limits import MAX_LOG_SAMPLE_TIME_S, MIN_LOG_SAMPLE_TIME_S
 
 

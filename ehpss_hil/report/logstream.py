@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import limits
 from ..canlog.decode import Columns, TooLongError, decoded_frames
 from ..canlog.reader import FRAME_INDEX, BadLines, LogError
 from ..codec import FrameCodec
-from .. import limits
 from ..physics.params import Params
 from ..physics.reference import ReferenceModel
 from .annotate import injection_events

@@ -12,6 +12,8 @@ running sums; the figures are drawn from a :class:`~.decimate.MinMaxDecimator` v
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import glob
 import os
 import tempfile
@@ -181,6 +183,25 @@ class _Counters:
         return out
 
 
+class _Sums:
+    """Everything summed over the chunks besides the scratch file: the figures' view, the
+    intervals, the counters, the events seen on the bus and the injections."""
+
+    def __init__(self, codec: FrameCodec) -> None:
+        self.dec, self.intervals, self.counters = MinMaxDecimator(), _Intervals(codec), _Counters()
+        self.bus_events: list[float] = []
+        self.injections: list[tuple[float, str]] = []
+        self.last: SimResult | None = None
+
+    def add(self, ch: ChunkRows) -> None:
+        r = self.last = ch.result
+        self.dec.add({**r.arrays(), "stuck": r.stuck, "commanded_a": ch.commanded_a})
+        self.intervals.add(ch)
+        self.counters.add(ch)
+        self.bus_events += r.event_times_s
+        self.injections += ch.injections
+
+
 def stream_log_run(
     path: str | os.PathLike[str],
     scenario: Scenario | None = None,
@@ -197,22 +218,16 @@ def stream_log_run(
     info = run_info(side, log.parent, scenario, log)
     prm = params if params is not None else load_params(info.params_path)
     stream = LogStream(log, codec, info, prm, bad, chunk_samples)
-    dec, ivs, cnt = MinMaxDecimator(), _Intervals(codec), _Counters()
-    bus_events: list[float] = []
-    injections: list[tuple[float, str]] = []
-    last: SimResult | None = None
     with tempfile.TemporaryDirectory(prefix="ehpss-report-") as tmp:
         spill = Spill(Path(tmp))
+        sums = _Sums(codec)
         for ch in stream.chunks():
-            r = last = ch.result
-            spill.add(r)
-            dec.add(
-                {**{k: v for k, v in r.arrays().items()}, "stuck": r.stuck, "commanded_a": ch.commanded_a}
-            )
-            ivs.add(ch)
-            cnt.add(ch)
-            bus_events += r.event_times_s
-            injections += ch.injections
+            spill.add(ch.result)
+            sums.add(ch)
+            del ch
+            release_freed_memory()
+        dec, ivs, cnt, last = sums.dec, sums.intervals, sums.counters, sums.last
+        bus_events, injections = sums.bus_events, sums.injections
         verdicts = {n: {v.name: c for v, c in per.items() if c} for n, per in codec.counts_by_name.items()}
         notes = ([bad.text()] if bad.count else []) + _notes(
             stream.state, info.reference is not None, spill, cnt
@@ -241,6 +256,23 @@ def stream_log_run(
     counted = np.isfinite(thin.x_true_m) if has_truth else np.zeros(0, bool)
     view = RunView(thin, thin.controller, labels, ivs.result() if spill.n else [], counted)
     return StreamedRun(run, m, view, counts)
+
+
+def release_freed_memory() -> None:
+    """Give the memory freed by a chunk back to the system (glibc ``malloc_trim``; a no-op
+    elsewhere). Without it the heap of a streamed report grew ≈ 4 MB a chunk on this host
+    (a chunk's arrays freed into a fragmented heap, not unmapped): 467 MB at 4 M samples."""
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)
+
+
+@functools.cache
+def _malloc_trim() -> Any:
+    try:
+        return ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return None
 
 
 def dec_commanded(dec: MinMaxDecimator) -> np.ndarray:
