@@ -12,8 +12,6 @@ running sums; the figures are drawn from a :class:`~.decimate.MinMaxDecimator` v
 
 from __future__ import annotations
 
-import ctypes
-import functools
 import glob
 import os
 import tempfile
@@ -32,6 +30,7 @@ from ..scenario import Scenario
 from .annotate import Interval, event_labels
 from .decimate import MinMaxDecimator
 from .figures import RunView
+from .heap import release_freed_memory
 from .logdata import LogRun, _dbc_of, _why_empty
 from .logmeta import run_info
 from .logmetrics import LogMetrics
@@ -256,23 +255,6 @@ def stream_log_run(
     counted = np.isfinite(thin.x_true_m) if has_truth else np.zeros(0, bool)
     view = RunView(thin, thin.controller, labels, ivs.result() if spill.n else [], counted)
     return StreamedRun(run, m, view, counts)
-
-
-def release_freed_memory() -> None:
-    """Give the memory freed by a chunk back to the system (glibc ``malloc_trim``; a no-op
-    elsewhere). Without it the heap of a streamed report grew ≈ 4 MB a chunk on this host
-    (a chunk's arrays freed into a fragmented heap, not unmapped): 467 MB at 4 M samples."""
-    trim = _malloc_trim()
-    if trim is not None:
-        trim(0)
-
-
-@functools.cache
-def _malloc_trim() -> Any:
-    try:
-        return ctypes.CDLL(None).malloc_trim
-    except (OSError, AttributeError):
-        return None
 
 
 def dec_commanded(dec: MinMaxDecimator) -> np.ndarray:
