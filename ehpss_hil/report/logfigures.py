@@ -18,7 +18,6 @@ import numpy as np
 
 from ..extras import require
 from .figures import RunView, estimating, has_estimator, mark_events, plot_runs, shade
-from .heap import release_freed_memory
 from .logdata import LogRun
 from .logviews import log_view
 from .metrics import RECOVERY_BAND_M
@@ -87,7 +86,6 @@ def _save(fig: Any, out_dir: Path, name: str, view: RunView) -> Path:
     path = out_dir / name
     fig.savefig(path, dpi=110)
     pyplot().close(fig)
-    release_freed_memory()  # the peak is one figure's, not their sum
     return path
 
 
@@ -243,9 +241,7 @@ def fig_overview(run: LogRun, out_dir: Path, view: RunView) -> Path | None:
     title = f"{run.result.scenario} — {run.result.controller} (from {run.log_path.name})"
     if not run.has_truth:
         title += ": no PLANT_TRUTH in this log"
-    path = plot_runs([view], out_dir / "overview.png", title=title)
-    release_freed_memory()
-    return path
+    return plot_runs([view], out_dir / "overview.png", title=title)
 
 
 def fig_compare(runs: list[LogRun], out_dir: Path, name: str = "compare.png") -> Path | None:
