@@ -55,11 +55,16 @@ MAX_FAULTS_PER_RUN = 7
 #: names; a multiplexed frame counts every signal of its name): a bench log at 1 kHz decodes
 #: about 49 per controller cycle (its sensor, truth, command, index and status frames)
 MAX_LOG_VALUES = 16_000_000
-#: most controller samples a report lays out (about 0.5 kB each with the metrics and the
-#: reference model): 6.7 min at 1 kHz. With :data:`MAX_LOG_VALUES` a report stays below
-#: ≈ 450 MB; a log beyond either is refused with one line. It also stops a ``CycleCount`` that
-#: jumps or runs backwards from becoming an array of millions of empty samples.
+#: most controller samples a report lays out in memory at once (about 0.5 kB each with the
+#: metrics and the reference model): 6.7 min at 1 kHz. With :data:`MAX_LOG_VALUES` a log read
+#: whole stays below ≈ 450 MB; a longer log is read in chunks (``report.logstream``), each of
+#: at most this many samples — a ``CycleCount`` that jumps by more inside one chunk (logs of
+#: several runs joined) is refused with one line instead of becoming millions of empty samples.
 MAX_LOG_SAMPLES = 400_000
+#: most controller samples ``report`` reads from one log in chunks: 10 h at 1 kHz. Memory does
+#: not grow with them; the scratch file of the metrics does (≈ 50 bytes a sample: 1.8 GB here,
+#: in the temporary directory) and so does the time (≈ 40 µs a sample); beyond, one line
+MAX_STREAMED_SAMPLES = 36_000_000
 #: largest sidecar ``<log>.json`` (or ``run.json``) read (bytes); ours are a few kB, with a
 #: scenario's reference table inline at most that table (:data:`MAX_REFERENCE_BYTES`)
 MAX_SIDECAR_BYTES = 32 * 2**20

@@ -10,6 +10,7 @@ memory that stops growing with the file); the 2 GB figures were measured by hand
 
 from __future__ import annotations
 
+import json
 import os
 import resource
 import shutil
@@ -198,24 +199,34 @@ def _tiled(base_log: Path, dst: Path, copies: int) -> Path:
     return dst
 
 
-def test_a_long_log_is_refused_in_bounded_memory(base_log: Path, tmp_path: Path) -> None:
-    """The 2 GB row scaled down: a 40 MB log against a cap of 200 000 decoded values. The child
-    stops reading at the cap: its peak RSS grows far less than the file (before: every frame
-    was a dict in memory, ≈ 1 kB per frame of 47 bytes)."""
+def test_logs_of_several_runs_joined_are_refused_in_bounded_memory(base_log: Path, tmp_path: Path) -> None:
+    """The 2 GB row scaled down: 160 runs joined (40 MB), read in chunks (its files exceed
+    ``STREAM_ABOVE_BYTES``) and refused at the first CycleCount that runs back — one line, its
+    peak RSS that of a short report (before: refused at the cap of decoded values)."""
     long = _tiled(base_log, tmp_path / "long" / "run.log", 160)
     assert long.stat().st_size > 35e6
     small = cli(["report", str(base_log), "--no-figures", "--out", str(tmp_path / "s")], tmp_path)
     assert small.rc == 0, small.err
     prelude = "import ehpss_hil.limits as L; L.MAX_LOG_VALUES = 200_000"
     c = cli(["report", str(long), "--no-figures", "--out", str(tmp_path / "l")], tmp_path, prelude)
-    _one_line_error(c, 2, "too long to report", "200000 decoded signal values")
+    _one_line_error(c, 2, "CycleCount jumps by 64337 samples after sample 1199", "several runs joined")
     assert c.peak_rss_mb < small.peak_rss_mb + 15
 
 
-def test_a_report_past_the_sample_cap_is_refused(base_log: Path, tmp_path: Path) -> None:
+def test_a_report_past_the_sample_cap_is_streamed(base_log: Path, tmp_path: Path) -> None:
+    """Beyond ``MAX_LOG_SAMPLES`` (scaled down to 1000: the log has 1200) the log is read in
+    chunks of 500 commands: the same metrics as read whole."""
+    whole = cli(["report", str(base_log), "--no-figures", "--out", str(tmp_path / "w")], tmp_path)
     prelude = "import ehpss_hil.limits as L; L.MAX_LOG_SAMPLES = 1000"
     c = cli(["report", str(base_log), "--no-figures", "--out", str(tmp_path / "r")], tmp_path, prelude)
-    _one_line_error(c, 2, "too long to report", "1200 controller samples (at most 1000")
+    assert whole.rc == 0 and c.rc == 0, c.err
+    assert "read in chunks: metrics use every sample (1200)" in c.out, c.out
+    rms = [ln for ln in c.out.splitlines() if ln.startswith("RMS error")]
+    assert rms and rms == [ln for ln in whole.out.splitlines() if ln.startswith("RMS error")]
+    a = json.loads((tmp_path / "w" / "metrics.json").read_text())[0]
+    b = json.loads((tmp_path / "r" / "metrics.json").read_text())[0]
+    assert a["events"] == b["events"] and a["switches"] == b["switches"]
+    assert a["rms_error_m"] == pytest.approx(b["rms_error_m"], rel=1e-12)
 
 
 def _with_foreign_tail(base_log: Path, dst: Path, n: int) -> Path:

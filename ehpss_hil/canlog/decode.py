@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import os
 from array import array
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -100,9 +101,31 @@ def decode_log(
     """
     codec = codec if codec is not None else FrameCodec()
     p = Path(path)
-    timeline: TimeOrder[None] = TimeOrder(p)
     rows: dict[str, Columns] = {}
     held = 0
+    for i, name, t_s, values in decoded_frames(path, codec, bad, rotated):
+        if order:
+            values = {**values, FRAME_INDEX: i}
+        cols = rows.setdefault(name, Columns())
+        held -= cols.cells
+        cols.add(t_s, values)
+        held += cols.cells
+        if held > max_values:
+            raise TooLongError(
+                f"{p}: too long to report: more than {max_values} decoded signal values (about "
+                f"{max_values // _VALUES_PER_BENCH_CYCLE} controller cycles of a bench log; a report "
+                "holds every sample in memory): cut the log (candump lines stand alone: head -n)"
+            )
+    return {name: c.arrays() for name, c in rows.items()}
+
+
+def decoded_frames(
+    path: str | os.PathLike[str], codec: FrameCodec, bad: BadLines | None = None, rotated: bool = True
+) -> Iterator[tuple[int, str, float, dict[str, Any]]]:
+    """``(position in the file, frame name, timestamp (s), decoded values)`` of every frame of
+    a log that :func:`decode_log` keeps (its docstring), streamed; the time order is checked
+    through the bounded reorder window on the way."""
+    timeline: TimeOrder[None] = TimeOrder(Path(path))
     for i, msg in enumerate(read_frames(path, bad, rotated)):
         timeline.push(msg.timestamp, None)
         d = codec.classify(msg)
@@ -113,18 +136,5 @@ def decode_log(
             values = codec.message(d.name).decode(bytes(msg.data), decode_choices=False)
         elif not d.verdict.usable:
             continue
-        if values is None:
-            continue
-        if order:
-            values = {**values, FRAME_INDEX: i}
-        cols = rows.setdefault(d.name, Columns())
-        held -= cols.cells
-        cols.add(msg.timestamp, values)
-        held += cols.cells
-        if held > max_values:
-            raise TooLongError(
-                f"{p}: too long to report: more than {max_values} decoded signal values (about "
-                f"{max_values // _VALUES_PER_BENCH_CYCLE} controller cycles of a bench log; a report "
-                "holds every sample in memory): cut the log (candump lines stand alone: head -n)"
-            )
-    return {name: c.arrays() for name, c in rows.items()}
+        if values is not None:
+            yield i, d.name, msg.timestamp, values

@@ -13,13 +13,15 @@ import argparse
 import json
 from pathlib import Path
 
+from ..canlog.decode import TooLongError
 from ..canlog.reader import LogError
 from ..extras import require
 from ..report.decimate import thinned
 from ..report.logdata import LogRun, load_log_run
 from ..report.logmetrics import log_metrics
 from ..report.markdown import metrics_row, write_markdown
-from ..scenario import load_scenario
+from ..report.streamed import STREAM_ABOVE_BYTES, Loaded, log_bytes, stream_log_run
+from ..scenario import Scenario, load_scenario
 
 NAME = "report"
 
@@ -58,31 +60,53 @@ def _with_samples(run: LogRun) -> LogRun:
     return run
 
 
+def _load(path: Path, scenario: Scenario | None) -> Loaded:
+    """A log's report data: whole (:func:`load_log_run`) when it fits in memory, else streamed
+    in chunks (:func:`stream_log_run`: its files larger than :data:`STREAM_ABOVE_BYTES`, or more
+    samples than :data:`~ehpss_hil.limits.MAX_LOG_SAMPLES`)."""
+    if log_bytes(path) <= STREAM_ABOVE_BYTES:
+        try:
+            lr = _with_samples(load_log_run(path, scenario=scenario))
+        except TooLongError:
+            pass
+        else:
+            m = log_metrics(lr)
+            drawn = thinned(lr)
+            if drawn is not lr:
+                lr.notes.append(
+                    f"figures drawn from {len(drawn.result.t_s)} of {len(lr.result.t_s)} samples (the "
+                    "largest |error| of each bucket); metrics use every sample"
+                )
+            return Loaded(lr, m, drawn, None, None)
+    s = stream_log_run(path, scenario=scenario)
+    _with_samples(s.run)
+    s.run.notes.append(
+        f"a long log, read in chunks: metrics use every sample ({s.metrics.extra['samples']}); "
+        f"figures drawn from {len(s.run.result.t_s)} samples (the smallest and largest error and "
+        "value of each signal per bucket)"
+    )
+    return Loaded(s.run, s.metrics, s.run, s.view, s.frame_counts)
+
+
 def run(args: argparse.Namespace) -> int:
     """Decode, compute, draw, write; prints where everything went."""
     if not args.no_figures:
         require("plot", "the report's figures (or use --no-figures)")
     scenario = load_scenario(args.scenario) if args.scenario is not None else None
-    lr = _with_samples(load_log_run(args.log, scenario=scenario))
-    others = [_with_samples(load_log_run(p, scenario=scenario)) for p in args.compare]
+    main = _load(args.log, scenario)
+    others = [_load(p, scenario) for p in args.compare]
+    lr, m = main.run, main.metrics
     out_dir = args.out if args.out is not None else lr.log_path.parent / "report"
     out_dir.mkdir(parents=True, exist_ok=True)
-    m = log_metrics(lr)
     figures: list[Path] = []
     if not args.no_figures:
         from ..report.logfigures import draw_all, fig_compare
 
-        drawn = thinned(lr)
-        if drawn is not lr:
-            lr.notes.append(
-                f"figures drawn from {len(drawn.result.t_s)} of {len(lr.result.t_s)} samples (the "
-                "largest |error| of each bucket); metrics use every sample"
-            )
-        figures = draw_all(drawn, out_dir / "figures")
-        both = fig_compare([drawn, *(thinned(o) for o in others)], out_dir / "figures")
+        figures = draw_all(main.drawn, out_dir / "figures", main.view)
+        both = fig_compare([main.drawn, *(o.drawn for o in others)], out_dir / "figures")
         figures = [both, *figures] if both is not None else figures
-    compare = [(lr, m), *((o, log_metrics(o)) for o in others)] if others else None
-    md = write_markdown(lr, m, figures, out_dir, compare)
+    compare = [(lr, m), *((o.run, o.metrics) for o in others)] if others else None
+    md = write_markdown(lr, m, figures, out_dir, compare, main.view, main.frame_counts)
     row = metrics_row(lr, m)
     text = json.dumps([row], indent=1, default=str)
     (out_dir / "metrics.json").write_text(text)

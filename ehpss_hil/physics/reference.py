@@ -33,6 +33,17 @@ class ReferenceModel:
         self.state = self.ad @ self.state + self.bd * r_m
         return y
 
+    def run(self, r_m: np.ndarray) -> np.ndarray:
+        """y_m for a reference sequence (m), continuing from ``self.state``, which it advances:
+        a long sequence run in parts gives what :meth:`simulate` gives on the whole of it."""
+        x = self.state
+        out = np.empty(len(r_m))
+        for k, r in enumerate(r_m):
+            out[k] = self.c @ x
+            x = self.ad @ x + self.bd * r
+        self.state = x
+        return out
+
     def simulate(self, r_m: np.ndarray) -> np.ndarray:
         """y_m for a whole reference sequence (m), from rest; does not touch ``self.state``."""
         x = np.zeros(6)

@@ -11,22 +11,23 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .. import limits
 from ..canlog import LogError
 from ..canlog.decode import TooLongError
-from ..limits import MAX_LOG_SAMPLE_TIME_S, MAX_LOG_SAMPLES, MIN_LOG_SAMPLE_TIME_S
+from ..limits import MAX_LOG_SAMPLE_TIME_S, MIN_LOG_SAMPLE_TIME_S
 
 
 def check_span(log: Path, samples: int, frames: int, name: str) -> None:
     """A :class:`TooLongError` when ``frames`` frames of ``name`` span more samples than a
-    report lays out (:data:`MAX_LOG_SAMPLES`): a run too long, or a ``CycleCount`` that jumps
-    or runs backwards in file order, which would otherwise become an array of millions of empty
-    samples."""
-    if samples > MAX_LOG_SAMPLES:
+    report lays out at once (:data:`~ehpss_hil.limits.MAX_LOG_SAMPLES`; a long log is laid out
+    in chunks of fewer commands): a ``CycleCount`` that jumps or runs backwards in file order,
+    which would otherwise become an array of millions of empty samples."""
+    cap = limits.MAX_LOG_SAMPLES
+    if samples > cap:
         raise TooLongError(
             f"{log}: too long to report: its {frames} {name} frames span {samples} controller "
-            f"samples (at most {MAX_LOG_SAMPLES}; a report holds every sample in memory): cut the "
-            "log (candump lines stand alone: head -n), or its CycleCount jumps (logs of several "
-            "runs joined)"
+            f"samples (at most {cap} at once): its CycleCount jumps (logs of several runs "
+            "joined?); cut the log (candump lines stand alone: head -n)"
         )
 
 

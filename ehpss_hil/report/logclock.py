@@ -87,18 +87,18 @@ def undo_clock_steps(
     :data:`FRAME_INDEX`) and move the timestamps after each back by it, in place; returns the
     steps undone and one-line notes. ``lockstep``: what the run's metadata says (None: not
     said, judged from the timing; see the module docstring)."""
-    t_all = _file_order_times(frames)
+    t_all, base = _file_order_times(frames)
     if len(t_all) == 0:
         return [], []
     cmd = frames.get("VALVE_CMD")
     notes: list[str] = []
     counted = cmd if cmd is not None and len(cmd["t_s"]) > 1 and "CycleCount" in cmd else None
     has_counter = counted is not None
-    follows = counted is not None and _clock_follows_cycles(counted, ts_s, lockstep, notes)
+    follows = counted is not None and clock_follows_cycles(counted, ts_s, lockstep, notes)
     if counted is not None and follows:
-        steps = _steps_from_cycle_count(counted, t_all, ts_s)
+        steps = _steps_from_cycle_count(counted, t_all, ts_s, base)
     else:
-        steps, jumps = _steps_from_file_order(t_all)
+        steps, jumps = _steps_from_file_order(t_all, base)
         if jumps and not has_counter:
             notes.append(
                 "log timestamps jump forward by "
@@ -120,17 +120,18 @@ def undo_clock_steps(
             + ": timestamps after each step corrected "
             + how,
         )
-    small = _small_steps_back(t_all, steps)
+    small = _small_steps_back(t_all, steps, base)
     if small:
         notes.append(small)
     return steps, notes
 
 
-def _small_steps_back(t_all: np.ndarray, steps: list[ClockStep]) -> str:
+def _small_steps_back(t_all: np.ndarray, steps: list[ClockStep], base: int = 0) -> str:
     """A note on the backward jumps in file order larger than :data:`SMALL_STEP_NOTE_S` that
-    were not undone as steps (too small to tell from jitter), or empty."""
-    known = np.flatnonzero(np.isfinite(t_all))
-    d = np.diff(t_all[known])
+    were not undone as steps (too small to tell from jitter), or empty; ``t_all[i]`` is frame
+    ``base + i``."""
+    known = np.flatnonzero(np.isfinite(t_all)) + base
+    d = np.diff(t_all[known - base])
     back = np.flatnonzero(d < -SMALL_STEP_NOTE_S)
     undone = {s.frame_index for s in steps}
     back = np.array([j for j in back if int(known[j + 1]) not in undone], dtype=np.int64)
@@ -139,13 +140,13 @@ def _small_steps_back(t_all: np.ndarray, steps: list[ClockStep]) -> str:
     first = int(back[0])
     return (
         f"the log's timestamps run back by up to {-float(np.min(d[back])) * 1e3:.3f} ms at "
-        f"{len(back)} place(s) (the first after t={float(t_all[known[first]]):.6f}, frame "
+        f"{len(back)} place(s) (the first after t={float(t_all[known[first] - base]):.6f}, frame "
         f"{int(known[first + 1])}): left as logged, a step must exceed "
         f"{CLOCK_STEP_MIN_S * 1e3:g} ms to be told from jitter and reordering"
     )
 
 
-def _clock_follows_cycles(
+def clock_follows_cycles(
     cmd: dict[str, np.ndarray], ts_s: float | None, lockstep: bool | None, notes: list[str]
 ) -> bool:
     """True when the wall clock of a log should keep the VALVE_CMD cycle clock (realtime): the
@@ -164,20 +165,25 @@ def _clock_follows_cycles(
     return False
 
 
-def _file_order_times(frames: Frames) -> np.ndarray:
-    """Every decoded frame's timestamp at its position in the log (NaN: a frame not decoded)."""
-    n = 1 + max((int(f[FRAME_INDEX][-1]) for f in frames.values() if len(f["t_s"])), default=-1)
-    t_all = np.full(n, np.nan)
+def _file_order_times(frames: Frames) -> tuple[np.ndarray, int]:
+    """``(t_all, base)``: every decoded frame's timestamp at its position in the log (NaN: a
+    frame not decoded), ``t_all[i]`` for frame ``base + i`` (``base``: the first frame given, so
+    a part of a long log costs its own length)."""
+    held = [f[FRAME_INDEX].astype(np.int64) for f in frames.values() if len(f["t_s"])]
+    if not held:
+        return np.zeros(0), 0
+    base = min(int(i.min()) for i in held)
+    t_all = np.full(1 + max(int(i.max()) for i in held) - base, np.nan)
     for f in frames.values():
         if len(f["t_s"]):
-            t_all[f[FRAME_INDEX].astype(np.int64)] = f["t_s"]
-    return t_all
+            t_all[f[FRAME_INDEX].astype(np.int64) - base] = f["t_s"]
+    return t_all, base
 
 
 def _steps_from_cycle_count(
-    cmd: dict[str, np.ndarray], t_all: np.ndarray, ts_s: float | None
+    cmd: dict[str, np.ndarray], t_all: np.ndarray, ts_s: float | None, base: int = 0
 ) -> list[ClockStep]:
-    t, at = cmd["t_s"], cmd[FRAME_INDEX].astype(np.int64)
+    t, at = cmd["t_s"], cmd[FRAME_INDEX].astype(np.int64) - base
     k = unwrap_counter(cmd["CycleCount"])
     ts = ts_s if ts_s else _period(t, k)
     if ts is None:
@@ -186,7 +192,7 @@ def _steps_from_cycle_count(
     steps = []
     for j, size in _persistent_cuts(off):
         where = _largest_jump(t_all, int(at[j]), int(at[j + 1]), size)
-        steps.append(ClockStep(where, float(t_all[_known_before(t_all, where)]), size))
+        steps.append(ClockStep(where + base, float(t_all[_known_before(t_all, where)]), size))
     return steps
 
 
@@ -214,14 +220,15 @@ def _persistent_cuts(off: np.ndarray) -> list[tuple[int, float]]:
     return out
 
 
-def _steps_from_file_order(t_all: np.ndarray) -> tuple[list[ClockStep], list[ClockStep]]:
-    """(backward steps to undo, forward jumps to report) from the timestamps in file order."""
+def _steps_from_file_order(t_all: np.ndarray, base: int = 0) -> tuple[list[ClockStep], list[ClockStep]]:
+    """(backward steps to undo, forward jumps to report) from the timestamps in file order
+    (``t_all[i]``: frame ``base + i``)."""
     known = np.flatnonzero(np.isfinite(t_all))
     d = np.diff(t_all[known])
     usual = float(np.median(d[d >= 0])) if np.any(d >= 0) else 0.0
     back, fwd = [], []
     for j in np.flatnonzero((d > CLOCK_STEP_S) | (d < -CLOCK_STEP_MIN_S)):
-        step = ClockStep(int(known[j + 1]), float(t_all[known[j]]), float(d[j]))
+        step = ClockStep(int(known[j + 1]) + base, float(t_all[known[j]]), float(d[j]))
         if d[j] < 0:
             size = round((float(d[j]) - usual) / STEP_RESOLUTION_S) * STEP_RESOLUTION_S
             back.append(ClockStep(step.frame_index, step.before_s, size))

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from .annotate import Interval
+from .figures import RunView
 from .html import write_html
 from .logdata import LogRun
 from .logfigures import CAPTIONS
@@ -179,17 +180,23 @@ def write_markdown(
     figures: list[Path],
     out_dir: Path,
     compare: list[tuple[LogRun, LogMetrics]] | None = None,
+    view: RunView | None = None,
+    frame_counts: dict[str, int] | None = None,
 ) -> Path:
     """``report.md`` in ``out_dir`` embedding ``figures`` (relative links), and ``report.html``
     beside it with the figures inside (one file to send). ``compare``: this run and the runs
-    it was overlaid with, for a table of their metrics."""
-    view = log_view(run)
+    it was overlaid with, for a table of their metrics. ``view`` and ``frame_counts``: the
+    events, intervals and frames decoded of the whole log when ``run`` holds a thinned part
+    of it (:mod:`.streamed`; default: from ``run``)."""
+    view = view if view is not None else log_view(run)
     r, side = run.result, run.sidecar or {}
-    frames = ", ".join(f"{n} {len(f['t_s'])}" for n, f in sorted(run.frames.items()))
+    counts = frame_counts or {n: len(f["t_s"]) for n, f in run.frames.items()}
+    frames = ", ".join(f"{n} {c}" for n, c in sorted(counts.items()))
+    n_samples = m.extra.get("samples", len(r.t_s))
     lines = [
         f"# Run report: {r.scenario} / {r.controller}",
         "",
-        f"- log: `{run.log_path}` ({len(r.t_s)} samples at Ts = {r.ts_s * 1e3:g} ms)",
+        f"- log: `{run.log_path}` ({n_samples} samples at Ts = {r.ts_s * 1e3:g} ms)",
         f"- sidecar: {'yes' if run.sidecar else 'none'}; started "
         f"{side.get('start_time_utc', '?')}; versions {_versions(side.get('versions', '?'))}",
         f"- DBC sha256: {(side.get('dbc') or {}).get('sha256', '?')}",

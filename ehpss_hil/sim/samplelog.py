@@ -145,8 +145,11 @@ def write_lockstep_log(
     truth: bool = True,
     status_every: int = 20,
     t0_s: float = _T0_S,
+    queue_lines: int = 200_000,
 ) -> Path:
-    """Run ``scenario`` with controller ``mode`` and log every frame to ``path``; returns it."""
+    """Run ``scenario`` with controller ``mode`` and log every frame to ``path``; returns it.
+    ``queue_lines``: the logger's queue (the loop outruns its writer thread: a run of more than
+    about 40 000 samples needs a longer one, else frames are dropped and counted)."""
     prm = params if params is not None else load_params()
     ts = scenario.sample_time_s
     ctrl = make_controller(mode, prm, ts, tuning, scenario.reference)
@@ -156,7 +159,7 @@ def write_lockstep_log(
         "config": {"mode": mode, "rate_hz": 1.0 / ts},
         "clock": "synthetic: t0 + k*Ts (+ µs per frame), s since the Unix epoch",
     }
-    log = CandumpLogger(path, iface="vcan0", sidecar=side)
+    log = CandumpLogger(path, iface="vcan0", sidecar=side, queue_lines=queue_lines)
     x_d = scenario.reference_samples().tolist()
     b = _Bench(scenario, ctrl, prm, log, truth, t0_s, x_d)
     set_truth = getattr(ctrl, "set_truth", None)
