@@ -59,13 +59,14 @@ bus: {{interface: udp_multicast, channel: 239.74.163.2}}
 mode: mmac
 rate_hz: 1000
 reference: {{kind: sine, amplitude_m: 0.001, omega_rad_s: 5.0}}
-watchdog: {{timeout_cycles: 200, recovery_cycles: 50, auto_recover: true, failsafe: zero}}
+watchdog: {{timeout_cycles: 200, recovery_cycles: 50, auto_recover: true, failsafe: zero, starvation_late_fraction: 1.0}}
 params: {root}/configs/params.yaml
 dbc: {root}/dbc/ehpss.dbc
 """
-#: the watchdog waits 200 cycles (0.2 s) for a sensor frame: total frame loss still trips it, a
-#: loaded host's stalls seldom do (at 10 cycles the controller tripped again and again and did not
-#: show ACTIVE within 90 s beside the full suite)
+#: the watchdog waits 200 cycles (0.2 s) for a sensor frame and counts the loop starved only when
+#: every cycle of its window is late: total frame loss still trips it, a loaded host seldom does
+#: (beside the full suite the controller stayed in LOOP_OVERRUN — starvation does not recover
+#: while it holds — and never showed ACTIVE again within 90 s); this test is about the page
 #: a generous limit for anything to show on a loaded host (s); not a timing requirement
 WAIT_S = 90.0
 SCREENSHOT = ROOT / "out" / "monitor-browser.png"
