@@ -59,7 +59,9 @@ bus: {{interface: udp_multicast, channel: 239.74.163.2}}
 mode: mmac
 rate_hz: 1000
 reference: {{kind: sine, amplitude_m: 0.001, omega_rad_s: 5.0}}
-watchdog: {{timeout_cycles: 200, recovery_cycles: 50, auto_recover: true, failsafe: zero, starvation_late_fraction: 1.0}}
+watchdog:
+  {{timeout_cycles: 200, recovery_cycles: 50, auto_recover: true, failsafe: zero,
+    starvation_late_fraction: 1.0}}
 params: {root}/configs/params.yaml
 dbc: {root}/dbc/ehpss.dbc
 """
