@@ -11,6 +11,7 @@ over [k, k+1) the command computed from y[k−1].
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -51,13 +52,41 @@ class _Stream:
         self._rng = np.random.default_rng([seed, stream])
         self._kind = kind
         self._buf: list[float] = []
+        self._n = 0
         self._i = 0
+
+    def block(self) -> np.ndarray:
+        """The next :data:`_BLOCK` draws (standard normal or uniform on [0, 1))."""
+        return self._rng.standard_normal(_BLOCK) if self._kind == "normal" else self._rng.random(_BLOCK)
 
     def next(self) -> float:
         i = self._i
-        if i >= len(self._buf):
-            block = self._rng.standard_normal(_BLOCK) if self._kind == "normal" else self._rng.random(_BLOCK)
-            self._buf = block.tolist()  # Python floats: indexing a list is cheaper than an array
+        if i >= self._n:
+            self._buf = self.block().tolist()  # Python floats: indexing a list is cheaper than an array
+            self._n = len(self._buf)
+            i = 0
+        self._i = i + 1
+        return self._buf[i]
+
+
+class _SensorNoise:
+    """The noise of the position, spool and pressure sensors (m, m, Pa): three seeded standard
+    normal streams scaled by their standard deviations, one tuple per sample. The streams are
+    drawn and scaled a block at a time (the same products as scaling each draw alone)."""
+
+    def __init__(self, seed: int, sigmas: tuple[float, float, float]) -> None:
+        self._streams = [_Stream(seed, i, "normal") for i in range(3)]
+        self._sigmas = sigmas
+        self._buf: list[tuple[float, float, float]] = []
+        self._n = 0
+        self._i = 0
+
+    def next(self) -> tuple[float, float, float]:
+        i = self._i
+        if i >= self._n:
+            cols = [(sd * st.block()).tolist() for st, sd in zip(self._streams, self._sigmas, strict=True)]
+            self._buf = list(zip(*cols, strict=True))
+            self._n = len(self._buf)
             i = 0
         self._i = i + 1
         return self._buf[i]
@@ -80,12 +109,19 @@ class PlantEmulation:
         self._timeline = scenario.fault_timeline()
         g = params.controller
         self._valve_dist_gain_a_per_m = g.k_f * g.k_a * g.k_p
+        dist = scenario.disturbance
+        #: the disturbance subtracted from the measured position (None: none there; a "none"
+        #: disturbance is 0 m, and y − 0.0 is y)
+        self._sensor_dist = dist if dist.enters == "sensor" and dist.kind != "none" else None
+        self._valve_dist = dist.enters == "valve"
+        nz = scenario.noise
+        self._sigmas = (nz.position_m, nz.spool_m, nz.pressure_pa)
         self.reset()
 
     def reset(self) -> None:
         """Back to k = 0, at rest, with fresh (identically seeded) random streams."""
         seed = self.scenario.seed
-        self._noise = [_Stream(seed, i, "normal") for i in range(3)]
+        self._noise = _SensorNoise(seed, self._sigmas)
         self._loss = [_Stream(seed, 10 + i, "uniform") for i in range(2)]
         self.plant.reset()
         self.k = 0
@@ -106,6 +142,8 @@ class PlantEmulation:
             self.loss = loss
             self._next_event += 1
             changed = True
+        #: the sample of the next scheduled event (:meth:`advance` looks no further before it)
+        self._due_k = tl[self._next_event][0] if self._next_event < len(tl) else math.inf
         if changed:
             self._set(replace(self._scheduled, **self._override))  # type: ignore[arg-type]
 
@@ -150,30 +188,36 @@ class PlantEmulation:
     def _measured_position(self) -> float:
         f = self.plant.faults
         y = f.k_dft * self.plant.position_m + f.position_bias_m
-        if self.scenario.disturbance.enters == "sensor":
-            y -= self._disturbance_m()
+        if self._sensor_dist is not None:
+            y -= self._sensor_dist.value_m(self.k * self.ts_s)
         return y
 
     def measure(self) -> SensorSample:
-        """The sensor sample y[k] (draws this sample's noise; call exactly once per sample)."""
-        nz = self.scenario.noise
-        s_pos, s_spool, s_p = self._noise
-        n_pos, n_spool, n_p = s_pos.next(), s_spool.next(), s_p.next()
-        if self.plant.faults.stuck:
+        """The sensor sample y[k] (draws this sample's noise; call exactly once per sample).
+
+        The plant's outputs are read once each (this runs every sample of every simulation)."""
+        e_pos, e_spool, e_p = self._noise.next()
+        plant, k = self.plant, self.k
+        f = plant.faults
+        x, spool = plant.position_m, plant.spool_actual_m
+        if f.stuck:
             pos = self._stuck_value_m
         else:
-            pos = self._measured_position() + nz.position_m * n_pos
+            pos = f.k_dft * x + f.position_bias_m
+            if self._sensor_dist is not None:
+                pos -= self._sensor_dist.value_m(k * self.ts_s)
+            pos += e_pos
         return SensorSample(
-            k=self.k,
-            t_s=self.k * self.ts_s,
-            position_m=pos,
-            spool_m=self.plant.spool_actual_m + nz.spool_m * n_spool,
-            load_pressure_pa=self.plant.load_pressure_pa + nz.pressure_pa * n_p,
-            coil_current_a=self.plant.coil_current_a,
-            true_position_m=self.plant.position_m,
-            true_spool_m=self.plant.spool_actual_m,
-            faults=self.plant.faults,
-            current_saturated=self._saturated,
+            k,
+            k * self.ts_s,
+            pos,
+            spool + e_spool,
+            plant.load_pressure_pa + e_p,
+            plant.coil_current_a,
+            x,
+            spool,
+            f,
+            self._saturated,
         )
 
     def frame_lost(self, direction: int) -> bool:
@@ -188,10 +232,11 @@ class PlantEmulation:
     def advance(self, current_a: float) -> float:
         """Hold ``current_a`` (A) over [k, k+1), step to k+1; returns the applied current (A)."""
         i = current_a
-        if self.scenario.disturbance.enters == "valve":
+        if self._valve_dist:
             i += self._valve_dist_gain_a_per_m * self._disturbance_m()
         applied = self.plant.step(i)
         self._saturated = applied != i
         self.k += 1
-        self._apply_schedule()
+        if self.k >= self._due_k:
+            self._apply_schedule()
         return applied

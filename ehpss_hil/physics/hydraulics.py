@@ -153,6 +153,7 @@ class NonlinearPlant:
             (float(ad[1, 0]), float(ad[1, 1]), float(bd[1, 0])),
         )
         self._p_lam = ORIFICE_LAMINAR_FRACTION * (hp.supply_pressure_pa - hp.return_pressure_pa)
+        self._consts = _step_constants(hp, h)
         self.modelled_faults = frozenset(ACTUATOR_FAULTS)
         self.faults = FaultState()
         self.reset()
@@ -171,6 +172,7 @@ class NonlinearPlant:
         """Apply new fault values from the next sample on."""
         self.faults = faults
         self._kv = self.hp.valve_coefficient * faults.k_q
+        self._spool_stop_m = self.hp.spool_stroke_m / faults.k_loe  # where x_v stops (m)
 
     # ---- sensors ----------------------------------------------------------------------------
     @property
@@ -223,8 +225,7 @@ class NonlinearPlant:
         """Step the valve over the sample's sub-steps (exact ZOH each, the actual spool stopped
         inelastically at the stroke); returns the mean actual spool of each sub-step (m)."""
         (v0, v1, vb), (x0, x1, xb) = self._valve
-        k_loe = self.faults.k_loe
-        stop = self.hp.spool_stroke_m / k_loe
+        k_loe, stop = self.faults.k_loe, self._spool_stop_m
         vv, xv = self._vv, self._xv
         path = []
         for _ in range(self.substeps):
@@ -241,49 +242,56 @@ class NonlinearPlant:
         in ``spools`` (m, held over the sub-step), then the end stops. Each solves
         ``(I − h/2·J)·Δ = h·f`` with the analytic Jacobian J: Δx = h·ẋ + h/2·Δẋ eliminated, then
         (ΔP_A, ΔP_B) in terms of Δẋ (2×2), then Δẋ (scalar). Locals only: the simulator's hot path."""
-        hp, h, kv, lam = self.hp, self._h, self._kv, self._p_lam
-        ps, pt, lap, cl2 = (
-            hp.supply_pressure_pa,
-            hp.return_pressure_pa,
-            hp.spool_overlap_m,
-            2.0 * hp.land_leak_m3_s_pa,
+        kv, lam = self._kv, self._p_lam
+        (h, hba, hbb, length, ps, pt, lap, cl2, leak0, aa, ab, ci, bv, fc, vs, ks, fext, stroke, th) = (
+            self._consts[:19]
         )
-        aa, ab, m, ci = hp.area_a_m2, hp.area_b_m2, hp.mass_kg, hp.internal_leak_m3_s_pa
-        ba, bb, length = hp.bulk_modulus_pa / aa, hp.bulk_modulus_pa / ab, hp.chamber_length_m
-        bv, fc, vs, ks, fext = (
-            hp.viscous_friction_n_s_m,
-            hp.coulomb_friction_n,
-            hp.friction_velocity_m_s,
-            hp.spring_n_m,
-            hp.external_force_n,
-        )
-        stroke, th, cl = hp.piston_stroke_m, 0.5 * h, 0.5 * cl2
-        leak0 = cl * (ps + pt)  # land leaks into a chamber at zero pressure (m³/s)
-        # per-sample constants of the v row: Δẋ's own coefficient and those of ΔP_A, ΔP_B
-        cv0, cvf, ca, cb = 1.0 + th * th * ks / m, th / m, -th * aa / m, th * ab / m
-        hm, hks = h / m, th * h * ks / m
+        cv0, cvf, ca, cb, hm, hks = self._consts[19:]
         pa, pb, x, v = self._pa, self._pb, self._x, self._v
         sqrt = math.sqrt
         for xs in spools:
-            hea, heb = h * ba / (length + x), h * bb / (length - x)  # h·β_e/V_A, h·β_e/V_B
+            hea = hba / (length + x)  # h·β_e/V_A
+            heb = hbb / (length - x)  # h·β_e/V_B
             tea, teb = 0.5 * hea, 0.5 * heb
-            qa, qb, ga, gb = leak0 - cl2 * pa, leak0 - cl2 * pb, cl2, cl2
+            qa = leak0 - cl2 * pa
+            qb = leak0 - cl2 * pb
+            ga = gb = cl2
             if xs > lap:  # P → A, B → T (√ inline when turbulent: the hot path)
                 kx = kv * (xs - lap)
                 dp = ps - pa
-                d, sl = (r := sqrt(dp), 0.5 / r) if dp > lam else _orifice(dp, lam)
-                qa, ga = qa + kx * d, ga + kx * sl
+                if dp > lam:
+                    d = sqrt(dp)
+                    sl = 0.5 / d
+                else:
+                    d, sl = _orifice(dp, lam)
+                qa += kx * d
+                ga += kx * sl
                 dp = pb - pt
-                d, sl = (r := sqrt(dp), 0.5 / r) if dp > lam else _orifice(dp, lam)
-                qb, gb = qb - kx * d, gb + kx * sl
+                if dp > lam:
+                    d = sqrt(dp)
+                    sl = 0.5 / d
+                else:
+                    d, sl = _orifice(dp, lam)
+                qb -= kx * d
+                gb += kx * sl
             elif xs < -lap:  # A → T, P → B
                 kx = kv * (-lap - xs)
                 dp = pa - pt
-                d, sl = (r := sqrt(dp), 0.5 / r) if dp > lam else _orifice(dp, lam)
-                qa, ga = qa - kx * d, ga + kx * sl
+                if dp > lam:
+                    d = sqrt(dp)
+                    sl = 0.5 / d
+                else:
+                    d, sl = _orifice(dp, lam)
+                qa -= kx * d
+                ga += kx * sl
                 dp = ps - pb
-                d, sl = (r := sqrt(dp), 0.5 / r) if dp > lam else _orifice(dp, lam)
-                qb, gb = qb + kx * d, gb + kx * sl
+                if dp > lam:
+                    d = sqrt(dp)
+                    sl = 0.5 / d
+                else:
+                    d, sl = _orifice(dp, lam)
+                qb += kx * d
+                gb += kx * sl
             qi = ci * (pa - pb)
             if fc > 0.0:
                 tv = math.tanh(v / vs)
@@ -308,6 +316,45 @@ class NonlinearPlant:
             elif x < -stroke:
                 x, v = -stroke, max(v, 0.0)
         self._pa, self._pb, self._x, self._v = pa, pb, x, v
+
+
+def _step_constants(hp: HydraulicParams, h: float) -> tuple[float, ...]:
+    """The per-sub-step constants of :meth:`NonlinearPlant._hydraulics` for sub-step ``h`` (s),
+    computed once with the same operations (and so the same values) as written out per step:
+    ``(h, h·β_e/A_A, h·β_e/A_B, L_0, P_S, P_T, overlap, 2·C_l, land leak at zero pressure, A_A,
+    A_B, C_i, B_v, F_c, v_s, k, F_ext, piston stroke, h/2)`` and the v row's coefficients
+    ``(1 + (h/2)²·k/m, (h/2)/m, −(h/2)·A_A/m, (h/2)·A_B/m, h/m, (h/2)·h·k/m)``."""
+    aa, ab, m, ks = hp.area_a_m2, hp.area_b_m2, hp.mass_kg, hp.spring_n_m
+    ps, pt, cl2 = hp.supply_pressure_pa, hp.return_pressure_pa, 2.0 * hp.land_leak_m3_s_pa
+    th = 0.5 * h
+    leak0 = 0.5 * cl2 * (ps + pt)  # land leaks into a chamber at zero pressure (m³/s)
+    return (
+        h,
+        h * (hp.bulk_modulus_pa / aa),
+        h * (hp.bulk_modulus_pa / ab),
+        hp.chamber_length_m,
+        ps,
+        pt,
+        hp.spool_overlap_m,
+        cl2,
+        leak0,
+        aa,
+        ab,
+        hp.internal_leak_m3_s_pa,
+        hp.viscous_friction_n_s_m,
+        hp.coulomb_friction_n,
+        hp.friction_velocity_m_s,
+        ks,
+        hp.external_force_n,
+        hp.piston_stroke_m,
+        th,
+        1.0 + th * th * ks / m,
+        th / m,
+        -th * aa / m,
+        th * ab / m,
+        h / m,
+        th * h * ks / m,
+    )
 
 
 def _orifice(dp: float, lam: float) -> tuple[float, float]:

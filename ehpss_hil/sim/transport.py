@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from cantools.database.conversion import LinearConversion
+from cantools.database.conversion import LinearConversion, LinearIntegerConversion
 
 from ..codec.frames import FrameCodec
 from ..codec.verdict import Decoded, Verdict
@@ -64,12 +64,22 @@ def _linear_scale(codec: FrameCodec, frame: str, signal: str) -> tuple[float, fl
     return None
 
 
+def _integer_scale(codec: FrameCodec, frame: str, signal: str) -> tuple[int, int] | None:
+    """(scale, offset) when the signal uses cantools' ``LinearIntegerConversion``."""
+    conv = codec.message(frame).get_signal_by_name(signal).conversion
+    if type(conv) is LinearIntegerConversion:
+        return conv.scale, conv.offset
+    return None
+
+
 class QuantizeTransport:
     """DBC quantization only (the conversions of :meth:`FrameCodec.quantize`).
 
     Position, spool, coil current and the command current use cantools' ``LinearConversion``
     arithmetic written out inline, ``round((v − offset)/scale)·scale + offset`` (this is the
-    simulator's hot path); any other conversion is called through cantools.
+    simulator's hot path). So is the load pressure's ``LinearIntegerConversion`` (the shipped
+    DBC's 10 Pa), expression for expression: ``r = v − offset``, ``r // scale`` when that
+    divides exactly, else ``r / scale``, rounded; any other conversion is called through cantools.
     """
 
     def __init__(self, codec: FrameCodec) -> None:
@@ -83,6 +93,8 @@ class QuantizeTransport:
             raise TypeError("position/spool/current signals must use a linear integer scaling")
         (self._ps, self._po), (self._ss, self._so), (self._cs, self._co), (self._ks, self._ko) = lin  # type: ignore[misc]
         self._press = _quantizer(codec, "SENSOR_AUX", "LoadPressure")
+        #: the load pressure's integer (scale, offset) when written out inline, else None
+        self._press_int = _integer_scale(codec, "SENSOR_AUX", "LoadPressure")
         self._pos_values: dict[str, float] = {"Position": 0.0, "Spool": 0.0}
         self._aux_values: dict[str, float] = {"LoadPressure": 0.0, "CoilCurrent": 0.0}
         self._pos = Decoded(Verdict.OK, "SENSOR_POS", self._pos_values)  # type: ignore[arg-type]
@@ -111,7 +123,14 @@ class QuantizeTransport:
         d_pos, d_aux, v_pos, v_aux = self._pos, self._aux, self._pos_values, self._aux_values
         v_pos["Position"] = round((pos - po) / ps) * ps + po
         v_pos["Spool"] = round((spool - so) / ss) * ss + so
-        v_aux["LoadPressure"] = self._press(_clip(pressure, 4e7))
+        pressure = -4e7 if pressure < -4e7 else 4e7 if pressure > 4e7 else pressure
+        if self._press_int is None:
+            v_aux["LoadPressure"] = self._press(pressure)
+        else:
+            p_s, p_o = self._press_int
+            r = pressure - p_o
+            q, rem = divmod(r, p_s)
+            v_aux["LoadPressure"] = round(q if rem == 0 else r / p_s) * p_s + p_o
         v_aux["CoilCurrent"] = round((coil - co) / cs) * cs + co
         d_pos.counter = k & 0x0F
         drv.take(d_pos)
