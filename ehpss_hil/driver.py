@@ -145,9 +145,10 @@ class ControllerDriver:
         m = self.meas
         if self._held and self._observe is not None:
             observe_held(self._observe, self._held, self._samples.take, self._scratch)
-        m.reference_m = self._x_d()
-        m.fresh = self._fresh
-        if self._fresh:
+        ov = self.override_m  # :meth:`_x_d` written out: this runs every cycle
+        m.reference_m = ov if ov is not None else self.reference(self.k)
+        fresh = m.fresh = self._fresh
+        if fresh:
             m.samples = self._samples.take(self._counter)
         cmd = self.controller.step(m)
         self.k += 1

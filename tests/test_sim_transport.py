@@ -28,7 +28,8 @@ def test_sensor_values_equal_the_dbc_conversions() -> None:
         m = drv.meas
         got = (m.position_m, m.spool_m, m.load_pressure_pa, m.coil_current_a)
         want = (want_pos["Position"], want_pos["Spool"], want_aux["LoadPressure"], want_aux["CoilCurrent"])
-        assert got == want and all(math.copysign(1, g) == math.copysign(1, w) for g, w in zip(got, want))
+        assert got == want
+        assert [math.copysign(1, g) for g in got] == [math.copysign(1, w) for w in want]  # ±0
     assert not tr.sensor(drv, 99, 0.1, 0.0, 0.0, 0.0, False, True)
 
 

@@ -77,6 +77,9 @@ class ScalarBank(_IndexBase):
         self.ria_est = Nlms(theta0, gain, c, *limits)
         self.theta = [*self.fixed, theta0, theta0]
         self._adapt_floor = tuning.excitation_floor
+        #: the NLMS step's (gain, c, lo, hi), the same for FRA and RIA (:meth:`update` writes
+        #: their step out)
+        self._nlms = (gain, c, *limits)
 
     def reset(self) -> None:
         """Estimators to θ0, index memory cleared."""
@@ -92,30 +95,31 @@ class ScalarBank(_IndexBase):
 
         Written out by hand (no per-model calls): this runs twice per cycle in ``mmac``.
         """
-        th = self.theta
+        th, mem, jj = self.theta, self.mem, self.j
         d, ts, a1, a2, s = self._decay, self._ts, self._a1, self._a2, self.inv_scale
         ys, ps = y * s, phi * s
-        mem, jj = self.mem, self.j
-        for i, t in enumerate(th):  # in place: faster than building lists
+        i = 0
+        for t in th:  # in place, one index counted by hand: faster than enumerate or new lists
             r = ys - t * ps
             e2 = r * r
             m = d * mem[i] + ts * e2
             mem[i] = m
             jj[i] = a1 * e2 + a2 * m
+            i += 1
         self.w = d * self.w + ts
-        if -self._adapt_floor < ps < self._adapt_floor:  # not excited: no evidence of θ
+        floor = self._adapt_floor
+        if -floor < ps < floor:  # not excited: no evidence of θ
             return
-        fra, ria = self.fra_est, self.ria_est
-        k = fra._g * phi / (fra._c + phi * phi)
-        lo, hi = fra._lo, fra._hi
-        t = fra.theta
+        g, c, lo, hi = self._nlms
+        k = g * phi / (c + phi * phi)
+        t = self.fra_est.theta
         t += k * (y - t * phi)
         t = lo if t < lo else hi if t > hi else t
-        fra.theta = th[self.fra] = t
-        t = ria.theta
+        self.fra_est.theta = th[self.fra] = t
+        t = self.ria_est.theta
         t += k * (y - t * phi)
         t = lo if t < lo else hi if t > hi else t
-        ria.theta = th[self.ria] = t
+        self.ria_est.theta = th[self.ria] = t
 
     def separation(self, a: int, b: int) -> float:
         """|θ_a − θ_b|."""

@@ -247,6 +247,7 @@ class NonlinearPlant:
             self._consts[:19]
         )
         cv0, cvf, ca, cb, hm, hks = self._consts[19:]
+        den_viscous = cv0 + cvf * bv  # the Δẋ coefficient's friction part without Coulomb friction
         pa, pb, x, v = self._pa, self._pb, self._x, self._v
         sqrt = math.sqrt
         for xs in spools:
@@ -295,9 +296,10 @@ class NonlinearPlant:
             qi = ci * (pa - pb)
             if fc > 0.0:
                 tv = math.tanh(v / vs)
-                friction, dfric = bv * v + fc * tv, bv + fc * (1.0 - tv * tv) / vs
+                friction = bv * v + fc * tv
+                den0 = cv0 + cvf * (bv + fc * (1.0 - tv * tv) / vs)  # with dfriction/dẋ
             else:
-                friction, dfric = bv * v, bv
+                friction, den0 = bv * v, den_viscous
             r1, r2 = hea * (qa - aa * v - qi), heb * (qb + ab * v + qi)
             m11, m12 = 1.0 + tea * (ga + ci), -tea * ci
             m21, m22 = -teb * ci, 1.0 + teb * (gb + ci)
@@ -306,7 +308,7 @@ class NonlinearPlant:
             pa0, qa_v = (m22 * r1 - m12 * r2) * inv, (m22 * s1 - m12 * s2) * inv
             pb0, qb_v = (m11 * r2 - m21 * r1) * inv, (m11 * s2 - m21 * s1) * inv
             force = aa * pa - ab * pb - friction - ks * x - fext  # m·ẍ (N)
-            dv = (hm * force - hks * v - ca * pa0 - cb * pb0) / (cv0 + cvf * dfric + ca * qa_v + cb * qb_v)
+            dv = (hm * force - hks * v - ca * pa0 - cb * pb0) / (den0 + ca * qa_v + cb * qb_v)
             pa += pa0 + qa_v * dv
             pb += pb0 + qb_v * dv
             x += h * v + th * dv

@@ -91,7 +91,7 @@ class LinearPlant:
         self.faults = FaultState()
         self._stroke_m = plant.spool_stroke_m
         self._p_per_acc = load_pressure_pa(plant, 1.0)
-        self._select(self.faults)
+        self.set_faults(self.faults)
 
     @property
     def state(self) -> Matrix:
@@ -125,6 +125,7 @@ class LinearPlant:
     def set_faults(self, faults: FaultState) -> None:
         """Apply new fault values from the next sample on."""
         self.faults = faults
+        self._stop_m = self._stroke_m / faults.k_loe  # where x_v stops (m)
         self._select(faults)
 
     def step(self, current_a: float) -> float:
@@ -140,7 +141,7 @@ class LinearPlant:
         s0, s1, s2, s3, s4 = self._s
         r0, r1, r2, r3, r4 = self._rows
         xv = r4[0] * s0 + r4[1] * s1 + r4[2] * s2 + r4[3] * s3 + r4[4] * s4 + r4[5] * u
-        stop = self._stroke_m / self.faults.k_loe
+        stop = self._stop_m
         if -stop <= xv <= stop:
             self._s = [
                 r0[0] * s0 + r0[1] * s1 + r0[2] * s2 + r0[3] * s3 + r0[4] * s4 + r0[5] * u,
