@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
+from itertools import chain
 
 import numpy as np
 
@@ -221,15 +222,12 @@ def _result(
     counts: dict[str, int],
 ) -> SimResult:
     n = len(x_d)
-    x, ys, sp, cur, probes, faults, fresh, jrows, nominal = (list(c) for c in zip(*rows, strict=True))
+    x, ys, sp, cur, probes, faults, fresh, jrows, nominal = zip(*rows, strict=True)
     index = np.full((n, N_SLOTS), np.nan)
     if slots:
-        index[:, list(slots)] = np.asarray(jrows, dtype=float)
-    pr = np.asarray(probes, dtype=float).reshape(n, 4)
-    seen: dict[FaultState, tuple[float, float, float]] = {}
-    tf = np.asarray([seen.setdefault(f, (f.k_loe, f.k_q, f.k_dft)) for f in faults], dtype=float).reshape(
-        n, 3
-    )
+        index[:, list(slots)] = _flat(jrows, n, len(slots))
+    pr = _flat(probes, n, 4)
+    tf = _flat(_true_faults(faults), n, 3)
     f = np.asarray
     return SimResult(
         scenario=sc.name,
@@ -256,3 +254,19 @@ def _result(
         frame_counts=counts,
         fallback=f(nominal, dtype=bool),
     )
+
+
+def _flat(rows: Iterable[Iterable[float]], n: int, width: int) -> np.ndarray:
+    """``n`` rows of ``width`` numbers as an (n, width) float array (one pass, no nested lists;
+    a row of another width leaves a total the reshape refuses)."""
+    return np.fromiter(chain.from_iterable(rows), dtype=float).reshape(n, width)
+
+
+def _true_faults(faults: Iterable[FaultState]) -> Iterator[tuple[float, float, float]]:
+    """(k_LOE, k_Q, k_DFT) per sample; the state object only changes at an event."""
+    last: FaultState | None = None
+    row = (1.0, 1.0, 1.0)
+    for fs in faults:
+        if fs is not last:
+            last, row = fs, (fs.k_loe, fs.k_q, fs.k_dft)
+        yield row
