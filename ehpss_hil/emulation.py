@@ -226,7 +226,12 @@ class PlantEmulation:
         stream, drawn once per call whatever the probability (the streams stay on the sample
         grid, so a scenario without the directional keys gives the same draws as before)."""
         p = self.loss.sensor if direction == 0 else self.loss.command
-        return self._loss[direction].next() < p
+        st = self._loss[direction]  # _Stream.next written out: twice a sample in a simulation
+        i = st._i
+        if i >= st._n:
+            return st.next() < p
+        st._i = i + 1
+        return st._buf[i] < p
 
     # ---- dynamics ---------------------------------------------------------------------------
     def advance(self, current_a: float) -> float:

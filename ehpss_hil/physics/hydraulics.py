@@ -216,7 +216,7 @@ class NonlinearPlant:
         """Advance one sample with ``current_a`` held (sub-steps, module docstring); returns the
         applied (limited) current (A)."""
         lim = self.faults.current_limit_a
-        u = min(max(current_a, -lim), lim)
+        u = -lim if current_a < -lim else lim if current_a > lim else current_a  # min(max(…)) inline
         self._u = u
         self._hydraulics(self._spool_path(u))
         return u

@@ -136,7 +136,7 @@ class LinearPlant:
         stop at rest and the piston is stepped with the spool held there over the whole sample
         (the valve is fast against Ts: it reaches the stop early in the sample)."""
         lim = self.faults.current_limit_a
-        u = min(max(current_a, -lim), lim)
+        u = -lim if current_a < -lim else lim if current_a > lim else current_a  # min(max(…)) inline
         self._u = u
         s0, s1, s2, s3, s4 = self._s
         r0, r1, r2, r3, r4 = self._rows
