@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ehpss_hil.control.attribution import JUMP_HOLD_S, SensorAttribution
+from ehpss_hil.control.attribution import SensorAttribution
 from ehpss_hil.control.flowgain import FlowGainMonitor
+from ehpss_hil.control.tuning import ControlTuning
 from ehpss_hil.physics.load import load_params
 
 PARAMS = load_params()
@@ -68,7 +69,7 @@ def test_a_model_still_adapting_when_the_motion_stops_is_not_attributed_at_rest(
 
 
 def test_a_jump_attributes_the_model_change_it_explains_and_only_that() -> None:
-    hold = round(JUMP_HOLD_S / TS)
+    hold = round(ControlTuning().jump_hold_s / TS)
     r = Rig()
     r.run(300, 1.0)
     r.run(3, 1.0, gain=0.8)  # the reading jumps to 0.8·x; the bank has not switched yet

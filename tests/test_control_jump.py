@@ -9,7 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from ehpss_hil.control.jump import MIN_SAMPLES, LevelJump
+from ehpss_hil.control.jump import LevelJump
+from ehpss_hil.control.tuning import ControlTuning
+
+MIN_SAMPLES = ControlTuning().jump_min_samples
 
 STEP_M = 5e-6  # piston travel per sample at the nominal flow gain (5 mm/s at 1 kHz)
 NOISE_M = 1e-6

@@ -6,7 +6,11 @@ from __future__ import annotations
 
 import pytest
 
-from ehpss_hil.control.stillsensor import MIN_TRAVEL_M, STILL_FRACTION, StillSensor
+from ehpss_hil.control.stillsensor import StillSensor
+from ehpss_hil.control.tuning import ControlTuning
+
+MIN_TRAVEL_M = ControlTuning().still_min_travel_m
+STILL_FRACTION = ControlTuning().still_fraction
 
 K_C = 3.3  # 1/s: 10 mm of spool move the model position 33 mm/s
 TS = 1e-3

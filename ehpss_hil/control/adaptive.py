@@ -22,28 +22,6 @@ from .sampleclock import SampleClock
 from .stillsensor import StillSensor
 from .supervisor import Supervisor
 
-#: after samples stepped without their data the flow-gain test takes no evidence for this many
-#: samples (≈ 6 time constants of the slowest valve/cylinder pole, −284 s⁻¹, at 1 kHz)
-FLOW_HOLD_S = 0.02
-#: after the spool was at its stop the spool channel and the flow-gain test take no evidence for
-#: this long (s): the valve model's stop is placed with k̂_LOE, the plant's with k_LOE, and the
-#: difference dies out with the valve poles (≈ 0.6 ms time constant)
-SPOOL_STOP_HOLD_S = 0.005
-#: a sensor declared failed whose increment gain θ_prod is this many times the failed-sensor
-#: threshold (0.3 with the default 0.15) follows the spool: it is fed back again
-FOLLOWS_FACTOR = 2.0
-#: a re-base of x̂ larger than this many reference amplitudes at once is not a sensor gain
-#: having changed (x0 = y0/θ̂_D ≈ the piston where the seed was taken, within the motion's range)
-REBASE_LIMIT = 2.0
-#: the spool model in use must have stood this long (s) before a sample teaches the pressure
-#: baseline (k̂_LOE known: the pressure scales with it)
-BASELINE_SETTLE_S = 0.1
-#: a reading that moved (an increment above the excitation gate) within this long (s) is a moving
-#: sensor
-MOVING_S = 0.1
-#: an adaptive estimate within this of its clip counts as at its limit (dimensionless)
-AT_LIMIT_MARGIN = 0.01
-
 
 class MmacController(LoopBase):
     """Corrected MMAC on two channels (spool, position) with bumpless compensation."""
@@ -63,9 +41,9 @@ class MmacController(LoopBase):
         )
         self.pos_sup = Supervisor(self.pos_bank, t, ts, guard_epsilon=t.position_guard_epsilon)
         self.flow = FlowGainMonitor(self.params.plant, ts, self.scale_spool_m, t)
-        self.still = StillSensor(self.params.plant.velocity_gain_1_s, ts)
-        self.attribution = SensorAttribution(self.flow, ts, t.sensor_failed_below)
-        self.clock = SampleClock(self.valve, self.xhat, self.flow if t.flow_gain_test else None)
+        self.still = StillSensor(self.params.plant.velocity_gain_1_s, ts, t)
+        self.attribution = SensorAttribution(self.flow, ts, t.sensor_failed_below, t)
+        self.clock = SampleClock(self.valve, self.xhat, self.flow if t.flow_gain_test else None, t)
         self.monitor = HarmMonitor(
             t.flow_gain_min_deviation,
             t.increment_window,
@@ -74,18 +52,19 @@ class MmacController(LoopBase):
             t.sensor_failed_below,
             t.monitor_sensor_alive,
         )
-        self._lim_d_hi = t.k_dft_limits[1] - AT_LIMIT_MARGIN
-        self._lim_l_lo = t.k_loe_limits[0] + AT_LIMIT_MARGIN
+        self._lim_d_hi = t.k_dft_limits[1] - t.at_limit_margin
+        self._lim_l_lo = t.k_loe_limits[0] + t.at_limit_margin
         self._alive = t.monitor_sensor_alive
         self._in_flow = False
         self._flow_on = t.flow_gain_test
-        self._flow_hold = max(1, round(FLOW_HOLD_S / ts))
-        self._stop_hold = max(1, round(SPOOL_STOP_HOLD_S / ts))
-        self._baseline_settle = max(1, round(BASELINE_SETTLE_S / ts))
-        self._moving_samples = max(1, round(MOVING_S / ts))
+        self._flow_hold = max(1, round(t.flow_hold_s / ts))
+        self._stop_hold = max(1, round(t.spool_stop_hold_s / ts))
+        self._baseline_settle = max(1, round(t.baseline_settle_s / ts))
+        self._moving_samples = max(1, round(t.moving_s / ts))
+        self._follows = t.follows_factor
         self._inv_s_spool = 1.0 / self.scale_spool_m
         self._inv_s_pos = 1.0 / self.scale_pos_m
-        self._rebase_limit_m = REBASE_LIMIT * self.scale_pos_m
+        self._rebase_limit_m = t.rebase_limit * self.scale_pos_m
         n_l, n_d = len(t.fixed_k_loe) + 2, len(t.fixed_k_dft) + 2
         self.index_slots = tuple(range(SPOOL_SLOT0, SPOOL_SLOT0 + n_l)) + tuple(
             range(POSITION_SLOT0, POSITION_SLOT0 + n_d)
@@ -347,7 +326,7 @@ class MmacController(LoopBase):
         """The sensor follows the spool, so it may be fed back raw. Under the position guard
         with no jump of the reading since the guard rose (a flow-gain change or a slow drift:
         x̂, integrating at the nominal flow gain, is the suspect, not the sensor): θ_prod, fresh
-        or not (no motion is no evidence against it), at :data:`FOLLOWS_FACTOR` times the
+        or not (no motion is no evidence against it), at ``follows_factor`` times the
         failed-sensor threshold or more. Otherwise θ_prod must be fresh, at a live sensor's
         gain and settled, and after a jump (a drift step, a failure) have taken a full window
         (M excited increments) since the guard rose: increments spanning the jump are not
@@ -358,7 +337,7 @@ class MmacController(LoopBase):
         guarded = self.pos_sup.guarded
         att = self.attribution
         if guarded and not att.jumped_since_guard:
-            return fl.theta_prod >= FOLLOWS_FACTOR * self._failed_below
+            return fl.theta_prod >= self._follows * self._failed_below
         if not (fl.product_fresh and fl.theta_prod >= self._alive):
             return False
         if guarded and att.since_guard < fl.increment_window:
@@ -375,9 +354,9 @@ class MmacController(LoopBase):
 
     def _sensor_follows_spool(self) -> bool:
         """The offset-free increment estimate θ_prod (fresh) says the sensor moves with the
-        spool integral, at :data:`FOLLOWS_FACTOR` times the failed-sensor threshold or more."""
+        spool integral, at ``follows_factor`` times the failed-sensor threshold or more."""
         fl = self.flow
-        return fl.product_fresh and fl.theta_prod >= FOLLOWS_FACTOR * self._failed_below
+        return fl.product_fresh and fl.theta_prod >= self._follows * self._failed_below
 
     def index_values(self) -> list[float]:
         """J of the spool models then the position models."""

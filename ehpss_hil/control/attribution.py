@@ -13,7 +13,7 @@ The evidence, each enough on its own:
 * the model changed while the piston was at rest (θ_prod stale: no excited increment) from one
   that agreed with θ_prod when the motion stopped: a flow gain moves nothing without flow, a
   sensor gain moves the reading at once;
-* the reading jumped (:class:`.LevelJump`) by a gain ratio ρ, and within :data:`JUMP_HOLD_S`
+* the reading jumped (:class:`.LevelJump`) by a gain ratio ρ, and within ``jump_hold_s``
   the model moved to ρ times the gain in use before the jump (a model change the jump does not
   explain, a flow-gain loss beside it, is left to the pressure test). A model so attributed
   stays attributed while it stays within ``min_deviation``/2 of the gain the jump explained,
@@ -33,13 +33,7 @@ import math
 
 from .flowgain import FlowGainMonitor
 from .jump import LevelJump
-
-#: after the position reading jumped, a position-model change within this long (s) that the
-#: jump's gain ratio explains is the sensor's
-JUMP_HOLD_S = 0.03
-#: … a model that moved by more than this from the gain in use before the jump (dimensionless;
-#: below the pressure test's band, which a jump does not need)
-JUMP_MIN_CHANGE = 0.01
+from .tuning import ControlTuning
 
 
 class SensorAttribution:
@@ -53,6 +47,7 @@ class SensorAttribution:
         "_kd_before",
         "_left",
         "_level_ref",
+        "_min_change",
         "_min_dev",
         "_model",
         "_theta_before",
@@ -66,14 +61,19 @@ class SensorAttribution:
         "since_guard",
     )
 
-    def __init__(self, flow: FlowGainMonitor, ts_s: float, failed_below: float) -> None:
+    def __init__(
+        self, flow: FlowGainMonitor, ts_s: float, failed_below: float, tuning: ControlTuning | None = None
+    ) -> None:
         """``flow``: the load-pressure test and increment regression of this controller;
-        ``ts_s``: sample time (s); ``failed_below``: θ of the failed-sensor model."""
+        ``ts_s``: sample time (s); ``failed_below``: θ of the failed-sensor model; ``tuning``:
+        the ``jump_*`` gates."""
+        t = tuning if tuning is not None else ControlTuning()
         self._flow = flow
         self._min_dev = flow.min_deviation
         self._failed_below = failed_below
-        self._hold = max(1, round(JUMP_HOLD_S / ts_s))
-        self.jump = LevelJump(flow.increment_window)
+        self._hold = max(1, round(t.jump_hold_s / ts_s))
+        self._min_change = t.jump_min_change
+        self.jump = LevelJump(flow.increment_window, t)
         self.reset()
 
     def reset(self) -> None:
@@ -136,7 +136,7 @@ class SensorAttribution:
                 self._to = self.jump_gain = self._kd_before * j.ratio
         if self._left > 0:
             self._left -= 1
-            moved = abs(theta_d - self._kd_before) > JUMP_MIN_CHANGE
+            moved = abs(theta_d - self._kd_before) > self._min_change
             if moved and abs(theta_d - self._to) < self._min_dev and theta_d >= self._failed_below:
                 fl.decide_sensor()
                 self._gain = theta_d

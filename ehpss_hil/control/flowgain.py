@@ -44,27 +44,6 @@ from .creep import CreepEstimator
 from .estimator import per_sample_gain
 from .tuning import ControlTuning
 
-#: the healthy pressure baseline (:attr:`FlowGainMonitor.pressure_gain`) forgets with this time
-#: constant (s of healthy samples)
-BASELINE_WINDOW_S = 2.0
-#: … and is used once it holds this much healthy operation (s)
-BASELINE_MIN_S = 0.2
-#: … within these bounds (dimensionless): the pressure gain of a plant whose hydraulic natural
-#: frequency, mass or flow gain is off the model by up to a factor of 2
-BASELINE_LIMITS = (0.5, 2.0)
-#: … and only where it differs from 1 by more than this (dimensionless): the least-squares gain
-#: of a load pressure quantized at the coarsest accepted resolution (0.2 bar, with a 3 µA echo) is
-#: 2–3 % off the plant's; the plants this baseline is for are 6–50 % off the model
-BASELINE_DEADBAND = 0.05
-
-
-#: an increment excites the product only where the motion the spool explains is this many times
-#: the reading's noise over one sample (at 20 µm of position noise a 10-sample increment of a
-#: slow motion is mostly noise, and θ_prod swung between 0.9 and 2.5 on a held position)
-EXCITATION_SNR = 2.0
-#: the reading's noise is averaged over about 1/this many samples
-NOISE_WEIGHT = 0.01
-
 
 class FlowGainMonitor:
     """Decides H_D / H_Q each sample; :attr:`k_q` is 1.0 (H_D) or the estimated product (H_Q).
@@ -75,6 +54,9 @@ class FlowGainMonitor:
 
     __slots__ = (
         "_anchor",
+        "_b_dead",
+        "_b_hi",
+        "_b_lo",
         "_b_min",
         "_b_up",
         "_b_uu",
@@ -98,6 +80,7 @@ class FlowGainMonitor:
         "_min_evidence",
         "_n",
         "_noise_var",
+        "_noise_w",
         "_nsettled",
         "_null_m_s",
         "_on",
@@ -107,6 +90,7 @@ class FlowGainMonitor:
         "_pend",
         "_prev",
         "_since_jump",
+        "_snr",
         "_spp",
         "_stale",
         "_sup",
@@ -155,11 +139,15 @@ class FlowGainMonitor:
         inc = plant.velocity_gain_1_s * scale_m * self._m * ts_s
         self._c2 = (t.nlms_c_fraction * inc) ** 2
         self._floor = t.flow_gain_excitation * inc
-        self._bd = math.exp(-ts_s / BASELINE_WINDOW_S)
-        self._b_min = BASELINE_MIN_S / ts_s
+        self._bd = math.exp(-ts_s / t.baseline_window_s)
+        self._b_min = t.baseline_min_s / ts_s
+        self._b_lo, self._b_hi = t.baseline_limits[0], t.baseline_limits[1]
+        self._b_dead = t.baseline_deadband
+        self._snr = t.excitation_snr
+        self._noise_w = t.noise_weight
         self._ts = ts_s
         #: the piston's velocity with the spool at null (:mod:`.creep`)
-        self.creep = CreepEstimator(plant.velocity_gain_1_s * plant.spool_stroke_m)
+        self.creep = CreepEstimator(plant.velocity_gain_1_s * plant.spool_stroke_m, t)
         self._null_m_s = self.creep.null_m_s
         self.reset()
 
@@ -284,7 +272,7 @@ class FlowGainMonitor:
         y1, v1 = self._p1
         if samples == 1 and y1 == y1:  # one sample's increment: the reading's noise
             r = position_m - y1 - self.theta_prod * (self.spool_integral_m - v1) - rate * dt
-            self._noise_var += NOISE_WEIGHT * (r * r - self._noise_var)
+            self._noise_var += self._noise_w * (r * r - self._noise_var)
         self._p1 = (position_m, self.spool_integral_m)
         i = self._i
         y = position_m - self._ys[i]
@@ -304,7 +292,7 @@ class FlowGainMonitor:
         near_null = abs(phi) <= self._null_m_s * tau
         self._pend = (y, phi, tau, self.theta_prod) if near_null and self._n > self._m and excited else None
         y -= self.creep.rate_m_s * tau  # the creep's share of the increment is no gain
-        floor = max(self._floor, EXCITATION_SNR * math.sqrt(self._noise_var))
+        floor = max(self._floor, self._snr * math.sqrt(self._noise_var))
         if self._n > self._m and abs(phi) > floor and excited:
             self._stale = 0
             t = self.theta_prod
@@ -397,16 +385,15 @@ class FlowGainMonitor:
     @property
     def pressure_gain(self) -> float:
         """The plant's load pressure over the model's, learned while nothing deviated (both
-        hypotheses predict with it): 1 until :data:`BASELINE_MIN_S` of healthy operation, then
-        the least-squares gain within :data:`BASELINE_LIMITS`, where it is off 1 by more than
-        :data:`BASELINE_DEADBAND`. A plant whose hydraulic natural
+        hypotheses predict with it): 1 until ``baseline_min_s`` of healthy operation, then
+        the least-squares gain within ``baseline_limits``, where it is off 1 by more than
+        ``baseline_deadband``. A plant whose hydraulic natural
         frequency or mass is off the model answers the same current with another pressure; a
         test against the model's own pressure takes that for a flow-gain change."""
         if self._b_w < self._b_min or self._b_uu <= 0.0:
             return 1.0
-        lo, hi = BASELINE_LIMITS
-        g = min(max(self._b_up / self._b_uu, lo), hi)
-        return g if abs(g - 1.0) > BASELINE_DEADBAND else 1.0
+        g = min(max(self._b_up / self._b_uu, self._b_lo), self._b_hi)
+        return g if abs(g - 1.0) > self._b_dead else 1.0
 
     @property
     def sensor_favoured(self) -> bool:
