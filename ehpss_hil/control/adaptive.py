@@ -15,6 +15,7 @@ from .attribution import SensorAttribution
 from .bank import ScalarBank
 from .base import Measurement, ValveCommand
 from .controllers import POSITION_SLOT0, SPOOL_SLOT0, LoopBase
+from .estimates import Estimates
 from .estimator import per_sample_gain
 from .flowgain import FlowGainMonitor
 from .monitor import HarmMonitor
@@ -64,7 +65,7 @@ class MmacController(LoopBase):
         self._follows = t.follows_factor
         self._inv_s_spool = 1.0 / self.scale_spool_m
         self._inv_s_pos = 1.0 / self.scale_pos_m
-        self._rebase_limit_m = t.rebase_limit * self.scale_pos_m
+        self.est = Estimates(self.xhat, t.sensor_failed_below, t.rebase_limit * self.scale_pos_m)
         n_l, n_d = len(t.fixed_k_loe) + 2, len(t.fixed_k_dft) + 2
         self.index_slots = tuple(range(SPOOL_SLOT0, SPOOL_SLOT0 + n_l)) + tuple(
             range(POSITION_SLOT0, POSITION_SLOT0 + n_d)
@@ -85,25 +86,23 @@ class MmacController(LoopBase):
         self._in_flow = False
         self._flow_spool_model = self.spool_sup.active
         self.clock.reset()
+        self.est.reset()
         self._spool_hold = 0  # samples left without spool evidence (the spool was at its stop)
-        #: the seed point: the sensor (m) and x̂ (m) at the first sample after the reset; the
-        #: position channel regresses y_s − y0 on x̂ − x0 (offset-free whatever k_DFT was then),
-        #: and x0 = y0/(θ̂_D·k̂_Q) keeps x̂ absolute as the estimates move
-        self._y0 = self._x0 = 0.0
         self._spool_age = 0  # samples the spool model in use has been in use
         self._creep_on = False  # a creep is in use (x̂ integrates it)
         self._spool_age_model = self.spool_sup.active
 
     def step(self, meas: Measurement) -> ValveCommand:
         """Predict, score both banks, supervise, compensate, PI."""
+        est = self.est
         if meas.fresh:
             y_v = meas.spool_m
-            tl_prev = self.k_loe_hat / self.k_q_hat
+            tl_prev = est.k_loe / est.k_q
             self.valve.stop_m = self.stroke_m / max(tl_prev, self.min_theta_l)
             seeding = self.clock.seed
             gap, resync, v, xh = self.clock.sample(meas, tl_prev, self._bridge_gain())
-            if seeding:  # x̂ = y_s now, as if k_DFT were 1: only differences from here are used
-                self._y0 = self._x0 = meas.position_m
+            if seeding:
+                est.seed(meas.position_m)
             if gap and self._flow_on:
                 self.flow.hold_off(self._flow_hold)
             sb, ss = self.spool_bank, self.spool_sup
@@ -126,42 +125,41 @@ class MmacController(LoopBase):
                 # fits the failed-sensor model)
                 self.sensor_held_off = self._dead = True
                 self._dead_evidence = 0
-                self.xhat.x = xh = x_dead
-                self._y0, self._x0 = meas.position_m, x_dead
+                est.place_dead(meas.position_m, x_dead)
+                xh = x_dead
             pb, ps = self.pos_bank, self.pos_sup
             if (gap and not resync) or stopped:
                 # x̂ missed samples, was dead-reckoned, or integrated a spool slamming into its
                 # stop (a transient no model of the valve follows exactly)
-                td = self.k_dft_hat
+                td = est.k_dft
                 if not self.pos_sup.guarded and self.sensor_alive(td) and not self.flow.flow_fault:
                     # re-anchor on the trusted sensor and start the regression over from here: a
                     # dead-reckoned offset must not be taken for a drift, nor the sensor's reading
                     # through the present θ̂_D for evidence (x̂ = y_s/θ̂_D, x0 = y0/θ̂_D)
-                    self._y0, self._x0 = meas.position_m, xh
+                    est.reanchor(meas.position_m, xh)
                     self._rebase(td)
                     xh = self.xhat.x
                 elif not self.flow.flow_fault:
-                    pb.update(meas.position_m - self._y0, xh - self._x0)
-                    ps.update(abs(xh - self._x0) * self._inv_s_pos)
+                    pb.update(meas.position_m - est.y0, xh - est.x0)
+                    ps.update(abs(xh - est.x0) * self._inv_s_pos)
             elif not self.flow.flow_fault:  # under H_Q the position channel has nothing to explain
-                pb.update(meas.position_m - self._y0, xh - self._x0)
-                ps.update(abs(xh - self._x0) * self._inv_s_pos)
+                pb.update(meas.position_m - est.y0, xh - est.x0)
+                ps.update(abs(xh - est.x0) * self._inv_s_pos)
             tl = 1.0 if ss.guarded else sb.theta[ss.active]
-            self.k_loe_hat = tl
-            self.k_dft_hat = pb.theta[ps.active]
-            self.k_q_hat = 1.0
-            self._rebase(self.k_dft_hat)
+            est.set_channels(tl, pb.theta[ps.active])
+            self._rebase(est.k_dft)
             if self._flow_on:
                 self._flow_split(meas, y_v, tl)
                 self._watch(tl)
                 broken = gap and not resync
                 sensor = self.attribution.update(
-                    meas.position_m, self.k_dft_hat, ps.active, ps.guarded, broken, self._was_trusted
+                    meas.position_m, est.k_dft, ps.active, ps.guarded, broken, self._was_trusted
                 )
                 ramp = 1 if self.attribution.by_jump else self._ramp_n
                 self.set_position_nominal(not (sensor or self.flow.flow_fault), ramp)
+            self.k_loe_hat, self.k_dft_hat, self.k_q_hat = est.k_loe, est.k_dft, est.k_q
         else:
-            self.clock.dead_cycle(self.k_loe_hat / self.k_q_hat)
+            self.clock.dead_cycle(est.k_loe / est.k_q)
         cmd = self._close(meas)
         if meas.fresh:
             self._was_trusted = self.sensor_trusted and not self.nominal
@@ -170,27 +168,19 @@ class MmacController(LoopBase):
         return cmd
 
     def _rebase(self, theta: float) -> None:
-        """Keep x0 = y0/θ with θ = θ̂_D·k̂_Q in use: x̂ moves with x0 (x̂ − x0 is unchanged), so
-        it stays the absolute position while the sensor gain estimate changes; a failed-sensor
-        model (θ below ``sensor_failed_below``) leaves it where it is."""
-        if self.sensor_alive(theta) and not self.pos_sup.guarded:
-            x0 = self._y0 / theta
-            if abs(x0 - self._x0) > self._rebase_limit_m:
-                # a model that would put x̂ this far away at once does not describe the sensor
-                # (a model at 0.16 nothing attributed moved x̂ by 3 mm, campaign run 1453)
-                return
-            self.xhat.x += x0 - self._x0
-            self._x0 = x0
+        """:meth:`Estimates.rebase` on ``theta`` while the sensor is trusted (alive through it,
+        not guarded): a failed-sensor model leaves x̂ where it is."""
+        self.est.rebase(theta, self.sensor_alive(theta) and not self.pos_sup.guarded)
 
     def observe(self, meas: Measurement) -> None:
         """A sample superseded within this cycle: the sample clock steps the predictors on it."""
-        if self.clock.observe(meas, self.k_loe_hat / self.k_q_hat).gap and self._flow_on:
+        if self.clock.observe(meas, self.est.k_loe / self.est.k_q).gap and self._flow_on:
             self.flow.hold_off(self._flow_hold)
 
     def _bridge_gain(self) -> float | None:
         """θ̂_D when the position sensor may place x̂ across a redone span: trusted (not guarded,
         not failed) and not under the flow-gain hypothesis; else None."""
-        td = self.k_dft_hat
+        td = self.est.k_dft
         if self.pos_sup.guarded or not self.sensor_alive(td) or self.flow.flow_fault:
             return None
         return td
@@ -214,7 +204,7 @@ class MmacController(LoopBase):
             fl.restart()
             fl.hold_off(self._flow_hold)
         # x̂ moves with the creep, in its own units (x/k̂_Q: the sensor read through θ_prod)
-        self.xhat.creep_m_s = fl.creep.rate_m_s / prod if prod >= self._failed_below else 0.0
+        self.est.set_creep(fl.creep.rate_m_s / prod if prod >= self._failed_below else 0.0)
         if (fl.creep.rate_m_s != 0.0) != self._creep_on:
             self._creep_on = not self._creep_on
             self._restart_position(meas.position_m)
@@ -226,23 +216,17 @@ class MmacController(LoopBase):
             and not self.pos_sup.guarded
             and self._spool_age >= self._baseline_settle
         )
-        fl.update(
-            self.clock.echo, meas.load_pressure_pa, self._flow_theta_l(tl), prod, self.k_dft_hat, healthy
-        )
+        est = self.est
+        fl.update(self.clock.echo, meas.load_pressure_pa, self._flow_theta_l(tl), prod, est.k_dft, healthy)
         if fl.flow_fault:
-            self.k_q_hat = prod
-            self.k_loe_hat = tl * prod
-            self.k_dft_hat = 1.0
-            self.xhat.x = meas.position_m / prod
-            self._x0 = self._y0 / prod if prod >= self._failed_below else self._x0
+            est.enter_flow(meas.position_m, prod, tl)
             self._in_flow = True
         elif self._in_flow:  # back to H_D: the product is the sensor's gain (≈ 1 when it vanished)
             self._in_flow = False
-            self.xhat.x = meas.position_m / prod if prod >= self._failed_below else meas.position_m
-            self._x0 = self._y0 / prod if prod >= self._failed_below else self._y0
+            est.leave_flow(meas.position_m, prod)
             self.pos_bank.seed_ria(prod)
             self.pos_sup.force(self.pos_bank.ria)
-            self.k_dft_hat = self.pos_bank.theta[self.pos_bank.ria]
+            est.set_sensor_gain(self.pos_bank.theta[self.pos_bank.ria])
 
     def _restart_position(self, position_m: float) -> None:
         """The plant model changed (a creep came into use or left it): what the position channel
@@ -256,10 +240,8 @@ class MmacController(LoopBase):
         self.attribution.reset()
         self.flow.forget_attribution()
         self.monitor.reset()
-        self.xhat.x = position_m
-        self._y0 = self._x0 = position_m
+        self.est.restart(position_m)
         self.sensor_held_off = self._in_flow = False
-        self.k_q_hat = 1.0
         self.set_position_nominal(True, self._ramp_n)
 
     def _flow_theta_l(self, tl: float) -> float:
@@ -275,14 +257,15 @@ class MmacController(LoopBase):
         pb, sb = self.pos_bank, self.spool_bank
         pa, sa = self.pos_sup.active, self.spool_sup.active
         guarded = self._position_guarded()
-        at_limit = (pa >= pb.n_fixed and not guarded and self.k_dft_hat >= self._lim_d_hi) or (
+        est = self.est
+        at_limit = (pa >= pb.n_fixed and not guarded and est.k_dft >= self._lim_d_hi) or (
             sa >= sb.n_fixed and not self.spool_sup.guarded and tl <= self._lim_l_lo
         )
         fl = self.flow
         # the position check only where the sensor is read through θ̂_D: under the guard the loop
         # runs on x̂ (no model explains the sensor; θ_prod, fitted on the same sensor, neither)
         fresh = fl.product_fresh and not guarded
-        self.set_nominal(self.monitor.update(self.k_dft_hat * self.k_q_hat, fl.theta_prod, fresh, at_limit))
+        self.set_nominal(self.monitor.update(est.k_dft * est.k_q, fl.theta_prod, fresh, at_limit))
 
     def fallback_reason(self) -> int:
         """The monitor's reason while in fallback, else 0."""
