@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 
-from .tuning import ControlTuning
+from ..tuning import ControlTuning
 
 
 class CreepEstimator:

@@ -1,7 +1,7 @@
 """A position reading that jumps is the sensor's doing, never the flow gain's.
 
 Only ``k_DFT·k_Q`` is identifiable from the position and the spool; the load-pressure test
-(:mod:`.flowgain`) splits it, but needs tens of milliseconds of evidence. An abrupt sensor
+(:mod:`.pressure`) splits it, but needs tens of milliseconds of evidence. An abrupt sensor
 fault gives itself away sooner: the piston position is the integral of the flow, so whatever
 the flow gain does, the piston moves over one sample by between nothing and the full flow the
 spool commands, ``Δx ∈ [0, K_c·∫y_v]`` over the sample (the integral of the measured spool at the
@@ -9,7 +9,7 @@ nominal flow gain; a flow-gain *loss* k_Q ≤ 1 assumed). A sensor whose gain st
 jumps by ``(k' − k)·x`` in one sample instead.
 
 :class:`LevelJump` compares each contiguous sample's position increment ``Δy_s`` with that band
-scaled by the sensor's present increment gain θ_prod (:meth:`.FlowGainMonitor.product`):
+scaled by the sensor's present increment gain θ_prod (:meth:`.Increments.product`):
 the distance of ``Δy_s`` outside ``θ_prod·[0, K_c·∫y_v]``, in units of the increment noise σ̂ (an
 exponentially weighted RMS of ``Δy_s − θ_prod·K_c·∫y_v`` over the samples that did not jump), is the
 statistic; above ``jump_sigmas`` the reading jumped. A jump at a small position (a gain step
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 
-from .tuning import ControlTuning
+from ..tuning import ControlTuning
 
 
 class LevelJump:

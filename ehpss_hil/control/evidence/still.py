@@ -18,7 +18,7 @@ piston (against its end stop) would look the same; the plant here has no piston 
 
 from __future__ import annotations
 
-from .tuning import ControlTuning
+from ..tuning import ControlTuning
 
 
 class StillSensor:
