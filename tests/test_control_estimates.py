@@ -40,7 +40,7 @@ def test_rebase_refuses_an_untrusted_sensor_and_a_jump_beyond_the_limit() -> Non
 def test_flow_hypothesis_enters_and_leaves_without_moving_the_sensor_reading() -> None:
     e = _est()
     e.seed(2e-3)
-    e.set_channels(0.9, 0.8)
+    e.set_channels(0.9, 0.8, False)
     e.enter_flow(1.6e-3, 0.8, 0.9)
     assert (e.k_q, e.k_dft) == (0.8, 1.0) and e.k_loe == pytest.approx(0.72)
     assert e.xhat.x == pytest.approx(2e-3) and e.x0 == pytest.approx(2.5e-3)
@@ -50,7 +50,7 @@ def test_flow_hypothesis_enters_and_leaves_without_moving_the_sensor_reading() -
 
 def test_restart_and_dead_placement() -> None:
     e = _est()
-    e.set_channels(0.5, 0.5)
+    e.set_channels(0.5, 0.5, False)
     e.enter_flow(1e-3, 0.7, 0.5)
     e.restart(3e-4)
     assert (e.xhat.x, e.x0, e.y0, e.k_q) == (3e-4, 3e-4, 3e-4, 1.0)

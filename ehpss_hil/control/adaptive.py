@@ -19,8 +19,8 @@ from .base import Measurement, ValveCommand
 from .controllers import POSITION_SLOT0, SPOOL_SLOT0, LoopBase
 from .estimates import Estimates
 from .estimator import per_sample_gain
-from .evidence import Attribution, EvidenceLayer, EvidenceSample
-from .sampleclock import Advance, SampleClock
+from .evidence import EvidenceLayer
+from .sampleclock import SampleClock
 from .supervisor import Supervisor
 
 
@@ -42,6 +42,7 @@ class MmacController(LoopBase):
         )
         self.pos_sup = Supervisor(self.pos_bank, t, ts, guard_epsilon=t.position_guard_epsilon)
         self.est = Estimates(self.xhat, t.sensor_failed_below, t.rebase_limit * self.scale_pos_m)
+        self.clock = SampleClock(self.valve, self.xhat, None, t)
         self.evidence = EvidenceLayer(
             self.params.plant,
             ts,
@@ -50,11 +51,18 @@ class MmacController(LoopBase):
             self.est,
             (self.spool_bank, self.spool_sup),
             (self.pos_bank, self.pos_sup),
+            self.clock,
         )
         self._pressure = self.evidence.pressure
-        self._sample = EvidenceSample()
-        pm = self._pressure if t.flow_gain_test else None
-        self.clock = SampleClock(self.valve, self.xhat, pm, t)
+        if t.flow_gain_test:  # the sample clock steps the pressure model too
+            self.clock.pressure = self._pressure
+        # the loop's questions go straight to the evidence (no forwarding call per cycle)
+        ev = self.evidence
+        self._position_guarded = ev.position_guarded  # type: ignore[method-assign]
+        self._guarded_gain = ev.guarded_gain  # type: ignore[method-assign]
+        self._sensor_live = ev.sensor_live  # type: ignore[method-assign]
+        self._sensor_dead = ev.sensor_dead  # type: ignore[method-assign]
+        self._sensor_follows_spool = ev.sensor_follows_spool  # type: ignore[method-assign]
         self._flow_on = t.flow_gain_test
         self._stop_hold = max(1, round(t.spool_stop_hold_s / ts))
         self._inv_s_spool = 1.0 / self.scale_spool_m
@@ -82,18 +90,25 @@ class MmacController(LoopBase):
             tl_prev = est.k_loe / est.k_q
             self.valve.stop_m = self.stroke_m / max(tl_prev, self.min_theta_l)
             seeding = self.clock.seed
-            adv = self.clock.sample(meas, tl_prev, self._bridge_gain())
+            gap, resync, v, xh = self.clock.sample(meas, tl_prev, self._bridge_gain())
             if seeding:
                 est.seed(meas.position_m)
-            if adv.gap:
+            if gap:
                 self.evidence.gap()
-            stopped = self._spool_channel(meas, adv, tl_prev)
-            self._position_channel(meas, adv, stopped)
+            broken = gap and not resync
+            self._banks(meas, v, xh, tl_prev, broken)
             tl = 1.0 if self.spool_sup.guarded else self.spool_bank.theta[self.spool_sup.active]
-            est.set_channels(tl, self.pos_bank.theta[self.pos_sup.active])
-            self._rebase(est.k_dft)
+            td = self.pos_bank.theta[self.pos_sup.active]
+            est.set_channels(tl, td, self.sensor_alive(td) and not self.pos_sup.guarded)
             if self._flow_on:
-                self._take(self.evidence.update(self._fill(meas, adv, tl)))
+                att = self.evidence.update(
+                    meas, tl, self._spool_hold == 0, self._warm_left > 0, broken, self._was_trusted
+                )
+                if att.restarted:  # the raw sensor, not held off, after a restart
+                    self.sensor_held_off = False
+                    self.set_position_nominal(True, self._ramp_n)
+                self.set_nominal(att.fallback)
+                self.set_position_nominal(att.position_nominal, att.ramp_samples)
             self.k_loe_hat, self.k_dft_hat, self.k_q_hat = est.k_loe, est.k_dft, est.k_q
         else:
             self.clock.dead_cycle(est.k_loe / est.k_q)
@@ -104,74 +119,40 @@ class MmacController(LoopBase):
         self.clock.commanded(sent, meas.command_sent)
         return cmd
 
-    def _spool_channel(self, meas: Measurement, adv: Advance, tl_prev: float) -> bool:
-        """The spool bank on this sample, unless the spool is at or just off its stop, or a gap
-        the predictors could not redo (the valve model was dead-reckoned): not evidence until
-        the model's error has died out. Then the still sensor (a stop phase). Returns whether
-        the spool channel took no evidence (stopped)."""
+    def _banks(self, meas: Measurement, v: float, xh: float, tl_prev: float, broken: bool) -> None:
+        """Both banks on this sample (v: the commanded spool, xh: x̂, m). The spool bank takes
+        no evidence at or just off the spool's stop, nor after a gap the predictors could not
+        redo (``broken``: the valve model was dead-reckoned), until the model's error has died
+        out. The still sensor watches the stop phases. The position bank has nothing to explain
+        under H_Q; after x̂ missed samples, was dead-reckoned, or integrated a spool slamming
+        into its stop (a transient no model of the valve follows exactly) it re-anchors on the
+        trusted sensor and starts over from here (a dead-reckoned offset is no drift)."""
         y_v = meas.spool_m
         lvl = self._stop_level_m
         at_stop = y_v >= lvl or y_v <= -lvl
-        if at_stop or abs(tl_prev * adv.v) >= lvl or (adv.gap and not adv.resync):
+        if at_stop or abs(tl_prev * v) >= lvl or broken:
             self._spool_hold = self._stop_hold
             self.evidence.spool_stop()
         stopped = self._spool_hold > 0
         if stopped:  # at or just off the stop: not evidence of k_LOE
             self._spool_hold -= 1
         else:
-            self.spool_bank.update(y_v, adv.v)
-            self.spool_sup.update(abs(adv.v) * self._inv_s_spool)
-        if self.evidence.stop_phase(at_stop, y_v, meas.position_m, adv.x):
+            self.spool_bank.update(y_v, v)
+            self.spool_sup.update(abs(v) * self._inv_s_spool)
+        if self.evidence.stop_phase(at_stop, y_v, meas.position_m, xh):
             self.sensor_held_off = True  # found dead: held off, x̂ placed (Estimates.place_dead)
-        return stopped
-
-    def _position_channel(self, meas: Measurement, adv: Advance, stopped: bool) -> None:
-        """The position bank on this sample (nothing to explain under H_Q). After x̂ missed
-        samples, was dead-reckoned, or integrated a spool slamming into its stop (a transient no
-        model of the valve follows exactly): re-anchor on the trusted sensor and start the
-        regression over from here (a dead-reckoned offset must not be taken for a drift)."""
-        est, pb, ps = self.est, self.pos_bank, self.pos_sup
+            xh = self.xhat.x
+        est = self.est
         flow = self._pressure.flow_fault
-        xh = self.xhat.x
-        if (adv.gap and not adv.resync) or stopped:
+        if broken or stopped:
             td = est.k_dft
-            if not ps.guarded and self.sensor_alive(td) and not flow:
+            if not self.pos_sup.guarded and self.sensor_alive(td) and not flow:
                 est.reanchor(meas.position_m, xh)
-                self._rebase(td)
+                est.rebase(td, True)  # trusted: checked just above
                 return
         if not flow:
-            pb.update(meas.position_m - est.y0, xh - est.x0)
-            ps.update(abs(xh - est.x0) * self._inv_s_pos)
-
-    def _fill(self, meas: Measurement, adv: Advance, tl: float) -> EvidenceSample:
-        """This fresh sample as the evidence takes it (the one sample object, rewritten)."""
-        s = self._sample
-        s.position_m = meas.position_m
-        s.spool_m = meas.spool_m
-        s.load_pressure_pa = meas.load_pressure_pa
-        s.echo_a = self.clock.echo
-        s.k_loe = tl
-        s.span = self.clock.span
-        s.excited = self._spool_hold == 0
-        s.warm = self._warm_left > 0
-        s.broken = adv.gap and not adv.resync
-        s.trusted = self._was_trusted
-        return s
-
-    def _take(self, att: Attribution) -> None:
-        """What the evidence concluded, into the loop: a restarted position channel feeds the
-        raw sensor back (not held off), the monitor's fallback, and the sensor compensated or
-        fed back raw (at once when a jump explains the model)."""
-        if att.restarted:
-            self.sensor_held_off = False
-            self.set_position_nominal(True, self._ramp_n)
-        self.set_nominal(att.fallback)
-        self.set_position_nominal(att.position_nominal, att.ramp_samples)
-
-    def _rebase(self, theta: float) -> None:
-        """:meth:`Estimates.rebase` on ``theta`` while the sensor is trusted (alive through it,
-        not guarded): a failed-sensor model leaves x̂ where it is."""
-        self.est.rebase(theta, self.sensor_alive(theta) and not self.pos_sup.guarded)
+            self.pos_bank.update(meas.position_m - est.y0, xh - est.x0)
+            self.pos_sup.update(abs(xh - est.x0) * self._inv_s_pos)
 
     def observe(self, meas: Measurement) -> None:
         """A sample superseded within this cycle: the sample clock steps the predictors on it."""
@@ -194,21 +175,6 @@ class MmacController(LoopBase):
     def fallback_count(self) -> int:
         """The monitor's fallbacks since start-up."""
         return self.evidence.monitor.fallbacks
-
-    def _position_guarded(self) -> bool:
-        return self.evidence.position_guarded()
-
-    def _guarded_gain(self) -> float | None:
-        return self.evidence.guarded_gain()
-
-    def _sensor_live(self) -> bool:
-        return self.evidence.sensor_live()
-
-    def _sensor_dead(self) -> bool:
-        return self.evidence.sensor_dead()
-
-    def _sensor_follows_spool(self) -> bool:
-        return self.evidence.sensor_follows_spool()
 
     def index_values(self) -> list[float]:
         """J of the spool models then the position models."""

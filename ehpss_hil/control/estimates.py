@@ -48,11 +48,17 @@ class Estimates:
         """x̂ moves with the creep, in its own units (m/s of x/k̂_Q: the sensor read through θ_prod)."""
         self.xhat.creep_m_s = rate_m_s
 
-    def set_channels(self, k_loe: float, k_dft: float) -> None:
-        """The banks' estimates in use (spool channel, position channel); k̂_Q back to 1."""
+    def set_channels(self, k_loe: float, k_dft: float, trusted: bool) -> None:
+        """The banks' estimates in use (spool channel, position channel), k̂_Q back to 1, and
+        x̂ re-based on the sensor gain (:meth:`rebase`, while the sensor is ``trusted``)."""
         self.k_loe = k_loe
         self.k_dft = k_dft
         self.k_q = 1.0
+        if trusted:  # rebase(k_dft, True), spelled out: this runs on every sample
+            x0 = self.y0 / k_dft
+            if not abs(x0 - self.x0) > self._rebase_limit_m:
+                self.xhat.x += x0 - self.x0
+                self.x0 = x0
 
     def reanchor(self, position_m: float, x_hat_m: float) -> None:
         """Start the position regression over from the trusted sensor at ``position_m`` with x̂

@@ -5,7 +5,7 @@ test, the do-no-harm monitor, the jump attribution, the still sensor — and run
 fixed order per fresh sample (:mod:`.layer`); :class:`Attribution` is what it concludes.
 """
 
-from .layer import Attribution, EvidenceLayer, EvidenceSample, Hypothesis
+from .layer import Attribution, EvidenceLayer, Hypothesis
 from .monitor import FallbackReason
 
-__all__ = ["Attribution", "EvidenceLayer", "EvidenceSample", "FallbackReason", "Hypothesis"]
+__all__ = ["Attribution", "EvidenceLayer", "FallbackReason", "Hypothesis"]

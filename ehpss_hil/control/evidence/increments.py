@@ -62,7 +62,9 @@ class Increments:
         "_ys",
         "creep",
         "creep_integral_m",
+        "product_fresh",
         "product_settled",
+        "product_updated",
         "spool_integral_m",
         "still_samples",
         "theta_prod",
@@ -113,6 +115,10 @@ class Increments:
         #: flow gain), as of the last :meth:`product` call
         self.spool_integral_m = self._prev = 0.0
         self._stale = 0  # updates since the product estimate last had an excited increment
+        #: θ_prod had an excited increment within the last M updates
+        self.product_fresh = True
+        #: θ_prod took an excited increment on the last :meth:`product` call
+        self.product_updated = True
         self._anchor = math.inf  # θ_prod where the present run of settled updates began
         self._nsettled = 0  # excited updates since, each within min_deviation/2 of it
         #: the last M excited increments left θ_prod within ``min_deviation``/2 of where they
@@ -123,16 +129,6 @@ class Increments:
     def increment_window(self) -> int:
         """M, the samples an increment spans."""
         return self._m
-
-    @property
-    def product_fresh(self) -> bool:
-        """θ_prod had an excited increment within the last M updates."""
-        return self._stale <= self._m
-
-    @property
-    def product_updated(self) -> bool:
-        """θ_prod took an excited increment on the last :meth:`product` call."""
-        return self._stale == 0
 
     def note_jump(self) -> None:
         """The reading jumped on the last sample: the increments spanning it teach no creep."""
@@ -185,4 +181,7 @@ class Increments:
             else:  # moved off: a new run of updates starts here
                 self._anchor, self._nsettled = self.theta_prod, 0
                 self.product_settled = False
+        stale = self._stale
+        self.product_fresh = stale <= self._m
+        self.product_updated = stale == 0
         return self.theta_prod

@@ -22,8 +22,9 @@ The **still sensor** (:class:`.StillSensor`) is the one piece that runs before t
 bank (:meth:`EvidenceLayer.stop_phase`): a sensor found dead moves x̂, and the position bank
 must regress on that x̂ on the same sample.
 
-The result is one :class:`Attribution` record (one object, rewritten on each update: read it
-before the next). The loop asks the layer, while it closes, for the gain to read a guarded
+Its input is the fresh sample (the :class:`~ehpss_hil.control.base.Measurement`) and the loop's
+state around it; the result is one :class:`Attribution` record (one object, rewritten on each
+update: read it before the next). The loop asks the layer, while it closes, for the gain to read a guarded
 sensor through (:meth:`~EvidenceLayer.guarded_gain`) and whether the sensor is live, dead or
 follows the spool: questions on the same state.
 """
@@ -35,7 +36,9 @@ from enum import IntEnum
 
 from ...physics.params import PlantParams
 from ..bank import ScalarBank
+from ..base import Measurement
 from ..estimates import Estimates
+from ..sampleclock import SampleClock
 from ..supervisor import Supervisor
 from ..tuning import ControlTuning
 from .attribution import SensorAttribution
@@ -51,35 +54,6 @@ class Hypothesis(IntEnum):
     NONE = 0  #: nothing attributed: the raw sensor is fed back (the estimates kept)
     SENSOR = 1  #: the sensor's (H_D decided, or a jump explains the model): compensate it
     FLOW = 2  #: the flow gain's (H_Q): k̂_Q = θ_prod, the sensor healthy
-
-
-class EvidenceSample:
-    """One fresh sample as the evidence takes it (one object, filled by the controller)."""
-
-    __slots__ = (
-        "broken",
-        "echo_a",
-        "excited",
-        "k_loe",
-        "load_pressure_pa",
-        "position_m",
-        "span",
-        "spool_m",
-        "trusted",
-        "warm",
-    )
-
-    def __init__(self) -> None:
-        self.position_m = 0.0  #: the position sensor (m)
-        self.spool_m = 0.0  #: the spool LVDT (m)
-        self.load_pressure_pa = 0.0  #: P_L (Pa)
-        self.echo_a = 0.0  #: the current echo the pressure model steps on (A)
-        self.k_loe = 1.0  #: the spool channel's k̂_LOE in use
-        self.span = 1  #: sensor samples this one stands for (the sample clock's)
-        self.excited = True  #: the spool not at or just off its stop
-        self.warm = False  #: the loop still in its warm-up
-        self.broken = False  #: samples were missed and not redone
-        self.trusted = True  #: the loop fed the sensor back at the last fresh sample
 
 
 class Attribution:
@@ -117,12 +91,16 @@ class EvidenceLayer:
         estimates: Estimates,
         spool: tuple[ScalarBank, Supervisor],
         position: tuple[ScalarBank, Supervisor],
+        clock: SampleClock,
     ) -> None:
         """``scale_spool_m``: the nominal spool amplitude S (m); ``estimates``: the estimator
         state the decisions are applied to; ``spool``, ``position``: the channels' bank and
-        supervisor (read; the position channel is restarted or re-seeded by the evidence)."""
+        supervisor (read; the position channel is restarted or re-seeded by the evidence);
+        ``clock``: the sample clock (the current echo, the samples a sample stands for; it
+        steps :attr:`pressure`'s model when the flow-gain test is on)."""
         t = tuning
         self.est = estimates
+        self.clock = clock
         self.spool_bank, self.spool_sup = spool
         self.pos_bank, self.pos_sup = position
         self.inc = Increments(plant, ts_s, scale_spool_m, t)
@@ -138,6 +116,7 @@ class EvidenceLayer:
             t.monitor_sensor_alive,
         )
         self.record = Attribution()
+        self._hyp = (Hypothesis.NONE, Hypothesis.SENSOR, Hypothesis.FLOW)  # looked up once
         self._on = t.flow_gain_test
         self._failed_below = t.sensor_failed_below
         self._alive = t.monitor_sensor_alive
@@ -188,29 +167,52 @@ class EvidenceLayer:
         return True
 
     # ---- after both banks ------------------------------------------------------------------
-    def update(self, s: EvidenceSample) -> Attribution:
-        """One fresh sample after both banks: the pieces in the module's order; the record."""
+    def update(
+        self, meas: Measurement, k_loe: float, excited: bool, warm: bool, broken: bool, trusted: bool
+    ) -> Attribution:
+        """One fresh sample after both banks: the pieces in the module's order; the record.
+        ``k_loe``: the spool channel's k̂_LOE in use; ``excited``: the spool not at or just off
+        its stop; ``warm``: the loop still in its warm-up; ``broken``: samples were missed and
+        not redone; ``trusted``: the loop fed the sensor back at the last fresh sample. The
+        current echo and the samples this one stands for come from the sample clock."""
         rec = self.record
         rec.restarted = False
-        prod = self._increments(s)
-        self._pressure(s, prod)
-        rec.fallback = self._watch(s.k_loe)
+        prod = self._increments(meas, excited)
+        # the pressure test, and H_Q entered or left in the estimates
+        est, pt = self.est, self.pressure
+        fresh = self.inc.product_fresh
+        healthy = (
+            not warm
+            and not self.spool_sup.guarded
+            and not self.pos_sup.guarded
+            and self._spool_age >= self._baseline_settle
+        )
+        theta_l = self._pressure_theta_l(k_loe, warm)
+        pt.update(self.clock.echo, meas.load_pressure_pa, theta_l, prod, est.k_dft, healthy, fresh)
+        if pt.flow_fault:
+            est.enter_flow(meas.position_m, prod, k_loe)
+            self._in_flow = True
+        elif self._in_flow:  # back to H_D: the product is the sensor's gain (≈ 1 when it vanished)
+            self._in_flow = False
+            est.leave_flow(meas.position_m, prod)
+            self.pos_bank.seed_ria(prod)
+            self.pos_sup.force(self.pos_bank.ria)
+            est.set_sensor_gain(self.pos_bank.theta[self.pos_bank.ria])
+        rec.fallback = self._watch(k_loe, fresh)
         rec.reason = self.monitor.reason
         ps = self.pos_sup
-        sensor = self.attribution.update(
-            s.position_m, self.est.k_dft, ps.active, ps.guarded, s.broken, s.trusted
-        )
-        flow = self.pressure.flow_fault
+        sensor = self.attribution.update(meas.position_m, est.k_dft, ps.active, ps.guarded, broken, trusted)
+        flow = pt.flow_fault
         rec.position_nominal = not (sensor or flow)
         rec.ramp_samples = 1 if self.attribution.by_jump else self._ramp_n
-        rec.hypothesis = Hypothesis.FLOW if flow else (Hypothesis.SENSOR if sensor else Hypothesis.NONE)
-        rec.k_q = self.est.k_q
+        rec.hypothesis = self._hyp[2 if flow else (1 if sensor else 0)]
+        rec.k_q = est.k_q
         return rec
 
-    def _increments(self, s: EvidenceSample) -> float:
+    def _increments(self, meas: Measurement, excited: bool) -> float:
         """θ_prod and the creep on this sample; x̂ moves with the creep (in x/k̂_Q units)."""
         inc = self.inc
-        prod = inc.product(s.position_m, s.spool_m, s.span, s.excited)
+        prod = inc.product(meas.position_m, meas.spool_m, self.clock.span, excited)
         if self.dead and inc.product_updated:
             self._dead_evidence += 1
         spool_model = self.spool_sup.active
@@ -224,31 +226,10 @@ class EvidenceLayer:
         self.est.set_creep(rate / prod if prod >= self._failed_below else 0.0)
         if (rate != 0.0) != self._creep_on:
             self._creep_on = not self._creep_on
-            self._restart_position(s.position_m)
+            self._restart_position(meas.position_m)
         self._spool_age = self._spool_age + 1 if spool_model == self._spool_age_model else 0
         self._spool_age_model = spool_model
         return prod
-
-    def _pressure(self, s: EvidenceSample, prod: float) -> None:
-        """The pressure test on this sample, and H_Q entered or left in the estimates."""
-        healthy = (
-            not s.warm
-            and not self.spool_sup.guarded
-            and not self.pos_sup.guarded
-            and self._spool_age >= self._baseline_settle
-        )
-        est, pt = self.est, self.pressure
-        theta_l = self._pressure_theta_l(s.k_loe, s.warm)
-        pt.update(s.echo_a, s.load_pressure_pa, theta_l, prod, est.k_dft, healthy, self.inc.product_fresh)
-        if pt.flow_fault:
-            est.enter_flow(s.position_m, prod, s.k_loe)
-            self._in_flow = True
-        elif self._in_flow:  # back to H_D: the product is the sensor's gain (≈ 1 when it vanished)
-            self._in_flow = False
-            est.leave_flow(s.position_m, prod)
-            self.pos_bank.seed_ria(prod)
-            self.pos_sup.force(self.pos_bank.ria)
-            est.set_sensor_gain(self.pos_bank.theta[self.pos_bank.ria])
 
     def _restart_position(self, position_m: float) -> None:
         """The plant model changed (a creep came into use or left it): what the position channel
@@ -275,7 +256,7 @@ class EvidenceLayer:
             return self.spool_bank.theta[j.index(min(j))]
         return k_loe
 
-    def _watch(self, k_loe: float) -> bool:
+    def _watch(self, k_loe: float, product_fresh: bool) -> bool:
         """The do-no-harm monitor on this sample; True: compensate nominally."""
         pb, sb = self.pos_bank, self.spool_bank
         pa, sa = self.pos_sup.active, self.spool_sup.active
@@ -284,11 +265,10 @@ class EvidenceLayer:
         at_limit = (pa >= pb.n_fixed and not guarded and est.k_dft >= self._lim_d_hi) or (
             sa >= sb.n_fixed and not self.spool_sup.guarded and k_loe <= self._lim_l_lo
         )
-        inc = self.inc
         # the position check only where the sensor is read through θ̂_D: under the guard the loop
         # runs on x̂ (no model explains the sensor; θ_prod, fitted on the same sensor, neither)
-        fresh = inc.product_fresh and not guarded
-        return self.monitor.update(est.k_dft * est.k_q, inc.theta_prod, fresh, at_limit)
+        fresh = product_fresh and not guarded
+        return self.monitor.update(est.k_dft * est.k_q, self.inc.theta_prod, fresh, at_limit)
 
     # ---- questions the loop asks while it closes -------------------------------------------
     def position_guarded(self) -> bool:
