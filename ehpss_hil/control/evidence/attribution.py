@@ -32,9 +32,8 @@ from __future__ import annotations
 import math
 
 from ..tuning import ControlTuning
-from .increments import Increments
 from .jump import LevelJump
-from .pressure import PressureTest
+from .protocols import IncrementEvidence, PressureEvidence
 
 
 class SensorAttribution:
@@ -65,8 +64,8 @@ class SensorAttribution:
 
     def __init__(
         self,
-        inc: Increments,
-        pressure: PressureTest,
+        inc: IncrementEvidence,
+        pressure: PressureEvidence,
         ts_s: float,
         failed_below: float,
         tuning: ControlTuning | None = None,

@@ -22,6 +22,9 @@ The **still sensor** (:class:`.StillSensor`) is the one piece that runs before t
 bank (:meth:`EvidenceLayer.stop_phase`): a sensor found dead moves x̂, and the position bank
 must regress on that x̂ on the same sample.
 
+Each piece is held behind its protocol (:mod:`.protocols`): replacing one is a change in one
+place.
+
 Its input is the fresh sample (the :class:`~ehpss_hil.control.base.Measurement`) and the loop's
 state around it; the result is one :class:`Attribution` record (one object, rewritten on each
 update: read it before the next). The loop asks the layer, while it closes, for the gain to read a guarded
@@ -45,6 +48,7 @@ from .attribution import SensorAttribution
 from .increments import Increments
 from .monitor import FallbackReason, HarmMonitor
 from .pressure import PressureTest
+from .protocols import HarmEvidence, IncrementEvidence, JumpEvidence, PressureEvidence, StillEvidence
 from .still import StillSensor
 
 
@@ -103,11 +107,13 @@ class EvidenceLayer:
         self.clock = clock
         self.spool_bank, self.spool_sup = spool
         self.pos_bank, self.pos_sup = position
-        self.inc = Increments(plant, ts_s, scale_spool_m, t)
-        self.pressure = PressureTest(plant, ts_s, t)
-        self.still = StillSensor(plant.velocity_gain_1_s, ts_s, t)
-        self.attribution = SensorAttribution(self.inc, self.pressure, ts_s, t.sensor_failed_below, t)
-        self.monitor = HarmMonitor(
+        self.inc: IncrementEvidence = Increments(plant, ts_s, scale_spool_m, t)
+        self.pressure: PressureEvidence = PressureTest(plant, ts_s, t)
+        self.still: StillEvidence = StillSensor(plant.velocity_gain_1_s, ts_s, t)
+        self.attribution: JumpEvidence = SensorAttribution(
+            self.inc, self.pressure, ts_s, t.sensor_failed_below, t
+        )
+        self.monitor: HarmEvidence = HarmMonitor(
             t.flow_gain_min_deviation,
             t.increment_window,
             round(t.monitor_confirm_s / ts_s),
