@@ -91,3 +91,58 @@ def test_a_gate_set_in_the_config_is_loaded_and_an_unknown_key_refused(tmp_path:
         with pytest.raises(ConfigError) as exc:
             load_controller_config(bad)
         assert exc.value.key_path == key
+
+
+def _fingerprint(obj: object, seen: set[int] | None = None, depth: int = 0) -> list[object]:
+    """Every number a configured controller holds (its objects walked through ``__dict__`` and
+    ``__slots__``), the tuning and the params themselves left out."""
+    seen = set() if seen is None else seen
+    if id(obj) in seen or depth > 6:
+        return []
+    seen.add(id(obj))
+    names = list(getattr(obj, "__dict__", {}))
+    for klass in type(obj).__mro__:
+        slots = klass.__dict__.get("__slots__", ())
+        names += [slots] if isinstance(slots, str) else list(slots)
+    out: list[object] = []
+    for name in sorted(set(names)):
+        if name in ("tuning", "params") or not hasattr(obj, name):
+            continue
+        v = getattr(obj, name)
+        if callable(v) and not hasattr(v, "__dict__") and not hasattr(v, "__slots__"):
+            continue
+        if isinstance(v, bool | int | float | str):
+            out.append((name, v))
+        elif isinstance(v, tuple | list) and all(isinstance(x, int | float) for x in v):
+            out.append((name, tuple(v)))
+        elif hasattr(v, "__dict__") or hasattr(type(v), "__slots__"):
+            out += _fingerprint(v, seen, depth + 1)
+    return out
+
+
+def _perturbed(name: str, value: object) -> object:
+    if isinstance(value, bool):
+        return not value
+    if isinstance(value, int):
+        return value + 1
+    if isinstance(value, float):
+        return value * 0.8 if value else 0.01
+    assert isinstance(value, tuple)
+    return (value[0] * 0.8 if value[0] else 0.01, *value[1:])
+
+
+@pytest.mark.parametrize("name", [f.name for f in dataclasses.fields(ControlTuning)])
+def test_every_gate_is_read_by_a_controller(name: str) -> None:
+    """Changing the gate changes what some mode holds once configured: the code reads it from
+    the tuning (a copy of the number elsewhere would leave the controllers as they were)."""
+    from ehpss_hil.control.registry import MODES, make_controller
+    from ehpss_hil.physics.load import load_params
+
+    params = load_params()
+    base = ControlTuning()
+    other = dataclasses.replace(base, **{name: _perturbed(name, getattr(base, name))})
+    assert any(
+        _fingerprint(make_controller(m, params, 1e-3, base))
+        != _fingerprint(make_controller(m, params, 1e-3, other))
+        for m in MODES
+    )
