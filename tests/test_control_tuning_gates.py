@@ -7,6 +7,7 @@ import ast
 import dataclasses
 import importlib
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -120,7 +121,7 @@ def _fingerprint(obj: object, seen: set[int] | None = None, depth: int = 0) -> l
     return out
 
 
-def _perturbed(name: str, value: object) -> object:
+def _perturbed(name: str, value: object) -> Any:
     if isinstance(value, bool):
         return not value
     if isinstance(value, int):
