@@ -27,9 +27,9 @@ place.
 
 Its input is the fresh sample (the :class:`~ehpss_hil.control.base.Measurement`) and the loop's
 state around it; the result is one :class:`Attribution` record (one object, rewritten on each
-update: read it before the next). The loop asks the layer, while it closes, for the gain to read a guarded
-sensor through (:meth:`~EvidenceLayer.guarded_gain`) and whether the sensor is live, dead or
-follows the spool: questions on the same state.
+update: read it before the next). The loop asks the layer, while it closes, for the gain to
+read a guarded sensor through (:meth:`~EvidenceLayer.guarded_gain`) and whether the sensor is
+live, dead or follows the spool: questions on the same state.
 """
 
 from __future__ import annotations
