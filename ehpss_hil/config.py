@@ -189,7 +189,7 @@ class ControllerConfig:
                 "rt.sensor_age_us",
                 f"must be below half a period ({0.5e6 / self.rate_hz:g} µs at rate_hz {self.rate_hz:g})",
             )
-        for key in ("k_loe_limits", "k_dft_limits"):
+        for key in ("k_loe_limits", "k_dft_limits", "baseline_limits"):
             lo, hi = getattr(self.tuning, key)
             if not lo < hi:
                 raise ConfigError(

@@ -23,6 +23,7 @@ from .limits import (
 )
 from .physics.faults import FaultState
 from .physics.fmumap import ACTUATOR_FAULTS
+from .physics.params import PlantParams
 from .physics.plantspec import PlantSpec
 from .schema import build, load_yaml, rng
 from .trajectory import ReferenceTable, load_reference_table
@@ -109,11 +110,12 @@ class Reference:
 
     @property
     def spool_amplitude_m(self) -> float:
-        """Nominal spool amplitude this reference needs, r·ω/K_c with K_c = 3.288 1/s (m).
+        """Nominal spool amplitude this reference needs, r·ω/K_c with K_c of the default plant
+        (:attr:`PlantParams.velocity_gain_1_s`, 3.288 1/s) (m).
 
         For steps and ramps (no ω) the rate-equivalent amplitude is used.
         """
-        k_c = 1.031e8 / 3.136e7
+        k_c = PlantParams().velocity_gain_1_s
         if self.kind == "sine":
             return self.amplitude_m * max(self.omega_rad_s, 1.0) / k_c
         if self.kind in ("ramp", "trapezoid"):

@@ -33,10 +33,23 @@ def rng(
     lo_open: bool = False,
     length: tuple[int, int] | None = None,
     doc: str = "",
+    unit: str = "",
+    origin: str = "",
 ) -> dict[str, Any]:
     """Field metadata for a numeric range ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); for a
-    tuple field the range applies to each item and ``length`` bounds the number of items."""
-    return {"min": lo, "max": hi, "lo_open": lo_open, "length": length, "doc": doc}
+    tuple field the range applies to each item and ``length`` bounds the number of items.
+    ``unit`` (``"s"``, ``"A"``, ``"1"`` for dimensionless …) and ``origin`` (where the value
+    comes from: a derivation, or the measurement that fixed it) document a gate; the loader
+    does not use them."""
+    return {
+        "min": lo,
+        "max": hi,
+        "lo_open": lo_open,
+        "length": length,
+        "doc": doc,
+        "unit": unit,
+        "origin": origin,
+    }
 
 
 def _join(path: str, key: object) -> str:

@@ -1,14 +1,16 @@
-"""Whose is a position-model change (control/attribution.py): the sensor's only on independent
+"""Whose is a position-model change (control/evidence/attribution.py): the sensor's only on independent
 evidence: a change made with the piston at rest from a model that agreed with the increments,
 or a jump of the reading whose gain ratio the new model matches. Driven through the real
-increment regression (:class:`FlowGainMonitor`) with synthetic readings; samples are counted."""
+increment regression (:class:`Increments`) with synthetic readings; samples are counted."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ehpss_hil.control.attribution import JUMP_HOLD_S, SensorAttribution
-from ehpss_hil.control.flowgain import FlowGainMonitor
+from ehpss_hil.control.evidence.attribution import SensorAttribution
+from ehpss_hil.control.evidence.increments import Increments
+from ehpss_hil.control.evidence.pressure import PressureTest
+from ehpss_hil.control.tuning import ControlTuning
 from ehpss_hil.physics.load import load_params
 
 PARAMS = load_params()
@@ -22,8 +24,9 @@ class Rig:
     noise); the attribution is fed the position model ``theta_d`` the caller says is in use."""
 
     def __init__(self) -> None:
-        self.flow = FlowGainMonitor(PARAMS.plant, TS, SPOOL_M)
-        self.att = SensorAttribution(self.flow, TS, 0.15)
+        self.inc = Increments(PARAMS.plant, TS, SPOOL_M)
+        self.pt = PressureTest(PARAMS.plant, TS)
+        self.att = SensorAttribution(self.inc, self.pt, TS, 0.15)
         self.x = 1e-3
         self.spool = 0.0
         self.rng = np.random.default_rng(3)
@@ -36,8 +39,9 @@ class Rig:
             self.x += K_C * 0.5 * (spool_m + self.spool) * TS  # the spool integral, trapezoidal
             self.spool = spool_m
             y = gain * self.x + 5e-7 * self.rng.standard_normal()
-            self.flow.product(y, spool_m)
-            self.flow.update(0.0, 0.0, 1.0, self.flow.theta_prod, theta_d)  # no pressure evidence
+            self.inc.product(y, spool_m)
+            # no pressure evidence
+            self.pt.update(0.0, 0.0, 1.0, self.inc.theta_prod, theta_d, fresh=self.inc.product_fresh)
             out.append(self.att.update(y, theta_d, model, False, False, True))
         return out
 
@@ -45,16 +49,16 @@ class Rig:
 def test_nothing_is_attributed_while_the_model_and_the_increments_agree_on_1() -> None:
     r = Rig()
     assert not any(r.run(300, 1.0))
-    assert not r.flow.sensor_decided
+    assert not r.pt.sensor_decided
 
 
 def test_a_model_change_at_rest_from_agreement_is_the_sensors() -> None:
     r = Rig()
     r.run(300, 1.0)
     r.run(50, 1.0, spool_m=0.0)  # at rest: θ_prod goes stale
-    assert not r.flow.product_fresh
+    assert not r.inc.product_fresh
     assert r.run(1, 0.8, spool_m=0.0) == [True]
-    assert r.flow.sensor_decided
+    assert r.pt.sensor_decided
 
 
 def test_a_model_still_adapting_when_the_motion_stops_is_not_attributed_at_rest() -> None:
@@ -64,23 +68,23 @@ def test_a_model_still_adapting_when_the_motion_stops_is_not_attributed_at_rest(
     r.run(300, 0.9)
     r.run(50, 0.9, spool_m=0.0)
     assert r.run(1, 0.8, spool_m=0.0) == [False]
-    assert not r.flow.sensor_decided
+    assert not r.pt.sensor_decided
 
 
 def test_a_jump_attributes_the_model_change_it_explains_and_only_that() -> None:
-    hold = round(JUMP_HOLD_S / TS)
+    hold = round(ControlTuning().jump_hold_s / TS)
     r = Rig()
     r.run(300, 1.0)
     r.run(3, 1.0, gain=0.8)  # the reading jumps to 0.8·x; the bank has not switched yet
-    assert not r.flow.sensor_decided
+    assert not r.pt.sensor_decided
     assert r.run(1, 0.8, gain=0.8) == [True]  # the bank's new model: the jump's ratio
-    assert r.flow.sensor_decided
+    assert r.pt.sensor_decided
 
     r = Rig()
     r.run(300, 1.0)
     r.run(3, 1.0, gain=0.8)
     assert r.run(hold, 0.6, gain=0.8) == [False] * hold  # a change the jump does not explain
-    assert not r.flow.sensor_decided
+    assert not r.pt.sensor_decided
 
 
 def test_a_jump_inside_the_pressure_tests_band_is_compensated_while_the_model_stays() -> None:
@@ -89,7 +93,7 @@ def test_a_jump_inside_the_pressure_tests_band_is_compensated_while_the_model_st
     r.run(300, 1.0)
     r.run(2, 1.0, gain=1.03)
     assert r.run(5, 1.03, gain=1.03) == [True] * 5
-    assert r.run(1, 1.06, gain=1.03) == [r.flow.sensor_favoured]  # moved off: the jump no longer speaks
+    assert r.run(1, 1.06, gain=1.03) == [r.pt.sensor_favoured]  # moved off: the jump no longer speaks
 
 
 def test_a_switch_without_evidence_does_not_inherit_the_last_attribution() -> None:
@@ -102,4 +106,4 @@ def test_a_switch_without_evidence_does_not_inherit_the_last_attribution() -> No
     assert r.run(5, 0.8, gain=0.8, model=3) == [True] * 5
     assert r.run(1, 0.8, gain=0.8, model=1) == [True]  # another slot, the same gain
     assert r.run(3, 0.16, gain=0.8, model=4) == [False] * 3
-    assert r.flow.sensor_decided  # the episode stands; only this model is not attributed
+    assert r.pt.sensor_decided  # the episode stands; only this model is not attributed

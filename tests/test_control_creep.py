@@ -1,4 +1,4 @@
-"""The creep (the piston's velocity with the spool at null, control/creep.py) and what it does
+"""The creep (the piston's velocity with the spool at null, control/evidence/creep.py) and what it does
 for mmac on a plant that creeps: measured where no gain can hide it, and x̂ integrating it."""
 
 from __future__ import annotations
@@ -8,11 +8,14 @@ import random
 import pytest
 
 from ehpss_hil import PROJECT_ROOT
-from ehpss_hil.control.creep import CREEP_MIN_SAMPLES, CreepEstimator
+from ehpss_hil.control.evidence.creep import CreepEstimator
+from ehpss_hil.control.tuning import ControlTuning
 from ehpss_hil.physics.load import load_params
 from ehpss_hil.report.metrics import RunMetrics, compute_metrics
 from ehpss_hil.scenario import load_scenario
 from ehpss_hil.sim import run_scenario
+
+CREEP_MIN_SAMPLES = ControlTuning().creep_min_samples
 
 FULL_FLOW = 0.033  # m/s
 TAU = 0.01  # s, an increment of 10 samples at 1 kHz

@@ -1,11 +1,13 @@
-"""Flow-gain attribution from the load pressure (control/flowgain.py)."""
+"""The pressure test (control/evidence/pressure.py) and the increment product it tests
+(control/evidence/increments.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from ehpss_hil.control.flowgain import FlowGainMonitor
+from ehpss_hil.control.evidence.increments import Increments
+from ehpss_hil.control.evidence.pressure import PressureTest
 from ehpss_hil.control.tuning import ControlTuning
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.physics.load import load_params
@@ -29,7 +31,7 @@ def _run(
     estimate still converging); ``theta_l_wrong``: k̂_LOE is 1 instead of 0.8 for that many."""
     plant = PlantStepper(PARAMS, TS)
     plant.set_faults(FaultState(k_loe=0.8, k_q=k_q, k_dft=k_dft))
-    mon = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3)
+    mon = PressureTest(PARAMS.plant, TS)
     rng = np.random.default_rng(7)
     out = []
     current = 0.0
@@ -71,8 +73,8 @@ def test_evidence_taken_before_k_loe_was_identified_counts_with_the_identified_v
     that knew 0.8 from the start."""
     plant = PlantStepper(PARAMS, TS)
     plant.set_faults(FaultState(k_loe=0.8, k_q=1.0, k_dft=0.7))
-    late = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3)
-    known = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3)
+    late = PressureTest(PARAMS.plant, TS)
+    known = PressureTest(PARAMS.plant, TS)
     rng = np.random.default_rng(3)
     current = 0.0
     for k in range(60):
@@ -91,7 +93,7 @@ def test_no_decision_without_a_deviation() -> None:
 
 
 def test_product_estimate_is_offset_free() -> None:
-    mon = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3)
+    mon = Increments(PARAMS.plant, TS, scale_m=1.52e-3)
     kc = PARAMS.plant.velocity_gain_1_s
     x, prev = 5e-4, 1.52e-3  # a level offset the increments do not see
     for k in range(300):
@@ -105,7 +107,7 @@ def test_product_estimate_is_offset_free() -> None:
 def test_hold_off_takes_no_evidence_and_keeps_the_decision() -> None:
     """After a gap the pressure model is stepped on guessed currents: for ``hold_off(n)``
     updates no evidence enters the window and the decision stands; then it resumes."""
-    mon = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3)
+    mon = PressureTest(PARAMS.plant, TS)
     rng = np.random.default_rng(3)
     for _ in range(50):  # a deviating product: the window fills
         mon.update(1e-4 * rng.standard_normal(), 1e4 * rng.standard_normal(), 1.0, 0.5)
@@ -119,7 +121,7 @@ def test_hold_off_takes_no_evidence_and_keeps_the_decision() -> None:
     assert mon._w != w
 
 
-def test_flow_gain_monitor_takes_its_constants_from_the_tuning() -> None:
+def test_pressure_test_and_product_take_their_constants_from_the_tuning() -> None:
     """One home per constant: the window, the product's clip and the failed-sensor bound come
     from ControlTuning (the monitor once had its own 0.1 s window against the tuning's 0.5 s)."""
     import math
@@ -130,9 +132,10 @@ def test_flow_gain_monitor_takes_its_constants_from_the_tuning() -> None:
     tun = replace(
         ControlTuning(), flow_gain_window_s=0.2, k_dft_limits=(0.0, 1.3), flow_gain_min_deviation=0.07
     )
-    mon = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3, tuning=tun)
-    assert mon._d == math.exp(-TS / 0.2)
-    assert mon.min_deviation == 0.07
+    mon = Increments(PARAMS.plant, TS, scale_m=1.52e-3, tuning=tun)
+    test = PressureTest(PARAMS.plant, TS, tuning=tun)
+    assert test._d == math.exp(-TS / 0.2)
+    assert test.min_deviation == 0.07
     # a position moving three times as fast as the spool integral says: the product clips at 1.3
     x = 0.0
     for k in range(400):
@@ -148,7 +151,7 @@ def test_a_product_that_falls_below_the_failed_sensor_bound_ends_h_q_even_when_h
     at 10.5 Hz, found by the config property test)."""
     plant = PlantStepper(PARAMS, TS)
     plant.set_faults(FaultState(k_loe=0.8, k_q=0.7, k_dft=1.0))
-    mon = FlowGainMonitor(PARAMS.plant, TS, scale_m=1.52e-3)
+    mon = PressureTest(PARAMS.plant, TS)
     rng = np.random.default_rng(7)
     current = 0.0
     for _ in range(400):

@@ -1,4 +1,4 @@
-"""The level-jump detector (control/jump.py): a position reading that moves by more than any
+"""The level-jump detector (control/evidence/jump.py): a position reading that moves by more than any
 flow gain in [0, 1] explains is a sensor event, with the sensor's gain ratio; a flow-gain loss,
 however abrupt, never is. Pure logic: samples are counted, the noise is seeded."""
 
@@ -9,7 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from ehpss_hil.control.jump import MIN_SAMPLES, LevelJump
+from ehpss_hil.control.evidence.jump import LevelJump
+from ehpss_hil.control.tuning import ControlTuning
+
+MIN_SAMPLES = ControlTuning().jump_min_samples
 
 STEP_M = 5e-6  # piston travel per sample at the nominal flow gain (5 mm/s at 1 kHz)
 NOISE_M = 1e-6

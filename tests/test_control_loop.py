@@ -15,6 +15,7 @@ from ehpss_hil.control.pi import PiLaw
 from ehpss_hil.control.predictors import ModelPosition, ValvePredictor
 from ehpss_hil.control.registry import MODES, make_controller
 from ehpss_hil.control.sampleclock import bridge_bound_m, bridge_spool, span_currents
+from ehpss_hil.control.tuning import ControlTuning
 from ehpss_hil.errors import ModelError
 from ehpss_hil.physics.faults import FaultState
 from ehpss_hil.physics.load import load_params
@@ -25,6 +26,7 @@ from ehpss_hil.sim import run_scenario
 
 PARAMS = load_params()
 TS = 1e-3
+MATCH_A = ControlTuning().wire_match_a
 FAULT_FREE = load_scenario(PROJECT_ROOT / "scenarios" / "fault-free.yaml")
 
 
@@ -251,12 +253,12 @@ def test_span_currents_are_the_commands_sent_only_when_the_loop_ran_and_the_echo
     two cycles back: the commands sent, oldest first. A late emulator (fewer cycles than
     samples), an echo that disagrees or a superseded sample: the held echoes."""
     wire = deque([1e-4, 2e-4, 3e-4, 4e-4, 5e-4])  # sent 5 … 1 cycles ago
-    assert span_currents(1, 0, wire, 9e-4, 4e-4) == []
-    assert span_currents(4, 3, wire, 9e-4, 4e-4) == [1e-4, 2e-4, 3e-4]
+    assert span_currents(1, 0, wire, 9e-4, 4e-4, MATCH_A) == []
+    assert span_currents(4, 3, wire, 9e-4, 4e-4, MATCH_A) == [1e-4, 2e-4, 3e-4]
     held = [9e-4, 4e-4, 4e-4]
-    assert span_currents(4, 0, wire, 9e-4, 4e-4) == held  # the emulator was late
-    assert span_currents(4, 3, wire, 9e-4, 4.5e-4) == [9e-4, 4.5e-4, 4.5e-4]  # echo disagrees
-    assert span_currents(4, 3, None, 9e-4, 4e-4) == held
+    assert span_currents(4, 0, wire, 9e-4, 4e-4, MATCH_A) == held  # the emulator was late
+    assert span_currents(4, 3, wire, 9e-4, 4.5e-4, MATCH_A) == [9e-4, 4.5e-4, 4.5e-4]  # echo disagrees
+    assert span_currents(4, 3, None, 9e-4, 4e-4, MATCH_A) == held
 
 
 def test_mmac_through_sensor_blackouts_at_fault_onsets() -> None:

@@ -51,7 +51,7 @@ def test_the_pressure_test_judges_against_the_plants_own_pressure(name: str) -> 
     the same current with another load pressure. Judged against the model's pressure, a drift 0.7
     was taken for a flow-gain loss (250 µm, as uncompensated as nrc) and a k_Q 0.7 for a drift
     (174 µm against nrc's 5.5 µm). Judged against the pressure gain learned while nothing
-    deviated (flowgain.py ``pressure_gain``), both are compensated: within 5 µm of the oracle."""
+    deviated (evidence/pressure.py ``pressure_gain``), both are compensated: within 5 µm of the oracle."""
     mm, nrc = _run(name, "mmac"), _run(name, "nrc")
     assert mm.rms_error_m <= _run(name, "oracle").rms_error_m + 5 * UM
     assert mm.max_error_m <= nrc.max_error_m + 10 * UM

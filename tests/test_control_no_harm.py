@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from ehpss_hil import PROJECT_ROOT
-from ehpss_hil.control.monitor import FallbackReason, HarmMonitor
+from ehpss_hil.control.evidence.monitor import FallbackReason, HarmMonitor
 from ehpss_hil.physics.load import load_params
 from ehpss_hil.report.metrics import RunMetrics, compute_metrics
 from ehpss_hil.report.result import SimResult

@@ -1,4 +1,4 @@
-"""The still-sensor check (control/stillsensor.py): a position sensor that does not move while
+"""The still-sensor check (control/evidence/still.py): a position sensor that does not move while
 the spool sits at its stop is dead; a live one, even at a low gain, is not. Pure logic, no
 timing: samples are counted."""
 
@@ -6,7 +6,11 @@ from __future__ import annotations
 
 import pytest
 
-from ehpss_hil.control.stillsensor import MIN_TRAVEL_M, STILL_FRACTION, StillSensor
+from ehpss_hil.control.evidence.still import StillSensor
+from ehpss_hil.control.tuning import ControlTuning
+
+MIN_TRAVEL_M = ControlTuning().still_min_travel_m
+STILL_FRACTION = ControlTuning().still_fraction
 
 K_C = 3.3  # 1/s: 10 mm of spool move the model position 33 mm/s
 TS = 1e-3

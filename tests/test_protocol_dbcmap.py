@@ -275,11 +275,11 @@ def test_a_valve_without_spool_actual_is_refused(tmp_path: Path) -> None:
 
 def test_current_resolution_leaves_the_sample_clock_its_echo_match() -> None:
     """A setpoint and its echo, each rounded to half of the coarsest LSB accepted, differ by at
-    most half of each LSB: within the sample clock's WIRE_MATCH_A, so the echo still confirms."""
-    from ehpss_hil.control.sampleclock import WIRE_MATCH_A
+    most half of each LSB: within the sample clock's wire_match_a, so the echo still confirms."""
+    from ehpss_hil.control.tuning import ControlTuning
     from ehpss_hil.protocol.logical import COIL_CURRENT_RESOLUTION_A, CURRENT_RESOLUTION_A, LOGICAL_SIGNALS
 
-    assert CURRENT_RESOLUTION_A / 2 + COIL_CURRENT_RESOLUTION_A / 2 < WIRE_MATCH_A
+    assert CURRENT_RESOLUTION_A / 2 + COIL_CURRENT_RESOLUTION_A / 2 < ControlTuning().wire_match_a
     assert {s.key: s.resolution for s in LOGICAL_SIGNALS if s.quantity == "current"} == {
         "coil_current": COIL_CURRENT_RESOLUTION_A,
         "current_setpoint": CURRENT_RESOLUTION_A,

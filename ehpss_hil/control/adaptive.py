@@ -3,7 +3,10 @@
 ``mmac`` (docs/design.md §5): the spool channel ``y_v = θ_L·v`` (v: commanded spool predicted from the
 current echo) and the position channel ``y_s = θ_D·x̂`` (x̂: model position from the spool LVDT),
 each with fixed models + FRA + RIA, a supervisor and a guard. The spool residual depends on
-k_LOE only and the position residual on k_DFT only, which is what makes them separable. The
+k_LOE only and the position residual on k_DFT only, which is what makes them separable. Whose a
+position-channel change is, and whether compensating does harm, is the evidence layer's
+(:mod:`.evidence`); the estimator state has one owner (:class:`.Estimates`). One fresh sample:
+sample clock → spool bank → (still sensor) → position bank → evidence → estimates → close. The
 paper's joint-model modes (``smac``, ``mmac-paper``) are in :mod:`.joint`.
 """
 
@@ -11,38 +14,14 @@ from __future__ import annotations
 
 import math
 
-from .attribution import SensorAttribution
 from .bank import ScalarBank
 from .base import Measurement, ValveCommand
 from .controllers import POSITION_SLOT0, SPOOL_SLOT0, LoopBase
+from .estimates import Estimates
 from .estimator import per_sample_gain
-from .flowgain import FlowGainMonitor
-from .monitor import HarmMonitor
+from .evidence import EvidenceLayer
 from .sampleclock import SampleClock
-from .stillsensor import StillSensor
 from .supervisor import Supervisor
-
-#: after samples stepped without their data the flow-gain test takes no evidence for this many
-#: samples (≈ 6 time constants of the slowest valve/cylinder pole, −284 s⁻¹, at 1 kHz)
-FLOW_HOLD_S = 0.02
-#: after the spool was at its stop the spool channel and the flow-gain test take no evidence for
-#: this long (s): the valve model's stop is placed with k̂_LOE, the plant's with k_LOE, and the
-#: difference dies out with the valve poles (≈ 0.6 ms time constant)
-SPOOL_STOP_HOLD_S = 0.005
-#: a sensor declared failed whose increment gain θ_prod is this many times the failed-sensor
-#: threshold (0.3 with the default 0.15) follows the spool: it is fed back again
-FOLLOWS_FACTOR = 2.0
-#: a re-base of x̂ larger than this many reference amplitudes at once is not a sensor gain
-#: having changed (x0 = y0/θ̂_D ≈ the piston where the seed was taken, within the motion's range)
-REBASE_LIMIT = 2.0
-#: the spool model in use must have stood this long (s) before a sample teaches the pressure
-#: baseline (k̂_LOE known: the pressure scales with it)
-BASELINE_SETTLE_S = 0.1
-#: a reading that moved (an increment above the excitation gate) within this long (s) is a moving
-#: sensor
-MOVING_S = 0.1
-#: an adaptive estimate within this of its clip counts as at its limit (dimensionless)
-AT_LIMIT_MARGIN = 0.01
 
 
 class MmacController(LoopBase):
@@ -62,30 +41,32 @@ class MmacController(LoopBase):
             self.spool_bank, t, ts, guard_epsilon=t.guard_epsilon, sustained_guard=True
         )
         self.pos_sup = Supervisor(self.pos_bank, t, ts, guard_epsilon=t.position_guard_epsilon)
-        self.flow = FlowGainMonitor(self.params.plant, ts, self.scale_spool_m, t)
-        self.still = StillSensor(self.params.plant.velocity_gain_1_s, ts)
-        self.attribution = SensorAttribution(self.flow, ts, t.sensor_failed_below)
-        self.clock = SampleClock(self.valve, self.xhat, self.flow if t.flow_gain_test else None)
-        self.monitor = HarmMonitor(
-            t.flow_gain_min_deviation,
-            t.increment_window,
-            round(t.monitor_confirm_s / ts),
-            round(t.monitor_reengage_s / ts),
-            t.sensor_failed_below,
-            t.monitor_sensor_alive,
+        self.est = Estimates(self.xhat, t.sensor_failed_below, t.rebase_limit * self.scale_pos_m)
+        self.clock = SampleClock(self.valve, self.xhat, None, t)
+        self.evidence = EvidenceLayer(
+            self.params.plant,
+            ts,
+            self.scale_spool_m,
+            t,
+            self.est,
+            (self.spool_bank, self.spool_sup),
+            (self.pos_bank, self.pos_sup),
+            self.clock,
         )
-        self._lim_d_hi = t.k_dft_limits[1] - AT_LIMIT_MARGIN
-        self._lim_l_lo = t.k_loe_limits[0] + AT_LIMIT_MARGIN
-        self._alive = t.monitor_sensor_alive
-        self._in_flow = False
+        self._pressure = self.evidence.pressure
+        if t.flow_gain_test:  # the sample clock steps the pressure model too
+            self.clock.pressure = self._pressure
+        # the loop's questions go straight to the evidence (no forwarding call per cycle)
+        ev = self.evidence
+        self._position_guarded = ev.position_guarded  # type: ignore[method-assign]
+        self._guarded_gain = ev.guarded_gain  # type: ignore[method-assign]
+        self._sensor_live = ev.sensor_live  # type: ignore[method-assign]
+        self._sensor_dead = ev.sensor_dead  # type: ignore[method-assign]
+        self._sensor_follows_spool = ev.sensor_follows_spool  # type: ignore[method-assign]
         self._flow_on = t.flow_gain_test
-        self._flow_hold = max(1, round(FLOW_HOLD_S / ts))
-        self._stop_hold = max(1, round(SPOOL_STOP_HOLD_S / ts))
-        self._baseline_settle = max(1, round(BASELINE_SETTLE_S / ts))
-        self._moving_samples = max(1, round(MOVING_S / ts))
+        self._stop_hold = max(1, round(t.spool_stop_hold_s / ts))
         self._inv_s_spool = 1.0 / self.scale_spool_m
         self._inv_s_pos = 1.0 / self.scale_pos_m
-        self._rebase_limit_m = REBASE_LIMIT * self.scale_pos_m
         n_l, n_d = len(t.fixed_k_loe) + 2, len(t.fixed_k_dft) + 2
         self.index_slots = tuple(range(SPOOL_SLOT0, SPOOL_SLOT0 + n_l)) + tuple(
             range(POSITION_SLOT0, POSITION_SLOT0 + n_d)
@@ -96,93 +77,41 @@ class MmacController(LoopBase):
         self.pos_bank.reset()
         self.spool_sup.reset()
         self.pos_sup.reset()
-        self.flow.reset()
-        self.monitor.reset()
-        self.still.reset()
-        self.attribution.reset()
+        self.evidence.reset()
         self._was_trusted = True  # the last fresh sample fed the sensor back, not on the fallback
-        self._dead = False  # the sensor stood still through a stop phase (stillsensor.py)
-        self._dead_evidence = 0  # excited increments of θ_prod taken since it was found dead
-        self._in_flow = False
-        self._flow_spool_model = self.spool_sup.active
         self.clock.reset()
+        self.est.reset()
         self._spool_hold = 0  # samples left without spool evidence (the spool was at its stop)
-        #: the seed point: the sensor (m) and x̂ (m) at the first sample after the reset; the
-        #: position channel regresses y_s − y0 on x̂ − x0 (offset-free whatever k_DFT was then),
-        #: and x0 = y0/(θ̂_D·k̂_Q) keeps x̂ absolute as the estimates move
-        self._y0 = self._x0 = 0.0
-        self._spool_age = 0  # samples the spool model in use has been in use
-        self._creep_on = False  # a creep is in use (x̂ integrates it)
-        self._spool_age_model = self.spool_sup.active
 
     def step(self, meas: Measurement) -> ValveCommand:
-        """Predict, score both banks, supervise, compensate, PI."""
+        """Sample clock → spool bank → position bank → evidence → estimates → close."""
+        est = self.est
         if meas.fresh:
-            y_v = meas.spool_m
-            tl_prev = self.k_loe_hat / self.k_q_hat
+            tl_prev = est.k_loe / est.k_q
             self.valve.stop_m = self.stroke_m / max(tl_prev, self.min_theta_l)
             seeding = self.clock.seed
             gap, resync, v, xh = self.clock.sample(meas, tl_prev, self._bridge_gain())
-            if seeding:  # x̂ = y_s now, as if k_DFT were 1: only differences from here are used
-                self._y0 = self._x0 = meas.position_m
-            if gap and self._flow_on:
-                self.flow.hold_off(self._flow_hold)
-            sb, ss = self.spool_bank, self.spool_sup
-            lvl = self._stop_level_m
-            if y_v >= lvl or y_v <= -lvl or abs(tl_prev * v) >= lvl or (gap and not resync):
-                # the spool at its stop, or a gap the predictors could not redo (the valve model
-                # was dead-reckoned): not evidence until the model's error has died out
-                self._spool_hold = self._stop_hold
-                self.flow.hold_off(self._stop_hold)
-            stopped = self._spool_hold > 0
-            if stopped:  # at or just off the stop: not evidence of k_LOE
-                self._spool_hold -= 1
-            else:
-                sb.update(y_v, v)
-                ss.update(abs(v) * self._inv_s_spool)
-            x_dead = self.still.update(y_v >= lvl or y_v <= -lvl, y_v, meas.position_m, xh)
-            if x_dead is not None and not self.flow.flow_fault:
-                # the sensor stood still through a full-flow stop phase: hold it off, put x̂
-                # where the spool took the piston, and regress from here (a stuck reading then
-                # fits the failed-sensor model)
-                self.sensor_held_off = self._dead = True
-                self._dead_evidence = 0
-                self.xhat.x = xh = x_dead
-                self._y0, self._x0 = meas.position_m, x_dead
-            pb, ps = self.pos_bank, self.pos_sup
-            if (gap and not resync) or stopped:
-                # x̂ missed samples, was dead-reckoned, or integrated a spool slamming into its
-                # stop (a transient no model of the valve follows exactly)
-                td = self.k_dft_hat
-                if not self.pos_sup.guarded and self.sensor_alive(td) and not self.flow.flow_fault:
-                    # re-anchor on the trusted sensor and start the regression over from here: a
-                    # dead-reckoned offset must not be taken for a drift, nor the sensor's reading
-                    # through the present θ̂_D for evidence (x̂ = y_s/θ̂_D, x0 = y0/θ̂_D)
-                    self._y0, self._x0 = meas.position_m, xh
-                    self._rebase(td)
-                    xh = self.xhat.x
-                elif not self.flow.flow_fault:
-                    pb.update(meas.position_m - self._y0, xh - self._x0)
-                    ps.update(abs(xh - self._x0) * self._inv_s_pos)
-            elif not self.flow.flow_fault:  # under H_Q the position channel has nothing to explain
-                pb.update(meas.position_m - self._y0, xh - self._x0)
-                ps.update(abs(xh - self._x0) * self._inv_s_pos)
-            tl = 1.0 if ss.guarded else sb.theta[ss.active]
-            self.k_loe_hat = tl
-            self.k_dft_hat = pb.theta[ps.active]
-            self.k_q_hat = 1.0
-            self._rebase(self.k_dft_hat)
+            if seeding:
+                est.seed(meas.position_m)
+            if gap:
+                self.evidence.gap()
+            broken = gap and not resync
+            self._banks(meas, v, xh, tl_prev, broken)
+            tl = 1.0 if self.spool_sup.guarded else self.spool_bank.theta[self.spool_sup.active]
+            td = self.pos_bank.theta[self.pos_sup.active]
+            est.set_channels(tl, td, self.sensor_alive(td) and not self.pos_sup.guarded)
             if self._flow_on:
-                self._flow_split(meas, y_v, tl)
-                self._watch(tl)
-                broken = gap and not resync
-                sensor = self.attribution.update(
-                    meas.position_m, self.k_dft_hat, ps.active, ps.guarded, broken, self._was_trusted
+                att = self.evidence.update(
+                    meas, tl, self._spool_hold == 0, self._warm_left > 0, broken, self._was_trusted
                 )
-                ramp = 1 if self.attribution.by_jump else self._ramp_n
-                self.set_position_nominal(not (sensor or self.flow.flow_fault), ramp)
+                if att.restarted:  # the raw sensor, not held off, after a restart
+                    self.sensor_held_off = False
+                    self.set_position_nominal(True, self._ramp_n)
+                self.set_nominal(att.fallback)
+                self.set_position_nominal(att.position_nominal, att.ramp_samples)
+            self.k_loe_hat, self.k_dft_hat, self.k_q_hat = est.k_loe, est.k_dft, est.k_q
         else:
-            self.clock.dead_cycle(self.k_loe_hat / self.k_q_hat)
+            self.clock.dead_cycle(est.k_loe / est.k_q)
         cmd = self._close(meas)
         if meas.fresh:
             self._was_trusted = self.sensor_trusted and not self.nominal
@@ -190,194 +119,62 @@ class MmacController(LoopBase):
         self.clock.commanded(sent, meas.command_sent)
         return cmd
 
-    def _rebase(self, theta: float) -> None:
-        """Keep x0 = y0/θ with θ = θ̂_D·k̂_Q in use: x̂ moves with x0 (x̂ − x0 is unchanged), so
-        it stays the absolute position while the sensor gain estimate changes; a failed-sensor
-        model (θ below ``sensor_failed_below``) leaves it where it is."""
-        if self.sensor_alive(theta) and not self.pos_sup.guarded:
-            x0 = self._y0 / theta
-            if abs(x0 - self._x0) > self._rebase_limit_m:
-                # a model that would put x̂ this far away at once does not describe the sensor
-                # (a model at 0.16 nothing attributed moved x̂ by 3 mm, campaign run 1453)
+    def _banks(self, meas: Measurement, v: float, xh: float, tl_prev: float, broken: bool) -> None:
+        """Both banks on this sample (v: the commanded spool, xh: x̂, m). The spool bank takes
+        no evidence at or just off the spool's stop, nor after a gap the predictors could not
+        redo (``broken``: the valve model was dead-reckoned), until the model's error has died
+        out. The still sensor watches the stop phases. The position bank has nothing to explain
+        under H_Q; after x̂ missed samples, was dead-reckoned, or integrated a spool slamming
+        into its stop (a transient no model of the valve follows exactly) it re-anchors on the
+        trusted sensor and starts over from here (a dead-reckoned offset is no drift)."""
+        y_v = meas.spool_m
+        lvl = self._stop_level_m
+        at_stop = y_v >= lvl or y_v <= -lvl
+        if at_stop or abs(tl_prev * v) >= lvl or broken:
+            self._spool_hold = self._stop_hold
+            self.evidence.spool_stop()
+        stopped = self._spool_hold > 0
+        if stopped:  # at or just off the stop: not evidence of k_LOE
+            self._spool_hold -= 1
+        else:
+            self.spool_bank.update(y_v, v)
+            self.spool_sup.update(abs(v) * self._inv_s_spool)
+        if self.evidence.stop_phase(at_stop, y_v, meas.position_m, xh):
+            self.sensor_held_off = True  # found dead: held off, x̂ placed (Estimates.place_dead)
+            xh = self.xhat.x
+        est = self.est
+        flow = self._pressure.flow_fault
+        if broken or stopped:
+            td = est.k_dft
+            if not self.pos_sup.guarded and self.sensor_alive(td) and not flow:
+                est.reanchor(meas.position_m, xh)
+                est.rebase(td, True)  # trusted: checked just above
                 return
-            self.xhat.x += x0 - self._x0
-            self._x0 = x0
+        if not flow:
+            self.pos_bank.update(meas.position_m - est.y0, xh - est.x0)
+            self.pos_sup.update(abs(xh - est.x0) * self._inv_s_pos)
 
     def observe(self, meas: Measurement) -> None:
         """A sample superseded within this cycle: the sample clock steps the predictors on it."""
-        if self.clock.observe(meas, self.k_loe_hat / self.k_q_hat).gap and self._flow_on:
-            self.flow.hold_off(self._flow_hold)
+        if self.clock.observe(meas, self.est.k_loe / self.est.k_q).gap:
+            self.evidence.gap()
 
     def _bridge_gain(self) -> float | None:
         """θ̂_D when the position sensor may place x̂ across a redone span: trusted (not guarded,
         not failed) and not under the flow-gain hypothesis; else None."""
-        td = self.k_dft_hat
-        if self.pos_sup.guarded or not self.sensor_alive(td) or self.flow.flow_fault:
+        td = self.est.k_dft
+        if self.pos_sup.guarded or not self.sensor_alive(td) or self._pressure.flow_fault:
             return None
         return td
 
-    def _flow_split(self, meas: Measurement, y_v: float, tl: float) -> None:
-        """Load-pressure test: is the position-channel change a flow-gain loss (flowgain.py)?
-
-        Under H_Q the sensor is taken as healthy (k̂_DFT = 1), the current is divided by
-        k̂_LOE·k̂_Q with k̂_Q the offset-free increment estimate, and x̂ (in x/k̂_Q units) is
-        kept on the sensor so that nothing jumps when the test returns to H_D.
-        """
-        fl = self.flow
-        prod = fl.product(meas.position_m, y_v, self.clock.span, self._spool_hold == 0)
-        if self._dead and fl.product_updated:
-            self._dead_evidence += 1
-        spool_model = self.spool_sup.active
-        if spool_model != self._flow_spool_model:
-            # the pressure prediction scales with k̂_LOE: evidence taken with another k̂_LOE
-            # favours the wrong hypothesis
-            self._flow_spool_model = spool_model
-            fl.restart()
-            fl.hold_off(self._flow_hold)
-        # x̂ moves with the creep, in its own units (x/k̂_Q: the sensor read through θ_prod)
-        self.xhat.creep_m_s = fl.creep.rate_m_s / prod if prod >= self._failed_below else 0.0
-        if (fl.creep.rate_m_s != 0.0) != self._creep_on:
-            self._creep_on = not self._creep_on
-            self._restart_position(meas.position_m)
-        self._spool_age = self._spool_age + 1 if spool_model == self._spool_age_model else 0
-        self._spool_age_model = spool_model
-        healthy = (
-            self._warm_left == 0
-            and not self.spool_sup.guarded
-            and not self.pos_sup.guarded
-            and self._spool_age >= self._baseline_settle
-        )
-        fl.update(
-            self.clock.echo, meas.load_pressure_pa, self._flow_theta_l(tl), prod, self.k_dft_hat, healthy
-        )
-        if fl.flow_fault:
-            self.k_q_hat = prod
-            self.k_loe_hat = tl * prod
-            self.k_dft_hat = 1.0
-            self.xhat.x = meas.position_m / prod
-            self._x0 = self._y0 / prod if prod >= self._failed_below else self._x0
-            self._in_flow = True
-        elif self._in_flow:  # back to H_D: the product is the sensor's gain (≈ 1 when it vanished)
-            self._in_flow = False
-            self.xhat.x = meas.position_m / prod if prod >= self._failed_below else meas.position_m
-            self._x0 = self._y0 / prod if prod >= self._failed_below else self._y0
-            self.pos_bank.seed_ria(prod)
-            self.pos_sup.force(self.pos_bank.ria)
-            self.k_dft_hat = self.pos_bank.theta[self.pos_bank.ria]
-
-    def _restart_position(self, position_m: float) -> None:
-        """The plant model changed (a creep came into use or left it): what the position channel
-        concluded under the old model — its models, the guard, the attribution, a flow-gain
-        hypothesis — was reached on increments the creep was read into. Start it over from the
-        sensor as it reads now (x̂ = y_s, nominal), the spool channel and the creep kept."""
-        switches = self.pos_sup.switches
-        self.pos_bank.reset()
-        self.pos_sup.reset()
-        self.pos_sup.switches = switches
-        self.attribution.reset()
-        self.flow.forget_attribution()
-        self.monitor.reset()
-        self.xhat.x = position_m
-        self._y0 = self._x0 = position_m
-        self.sensor_held_off = self._in_flow = False
-        self.k_q_hat = 1.0
-        self.set_position_nominal(True, self._ramp_n)
-
-    def _flow_theta_l(self, tl: float) -> float:
-        """k̂_LOE for the pressure test: the spool model in use, or while the spool channel is
-        still in its warm-up the best-scoring one (a power-on LOE is not switched to yet)."""
-        if self._warm_left > 0 or self.spool_sup.guarded:
-            j = self.spool_bank.j
-            return self.spool_bank.theta[j.index(min(j))]
-        return tl
-
-    def _watch(self, tl: float) -> None:
-        """The do-no-harm monitor on this sample; nominal compensation while it says so."""
-        pb, sb = self.pos_bank, self.spool_bank
-        pa, sa = self.pos_sup.active, self.spool_sup.active
-        guarded = self._position_guarded()
-        at_limit = (pa >= pb.n_fixed and not guarded and self.k_dft_hat >= self._lim_d_hi) or (
-            sa >= sb.n_fixed and not self.spool_sup.guarded and tl <= self._lim_l_lo
-        )
-        fl = self.flow
-        # the position check only where the sensor is read through θ̂_D: under the guard the loop
-        # runs on x̂ (no model explains the sensor; θ_prod, fitted on the same sensor, neither)
-        fresh = fl.product_fresh and not guarded
-        self.set_nominal(self.monitor.update(self.k_dft_hat * self.k_q_hat, fl.theta_prod, fresh, at_limit))
-
     def fallback_reason(self) -> int:
         """The monitor's reason while in fallback, else 0."""
-        return int(self.monitor.reason) if self.monitor.fallback else 0
+        mon = self.evidence.monitor
+        return int(mon.reason) if mon.fallback else 0
 
     def fallback_count(self) -> int:
         """The monitor's fallbacks since start-up."""
-        return self.monitor.fallbacks
-
-    def _position_guarded(self) -> bool:
-        return self.pos_sup.guarded and not self.flow.flow_fault
-
-    def _guarded_gain(self) -> float | None:
-        """x̂ carries the loop under the guard only while the sensor gives no better reading.
-        The guard says no level model explains the sensor against x̂; x̂ integrates the spool at
-        the model's flow gain, so on a plant off the model, or after a flow-gain change beside a
-        sensor fault, x̂ is the one that is off. Once the sensor's increments have followed the
-        spool for a full window (M excited increments) since the guard rose, at a live gain and
-        settled, and it is not dead, it is read through the gain the evidence gives it: the
-        gain its last jump went to, else θ_prod when the deviation was attributed to the sensor,
-        else 1 (raw, as the plain PI loop reads it)."""
-        if not self._flow_on:  # no increment evidence kept (the flow-gain test is off)
-            return None
-        fl, att = self.flow, self.attribution
-        if (
-            not (self._dead or fl.creep.judged or att.jumped_since_guard)
-            and fl.still_samples < self._moving_samples
-        ):
-            # before the creep is known, x̂ has no authority over a moving sensor that gave no
-            # sign of a fault (a jump, standing still)
-            return 1.0
-        if self._dead or not (fl.product_fresh and fl.product_settled and fl.theta_prod >= self._alive):
-            return None
-        if att.since_guard < fl.increment_window:
-            return None
-        if math.isfinite(att.jump_gain) and att.jump_gain >= self._alive:
-            return att.jump_gain
-        return fl.theta_prod if fl.sensor_favoured else 1.0
-
-    def _sensor_live(self) -> bool:
-        """The sensor follows the spool, so it may be fed back raw. Under the position guard
-        with no jump of the reading since the guard rose (a flow-gain change or a slow drift:
-        x̂, integrating at the nominal flow gain, is the suspect, not the sensor): θ_prod, fresh
-        or not (no motion is no evidence against it), at :data:`FOLLOWS_FACTOR` times the
-        failed-sensor threshold or more. Otherwise θ_prod must be fresh, at a live sensor's
-        gain and settled, and after a jump (a drift step, a failure) have taken a full window
-        (M excited increments) since the guard rose: increments spanning the jump are not
-        evidence that the sensor follows the spool. Never while the sensor is dead."""
-        fl = self.flow
-        if self._dead:
-            return False
-        guarded = self.pos_sup.guarded
-        att = self.attribution
-        if guarded and not att.jumped_since_guard:
-            return fl.theta_prod >= FOLLOWS_FACTOR * self._failed_below
-        if not (fl.product_fresh and fl.theta_prod >= self._alive):
-            return False
-        if guarded and att.since_guard < fl.increment_window:
-            return False
-        return fl.product_settled
-
-    def _sensor_dead(self) -> bool:
-        """Found standing still through a full-flow stop phase (:class:`StillSensor`) and not
-        seen following the spool since: θ_prod, over a full window (M excited increments) of
-        increments taken after the finding, at a live sensor's gain."""
-        if self._dead and self._dead_evidence >= self.flow.increment_window and self._sensor_follows_spool():
-            self._dead = False
-        return self._dead
-
-    def _sensor_follows_spool(self) -> bool:
-        """The offset-free increment estimate θ_prod (fresh) says the sensor moves with the
-        spool integral, at :data:`FOLLOWS_FACTOR` times the failed-sensor threshold or more."""
-        fl = self.flow
-        return fl.product_fresh and fl.theta_prod >= FOLLOWS_FACTOR * self._failed_below
+        return self.evidence.monitor.fallbacks
 
     def index_values(self) -> list[float]:
         """J of the spool models then the position models."""

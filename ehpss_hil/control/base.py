@@ -7,7 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from ..physics.params import Params
+from ..physics.params import Params, PlantParams
 
 
 class NominalMotion(Protocol):
@@ -27,11 +27,12 @@ class NominalMotion(Protocol):
 
 @dataclass(frozen=True)
 class PaperMotion:
-    """The paper's 1 mm, 5 rad/s sine: 1 mm of position, r·ω/K_c ≈ 1.52 mm of spool (K_c of
-    eq 39, 1.031e8/3.136e7 s⁻¹: the same figure :class:`~ehpss_hil.scenario.Reference` gives)."""
+    """The paper's 1 mm, 5 rad/s sine: 1 mm of position, r·ω/K_c ≈ 1.52 mm of spool (K_c of the
+    default plant, :attr:`PlantParams.velocity_gain_1_s`, as :class:`~ehpss_hil.scenario.Reference`
+    uses it)."""
 
     amplitude_m: float = 1e-3
-    spool_amplitude_m: float = 1e-3 * 5.0 / (1.031e8 / 3.136e7)
+    spool_amplitude_m: float = 1e-3 * 5.0 / PlantParams().velocity_gain_1_s
 
 
 @dataclass(slots=True)

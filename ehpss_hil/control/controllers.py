@@ -36,15 +36,6 @@ from .pi import PiLaw
 from .predictors import ModelPosition, ValvePredictor
 from .tuning import ControlTuning
 
-#: a spool sample is at the stop when the LVDT reads within this fraction of the stroke (the
-#: spool is held there whatever the current: no evidence of k_LOE, and the actuator saturates)
-SPOOL_STOP_FRACTION = 0.98
-#: the actuator is current-saturated when the echo falls short of the command by more than this
-#: (A): a few of the DBC's 0.2 µA echo steps and 10 µA setpoint steps
-ECHO_SHORT_A = 3e-5
-#: entering or leaving the nominal fallback moves the compensation divisors over this time (s)
-FALLBACK_RAMP_S = 0.02
-
 SPOOL_SLOT0 = 0
 POSITION_SLOT0 = 4
 JOINT_SLOT0 = 9
@@ -82,7 +73,8 @@ class LoopBase(Controller):
         self.min_theta_l = self.tuning.k_loe_limits[0]
         self.stroke_m = params.plant.spool_stroke_m
         self.valve.stop_m = self.stroke_m
-        self._stop_level_m = SPOOL_STOP_FRACTION * self.stroke_m
+        self._stop_level_m = self.tuning.spool_stop_fraction * self.stroke_m
+        self._echo_short_a = self.tuning.echo_short_a
         self.xhat = ModelPosition(params.plant, ts_s, self.tuning.anchor_rate_1_s)
         ref = self.reference
         self.scale_pos_m = ref.amplitude_m if ref.amplitude_m > 0.0 else 1e-3
@@ -96,7 +88,7 @@ class LoopBase(Controller):
         self._echo = 0.0
         self._y_s = 0.0
         self._warm_samples = round(self.tuning.warmup_s / ts_s)
-        self._ramp_n = max(1, round(FALLBACK_RAMP_S / ts_s))
+        self._ramp_n = max(1, round(self.tuning.fallback_ramp_s / ts_s))
         self._build()
         self.reset()
 
@@ -140,7 +132,7 @@ class LoopBase(Controller):
 
     def set_nominal(self, nominal: bool) -> None:
         """Compensate nominally (k̂ = 1: the plain PI loop on the raw sensor) or with the
-        estimates; the divisors in use move between the two over ``FALLBACK_RAMP_S``."""
+        estimates; the divisors in use move between the two over ``fallback_ramp_s``."""
         if nominal != self.nominal:
             self.start_ramp(self._ramp_n)
             self.nominal = nominal
@@ -179,7 +171,7 @@ class LoopBase(Controller):
     def _saturation(self, meas: Measurement) -> int:
         """+1/−1 when the actuator is saturated upwards/downwards, judged on this sample: the
         spool LVDT at the stop, or a current echo short of the command it answers (the one sent
-        two cycles ago: one sample of transport delay) by more than :data:`ECHO_SHORT_A`. A
+        two cycles ago: one sample of transport delay) by more than ``echo_short_a`` (A). A
         sample without data keeps the previous judgement."""
         if not meas.fresh:
             return self.pi.saturated
@@ -189,7 +181,7 @@ class LoopBase(Controller):
         if y_v <= -self._stop_level_m:
             return -1
         sent = self._sent_prev
-        if abs(sent) - abs(meas.coil_current_a) > ECHO_SHORT_A:
+        if abs(sent) - abs(meas.coil_current_a) > self._echo_short_a:
             return 1 if sent > 0.0 else -1
         return 0
 

@@ -29,19 +29,15 @@ from typing import NamedTuple, Protocol
 
 from .base import Measurement
 from .predictors import ModelPosition, ValvePredictor
+from .tuning import ControlTuning
 
 #: the predictors are redone over at most this many sensor samples and after fewer cycles without
-#: data (beyond: dead-reckoned and re-anchored): the 4-bit counter tells up to 15 apart
+#: data (beyond: dead-reckoned and re-anchored): the 4-bit counter tells up to 15 apart. Not a
+#: gate: the protocol's reach (the driver, the watchdog and replay share it)
 RESYNC_SAMPLES = 15
 #: the commands kept: those applied over every sample of the longest span redone (one sample of
 #: transport delay: the command computed at cycle c is applied over [c+1, c+2))
 WIRE_COMMANDS = RESYNC_SAMPLES + 2
-#: the kept commands are taken as what the valve applied when the echo of a span's last sample
-#: is the one kept for it within this (A): the DBC's 10 µA steps, the setpoint and echo scalings
-WIRE_MATCH_A = 3e-5
-#: the position sensor may move x̂ across a span within this multiple of the bound that the spool
-#: LVDT at its two ends leaves (:func:`bridge_bound_m`)
-BRIDGE_MARGIN = 1.25
 
 
 class PressureModel(Protocol):
@@ -69,11 +65,18 @@ class SampleClock:
     """Valve model, x̂ and (optionally) the pressure model, advanced once per sensor sample."""
 
     def __init__(
-        self, valve: ValvePredictor, xhat: ModelPosition, pressure: PressureModel | None = None
+        self,
+        valve: ValvePredictor,
+        xhat: ModelPosition,
+        pressure: PressureModel | None = None,
+        tuning: ControlTuning | None = None,
     ) -> None:
+        t = tuning if tuning is not None else ControlTuning()
         self.valve = valve
         self.xhat = xhat
         self.pressure = pressure
+        self._match_a = t.wire_match_a  # ControlTuning.wire_match_a (A)
+        self._bridge_margin = t.bridge_margin  # ControlTuning.bridge_margin
         self.reset()
 
     def reset(self) -> None:
@@ -159,7 +162,7 @@ class SampleClock:
             if pm is not None:
                 pm.rewind()
         n, echo_a, y_v = meas.samples, meas.coil_current_a, meas.spool_m
-        currents = span_currents(n, dead, self._wire if stepped else None, self.echo, echo_a)
+        currents = span_currents(n, dead, self._wire if stepped else None, self.echo, echo_a, self._match_a)
         x0 = xh.x
         e0 = xh.last_spool - gain * valve.v
         vs = []
@@ -174,7 +177,7 @@ class SampleClock:
             xh.integrate(sp)
         x_end = xh.integrate(y_v)
         if n > 1 and not self.seed and bridge_gain is not None:
-            u = BRIDGE_MARGIN * bridge_bound_m(xh.spool_to_x_m(1.0, n - 1), en - e0)
+            u = self._bridge_margin * bridge_bound_m(xh.spool_to_x_m(1.0, n - 1), en - e0)
             dx = (meas.position_m - self.y_seen) / bridge_gain
             xh.x = x0 + min(max(dx, x_end - x0 - u), x_end - x0 + u)
         return v, xh.x
@@ -192,20 +195,21 @@ def resync_span(samples: int, dead: int) -> bool:
 
 
 def span_currents(
-    samples: int, dead: int, wire: deque[float] | None, last_echo_a: float, echo_a: float
+    samples: int, dead: int, wire: deque[float] | None, last_echo_a: float, echo_a: float, match_a: float
 ) -> list[float]:
     """The currents (A) applied over the ``samples − 1`` samples not seen before one whose echo
     is ``echo_a`` (the last one seen had ``last_echo_a``; ``dead`` cycles ran without data in
     between). ``wire``: the commands sent in the cycles before this one (newest last; one sample
     of transport delay, so the echo of this sample is ``wire[-2]``). They are taken when each
     sample not seen had a cycle of its own (``dead == samples − 1``) and this echo confirms the
-    valve applied them: the sensor frames were lost, the commands got through. Otherwise (fewer
-    cycles than samples: the emulator was late; or no ``wire``: a sample superseded within a
-    cycle): the last echo for the first period (commanded before that sample) and this echo for
-    the others (a late emulator holds the newest command over the periods it skips)."""
+    valve applied them (within ``match_a``, A: ``ControlTuning.wire_match_a``): the sensor
+    frames were lost, the commands got through. Otherwise (fewer cycles than samples: the
+    emulator was late; or no ``wire``: a sample superseded within a cycle): the last echo for
+    the first period (commanded before that sample) and this echo for the others (a late
+    emulator holds the newest command over the periods it skips)."""
     if samples < 2:
         return []
-    if wire is not None and dead == samples - 1 and abs(echo_a - wire[-2]) <= WIRE_MATCH_A:
+    if wire is not None and dead == samples - 1 and abs(echo_a - wire[-2]) <= match_a:
         return [wire[-m - 2] for m in range(samples - 1, 0, -1)]
     return [last_echo_a] + [echo_a] * (samples - 2)
 

@@ -7,7 +7,7 @@ with a witness the banks do not use, and falls back to nominal compensation (the
 loop's behaviour, ``nrc``) while the answer is no:
 
 * ``PRODUCT_MISMATCH``: the position channel's gain in use times k̂_Q, θ_used = θ̂_D·k̂_Q, and
-  the offset-free increment estimate of k_DFT·k_Q (θ_prod, :meth:`FlowGainMonitor.product`)
+  the offset-free increment estimate of k_DFT·k_Q (θ_prod, :meth:`.Increments.product`)
   deviate from 1 in opposite directions, each by more than ``min_deviation``, while θ_prod is
   fresh (an excited increment within the last M samples) and settled (moved by less than
   ``min_deviation`` over the last M samples: an increment that spans a sensor jump gives a

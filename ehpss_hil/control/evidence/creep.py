@@ -8,12 +8,12 @@ a gain: the single-rod plant's 5 mm/s put the increment gain θ_prod at 2.4 at p
 as the spool reversed, and x̂ — integrating the spool alone — walked away from the piston.
 
 :class:`CreepEstimator` measures it where no gain can hide it: over increments taken while the
-spool was near null (``|φ/τ|`` below :data:`NULL_SHARE` of the full-flow velocity), the position
+spool was near null (``|φ/τ|`` below ``creep_null_share`` of the full-flow velocity), the position
 moves by ``c·τ`` plus what the gain makes of the little flow there, ``θ·φ``. So the creep is the
 exponentially weighted mean of ``(Δy − θ_prod·φ)/τ`` over such increments — whatever the sensor's
 gain or the flow gain (both multiply a flow near zero). A jump of the reading is no creep: an
-increment further than :data:`OUTLIER_SIGMAS` spreads from the mean is left out. The creep is
-used once it exceeds :data:`CREEP_MIN_SHARE` of the full-flow velocity (the smallest worth
+increment further than ``creep_outlier_sigmas`` spreads from the mean is left out. The creep is
+used once it exceeds ``creep_min_share`` of the full-flow velocity (the smallest worth
 modelling; a linear plant's stays far below) and stays in use until it falls below half of that.
 """
 
@@ -21,29 +21,24 @@ from __future__ import annotations
 
 import math
 
-#: an increment counts as "spool near null" when its spool integral moves the piston (at the
-#: nominal flow gain) by less than this share of the full-flow velocity over its span
-NULL_SHARE = 0.02
-#: the creep is averaged over about this many near-null increments
-CREEP_SAMPLES = 200
-#: … and judged only after this many
-CREEP_MIN_SAMPLES = 50
-#: an increment further than this many spreads from the mean is a jump, not creep
-OUTLIER_SIGMAS = 6.0
-#: a creep above this share of the full-flow velocity is modelled (and kept until below half of it)
-CREEP_MIN_SHARE = 0.03
+from ..tuning import ControlTuning
 
 
 class CreepEstimator:
     """Creep c (m/s of the sensor reading) from near-null increments ``(Δy, φ, τ)``."""
 
-    __slots__ = ("_n", "_null", "_on", "_var", "_w", "mean_m_s", "rate_m_s")
+    __slots__ = ("_min_n", "_n", "_n_avg", "_null", "_on", "_out2", "_var", "_w", "mean_m_s", "rate_m_s")
 
-    def __init__(self, full_flow_m_s: float) -> None:
-        """``full_flow_m_s``: the piston velocity at the full spool stroke, nominal flow gain (m/s)."""
-        self._null = NULL_SHARE * full_flow_m_s
-        self._on = CREEP_MIN_SHARE * full_flow_m_s
-        self._w = 1.0 / CREEP_SAMPLES
+    def __init__(self, full_flow_m_s: float, tuning: ControlTuning | None = None) -> None:
+        """``full_flow_m_s``: the piston velocity at the full spool stroke, nominal flow gain
+        (m/s); ``tuning``: the ``creep_*`` gates."""
+        t = tuning if tuning is not None else ControlTuning()
+        self._null = t.creep_null_share * full_flow_m_s
+        self._on = t.creep_min_share * full_flow_m_s
+        self._n_avg = t.creep_samples
+        self._min_n = t.creep_min_samples
+        self._out2 = t.creep_outlier_sigmas * t.creep_outlier_sigmas
+        self._w = 1.0 / t.creep_samples
         self.reset()
 
     def reset(self) -> None:
@@ -63,14 +58,14 @@ class CreepEstimator:
         v = (dy_m - theta * phi_m) / tau_s
         n, m, var = self._n, self.mean_m_s, self._var
         d = v - m
-        if n >= CREEP_MIN_SAMPLES and d * d > OUTLIER_SIGMAS * OUTLIER_SIGMAS * var:
+        if n >= self._min_n and d * d > self._out2 * var:
             return self.rate_m_s
         n += 1
-        w = 1.0 / n if n < CREEP_SAMPLES else self._w
+        w = 1.0 / n if n < self._n_avg else self._w
         m += w * d
         var += w * (d * (v - m) - var)
         self._n, self.mean_m_s, self._var = n, m, var
-        if n >= CREEP_MIN_SAMPLES:
+        if n >= self._min_n:
             on = abs(m) > (0.5 * self._on if self.rate_m_s else self._on)
             self.rate_m_s = m if on else 0.0
         return self.rate_m_s
@@ -83,7 +78,7 @@ class CreepEstimator:
     @property
     def judged(self) -> bool:
         """Enough near-null increments have been seen to say whether the plant creeps."""
-        return self._n >= CREEP_MIN_SAMPLES
+        return self._n >= self._min_n
 
     @property
     def spread_m_s(self) -> float:

@@ -7,19 +7,19 @@ So the position model in use is compensated only once independent evidence has a
 the sensor; until then the loop feeds the raw sensor back (``LoopBase.position_nominal``).
 The evidence, each enough on its own:
 
-* the load-pressure test decided H_D (:class:`.FlowGainMonitor`,
-  :attr:`.FlowGainMonitor.sensor_favoured`; an increment gain θ_prod above 1 is no evidence on
+* the load-pressure test decided H_D (:class:`.PressureTest`,
+  :attr:`.PressureTest.sensor_favoured`; an increment gain θ_prod above 1 is no evidence on
   its own: a flow gain may be above the model's);
 * the model changed while the piston was at rest (θ_prod stale: no excited increment) from one
   that agreed with θ_prod when the motion stopped: a flow gain moves nothing without flow, a
   sensor gain moves the reading at once;
-* the reading jumped (:class:`.LevelJump`) by a gain ratio ρ, and within :data:`JUMP_HOLD_S`
+* the reading jumped (:class:`.LevelJump`) by a gain ratio ρ, and within ``jump_hold_s``
   the model moved to ρ times the gain in use before the jump (a model change the jump does not
   explain, a flow-gain loss beside it, is left to the pressure test). A model so attributed
   stays attributed while it stays within ``min_deviation``/2 of the gain the jump explained,
   also inside the band the pressure test cannot resolve.
 
-Every attribution but the last is the pressure test's state (:meth:`.FlowGainMonitor.decide_sensor`),
+Every attribution but the last is the pressure test's state (:meth:`.PressureTest.decide_sensor`),
 which H_Q evidence can still overturn. An attribution belongs to the deviation it was made for: a
 switch of the position supervisor to a model whose gain differs by more than ``min_deviation``
 from the one in use, with no evidence on or after it, is a new deviation and is not compensated
@@ -31,15 +31,9 @@ from __future__ import annotations
 
 import math
 
-from .flowgain import FlowGainMonitor
+from ..tuning import ControlTuning
 from .jump import LevelJump
-
-#: after the position reading jumped, a position-model change within this long (s) that the
-#: jump's gain ratio explains is the sensor's
-JUMP_HOLD_S = 0.03
-#: … a model that moved by more than this from the gain in use before the jump (dimensionless;
-#: below the pressure test's band, which a jump does not need)
-JUMP_MIN_CHANGE = 0.01
+from .protocols import IncrementEvidence, PressureEvidence
 
 
 class SensorAttribution:
@@ -47,14 +41,16 @@ class SensorAttribution:
 
     __slots__ = (
         "_failed_below",
-        "_flow",
         "_gain",
         "_hold",
+        "_inc",
         "_kd_before",
         "_left",
         "_level_ref",
+        "_min_change",
         "_min_dev",
         "_model",
+        "_pt",
         "_theta_before",
         "_to",
         "_unexplained",
@@ -66,14 +62,25 @@ class SensorAttribution:
         "since_guard",
     )
 
-    def __init__(self, flow: FlowGainMonitor, ts_s: float, failed_below: float) -> None:
-        """``flow``: the load-pressure test and increment regression of this controller;
-        ``ts_s``: sample time (s); ``failed_below``: θ of the failed-sensor model."""
-        self._flow = flow
-        self._min_dev = flow.min_deviation
+    def __init__(
+        self,
+        inc: IncrementEvidence,
+        pressure: PressureEvidence,
+        ts_s: float,
+        failed_below: float,
+        tuning: ControlTuning | None = None,
+    ) -> None:
+        """``inc``, ``pressure``: the increment product and the load-pressure test of this
+        controller; ``ts_s``: sample time (s); ``failed_below``: θ of the failed-sensor model;
+        ``tuning``: the ``jump_*`` gates."""
+        t = tuning if tuning is not None else ControlTuning()
+        self._inc = inc
+        self._pt = pressure
+        self._min_dev = pressure.min_deviation
         self._failed_below = failed_below
-        self._hold = max(1, round(JUMP_HOLD_S / ts_s))
-        self.jump = LevelJump(flow.increment_window)
+        self._hold = max(1, round(t.jump_hold_s / ts_s))
+        self._min_change = t.jump_min_change
+        self.jump = LevelJump(inc.increment_window, t)
         self.reset()
 
     def reset(self) -> None:
@@ -108,7 +115,7 @@ class SensorAttribution:
         the last fresh sample.
         True when θ̂_D is attributed to the sensor: by evidence, or by an attribution that stands
         for this model (not made unexplained by a switch without evidence)."""
-        fl = self._flow
+        fl, pt = self._inc, self._pt
         if not guarded:
             self.since_guard = 0
             self.jumped_since_guard = False
@@ -122,7 +129,7 @@ class SensorAttribution:
             # rest is then the reading's; one that does not agree may still be adapting
             self._level_ref = theta_d if abs(theta_d - fl.theta_prod) < self._min_dev else math.nan
         elif abs(theta_d - self._level_ref) > self._min_dev and theta_d >= self._failed_below:
-            fl.decide_sensor()  # a model change with the piston at rest (False while NaN)
+            pt.decide_sensor(fl.theta_prod)  # a model change with the piston at rest (False while NaN)
         j = self.jump
         if broken:  # the spool integral does not span the samples missed
             j.break_chain()
@@ -136,9 +143,9 @@ class SensorAttribution:
                 self._to = self.jump_gain = self._kd_before * j.ratio
         if self._left > 0:
             self._left -= 1
-            moved = abs(theta_d - self._kd_before) > JUMP_MIN_CHANGE
+            moved = abs(theta_d - self._kd_before) > self._min_change
             if moved and abs(theta_d - self._to) < self._min_dev and theta_d >= self._failed_below:
-                fl.decide_sensor()
+                pt.decide_sensor(fl.theta_prod)
                 self._gain = theta_d
                 self._left = 0
         near = abs(theta_d - self._gain) <= 0.5 * self._min_dev  # False while NaN
@@ -152,6 +159,6 @@ class SensorAttribution:
             self._unexplained = self._model >= 0 and abs(theta_d - self._theta_before) > self._min_dev
             self._model = model
         self._theta_before = theta_d
-        if fl.sensor_current or near or not fl.sensor_decided:
+        if pt.sensor_current or near or not pt.sensor_decided:
             self._unexplained = False
-        return (fl.sensor_favoured or near) and not self._unexplained
+        return (pt.sensor_favoured or near) and not self._unexplained

@@ -1,7 +1,7 @@
 """A position reading that jumps is the sensor's doing, never the flow gain's.
 
 Only ``k_DFT·k_Q`` is identifiable from the position and the spool; the load-pressure test
-(:mod:`.flowgain`) splits it, but needs tens of milliseconds of evidence. An abrupt sensor
+(:mod:`.pressure`) splits it, but needs tens of milliseconds of evidence. An abrupt sensor
 fault gives itself away sooner: the piston position is the integral of the flow, so whatever
 the flow gain does, the piston moves over one sample by between nothing and the full flow the
 spool commands, ``Δx ∈ [0, K_c·∫y_v]`` over the sample (the integral of the measured spool at the
@@ -9,10 +9,10 @@ nominal flow gain; a flow-gain *loss* k_Q ≤ 1 assumed). A sensor whose gain st
 jumps by ``(k' − k)·x`` in one sample instead.
 
 :class:`LevelJump` compares each contiguous sample's position increment ``Δy_s`` with that band
-scaled by the sensor's present increment gain θ_prod (:meth:`.FlowGainMonitor.product`):
+scaled by the sensor's present increment gain θ_prod (:meth:`.Increments.product`):
 the distance of ``Δy_s`` outside ``θ_prod·[0, K_c·∫y_v]``, in units of the increment noise σ̂ (an
 exponentially weighted RMS of ``Δy_s − θ_prod·K_c·∫y_v`` over the samples that did not jump), is the
-statistic; above :data:`JUMP_SIGMAS` the reading jumped. A jump at a small position (a gain step
+statistic; above ``jump_sigmas`` the reading jumped. A jump at a small position (a gain step
 near x = 0) stays inside the noise and goes unseen; so does the error it would cause. A jump
 also measures the sensor's gain change, :attr:`LevelJump.ratio` = k'/k ≈ (y_s − θ_prod·K_c·∫y_v)
 / y_s,before: a position model that changes by that ratio is the sensor's.
@@ -22,25 +22,38 @@ from __future__ import annotations
 
 import math
 
-#: a position increment this many σ̂ outside what any flow gain in [0, 1] explains is a jump
-JUMP_SIGMAS = 6.0
-#: the increment noise σ̂ is averaged over about this many samples
-NOISE_SAMPLES = 100
-#: the gain ratio of a jump is estimated only where the reading is this many σ̂ from 0
-RATIO_SIGMAS = 20.0
-#: no judgement before σ̂ has this many samples behind it
-MIN_SAMPLES = 10
+from ..tuning import ControlTuning
 
 
 class LevelJump:
     """Per contiguous sample: did the position reading jump? (:meth:`update`)."""
 
-    __slots__ = ("_gain", "_hold", "_n", "_settle", "_var", "_w", "_x", "_y", "ratio")
+    __slots__ = (
+        "_gain",
+        "_hold",
+        "_jump2",
+        "_min_n",
+        "_n",
+        "_n_avg",
+        "_ratio2",
+        "_settle",
+        "_var",
+        "_w",
+        "_x",
+        "_y",
+        "ratio",
+    )
 
-    def __init__(self, settle_samples: int) -> None:
+    def __init__(self, settle_samples: int, tuning: ControlTuning | None = None) -> None:
         """``settle_samples``: after a jump, the increment gain passed in is not used for this
-        many samples (θ_prod's increments span the jump: M, the increment window)."""
-        self._w = 1.0 / NOISE_SAMPLES
+        many samples (θ_prod's increments span the jump: M, the increment window); ``tuning``:
+        the ``jump_*`` gates."""
+        t = tuning if tuning is not None else ControlTuning()
+        self._w = 1.0 / t.jump_noise_samples
+        self._n_avg = t.jump_noise_samples
+        self._min_n = t.jump_min_samples
+        self._jump2 = t.jump_sigmas * t.jump_sigmas
+        self._ratio2 = t.jump_ratio_sigmas * t.jump_ratio_sigmas
         self._settle = settle_samples
         self.reset()
 
@@ -81,15 +94,15 @@ class LevelJump:
         else:
             outside = dy if dy > 0.0 else (dx - dy if dy < dx else 0.0)
         n, var = self._n, self._var
-        if n >= MIN_SAMPLES and outside * outside > JUMP_SIGMAS * JUMP_SIGMAS * var:
+        if n >= self._min_n and outside * outside > self._jump2 * var:
             self._hold = self._settle
             # the sensor's gain changed by y_now/y_before once the motion over the sample (taken
             # at the full flow) is taken out; unknown where the reading is within the noise of 0
-            far = y_prev * y_prev > RATIO_SIGMAS * RATIO_SIGMAS * var
+            far = y_prev * y_prev > self._ratio2 * var
             self.ratio = (position_m - dx) / y_prev if far else math.nan
             return True
         r = dy - dx
         n += 1
         self._n = n
-        self._var = var + (self._w if n > NOISE_SAMPLES else 1.0 / n) * (r * r - var)
+        self._var = var + (self._w if n > self._n_avg else 1.0 / n) * (r * r - var)
         return False

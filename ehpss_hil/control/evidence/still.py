@@ -9,8 +9,8 @@ spool into its stop towards a reading that never moves, and the piston runs away
 
 :class:`StillSensor` watches each stop phase in stretches: the spool integral
 ``K_c·Ts·Σ y_v`` (m, in the units of the model position x̂) against the sensor's own movement
-over the stretch. Once the integral has passed :data:`MIN_TRAVEL_M` while the sensor moved by
-less than :data:`STILL_FRACTION` of it (a live sensor moves by k_DFT·k_Q of it, far more), the
+over the stretch. Once the integral has passed ``still_min_travel_m`` while the sensor moved by
+less than ``still_fraction`` of it (a live sensor moves by k_DFT·k_Q of it, far more), the
 sensor is dead, and the model position is x̂ at the phase start plus the integral since; if the
 sensor did move, the next stretch begins there. A mechanically blocked
 piston (against its end stop) would look the same; the plant here has no piston end stop.
@@ -18,22 +18,21 @@ piston (against its end stop) would look the same; the plant here has no piston 
 
 from __future__ import annotations
 
-#: spool integral over one stop phase (m of x̂) before a motionless sensor is judged (≈ 9 ms of
-#: full flow at the shipped K_c·x_v,max of 33 mm/s)
-MIN_TRAVEL_M = 3e-4
-#: a sensor that moved by less than this fraction of the spool integral stands still (15 µm
-#: over 0.3 mm: far above the sensor noise, far below any live gain k_DFT·k_Q the banks model)
-STILL_FRACTION = 0.05
+from ..tuning import ControlTuning
 
 
 class StillSensor:
     """One stop phase at a time; :meth:`update` once per fresh sample."""
 
-    __slots__ = ("_fired", "_in_phase", "_kts", "_travel", "_x0", "_y0")
+    __slots__ = ("_fired", "_in_phase", "_kts", "_min_travel", "_still", "_travel", "_x0", "_y0")
 
-    def __init__(self, velocity_gain_1_s: float, ts_s: float) -> None:
-        """``velocity_gain_1_s``: K_c (1/s) of the model position; ``ts_s``: sample time (s)."""
+    def __init__(self, velocity_gain_1_s: float, ts_s: float, tuning: ControlTuning | None = None) -> None:
+        """``velocity_gain_1_s``: K_c (1/s) of the model position; ``ts_s``: sample time (s);
+        ``tuning``: ``still_min_travel_m`` and ``still_fraction``."""
+        t = tuning if tuning is not None else ControlTuning()
         self._kts = velocity_gain_1_s * ts_s
+        self._min_travel = t.still_min_travel_m
+        self._still = t.still_fraction
         self.reset()
 
     def reset(self) -> None:
@@ -56,9 +55,9 @@ class StillSensor:
         self._travel += self._kts * spool_m
         if self._fired:
             return None
-        if abs(self._travel) < MIN_TRAVEL_M:
+        if abs(self._travel) < self._min_travel:
             return None
-        if abs(position_m - self._y0) < STILL_FRACTION * abs(self._travel):
+        if abs(position_m - self._y0) < self._still * abs(self._travel):
             self._fired = True
             return self._x0 + self._travel
         # the sensor moved over this stretch: judge the next one (a sensor that fails during a

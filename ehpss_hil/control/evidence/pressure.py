@@ -1,4 +1,4 @@
-"""Flow-gain (k_Q) attribution from the load pressure: sensor drift or flow-gain loss?
+"""The pressure test: is a deviation of the product a sensor drift (H_D) or a flow-gain change (H_Q)?
 
 With the piston position and the spool LVDT alone only ``k_DFT·k_Q`` is identifiable: a flow-gain
 loss downstream of the spool (k_Q < 1, e.g. a supply-pressure drop) looks exactly like a
@@ -37,104 +37,51 @@ from __future__ import annotations
 
 import math
 
-from ..physics.discretize import zoh
-from ..physics.model import ACC, SPOOL, SPOOL_VEL, VEL, plant_matrices
-from ..physics.params import PlantParams
-from .creep import CreepEstimator
-from .estimator import per_sample_gain
-from .tuning import ControlTuning
-
-#: the healthy pressure baseline (:attr:`FlowGainMonitor.pressure_gain`) forgets with this time
-#: constant (s of healthy samples)
-BASELINE_WINDOW_S = 2.0
-#: … and is used once it holds this much healthy operation (s)
-BASELINE_MIN_S = 0.2
-#: … within these bounds (dimensionless): the pressure gain of a plant whose hydraulic natural
-#: frequency, mass or flow gain is off the model by up to a factor of 2
-BASELINE_LIMITS = (0.5, 2.0)
-#: … and only where it differs from 1 by more than this (dimensionless): the least-squares gain
-#: of a load pressure quantized at the coarsest accepted resolution (0.2 bar, with a 3 µA echo) is
-#: 2–3 % off the plant's; the plants this baseline is for are 6–50 % off the model
-BASELINE_DEADBAND = 0.05
+from ...physics.discretize import zoh
+from ...physics.model import ACC, SPOOL, SPOOL_VEL, VEL, plant_matrices
+from ...physics.params import PlantParams
+from ..tuning import ControlTuning
 
 
-#: an increment excites the product only where the motion the spool explains is this many times
-#: the reading's noise over one sample (at 20 µm of position noise a 10-sample increment of a
-#: slow motion is mostly noise, and θ_prod swung between 0.9 and 2.5 on a held position)
-EXCITATION_SNR = 2.0
-#: the reading's noise is averaged over about 1/this many samples
-NOISE_WEIGHT = 0.01
-
-
-class FlowGainMonitor:
+class PressureTest:
     """Decides H_D / H_Q each sample; :attr:`k_q` is 1.0 (H_D) or the estimated product (H_Q).
-
-    ``scale_m``: the nominal spool amplitude S (m); it sets the excitation gate and the NLMS
-    regularization of the increment regression.
-    """
+    The product θ_pos comes from :class:`.Increments`; this class holds the P_L model (stepped by
+    the sample clock: :meth:`propagate`, :meth:`mark`, :meth:`rewind`), the evidence window,
+    the healthy baseline and the decision."""
 
     __slots__ = (
-        "_anchor",
+        "_b_dead",
+        "_b_hi",
+        "_b_lo",
         "_b_min",
         "_b_up",
         "_b_uu",
         "_b_w",
         "_bd",
         "_c",
-        "_c2",
         "_d",
         "_failed_below",
-        "_floor",
-        "_g",
-        "_h",
-        "_half_dev",
-        "_hi",
         "_hold",
-        "_i",
-        "_lo",
-        "_m",
         "_mark",
         "_min_dev",
         "_min_evidence",
-        "_n",
-        "_noise_var",
-        "_nsettled",
-        "_null_m_s",
         "_on",
         "_on_d",
-        "_p1",
         "_pa",
-        "_pend",
-        "_prev",
-        "_since_jump",
         "_spp",
-        "_stale",
         "_sup",
         "_suu",
-        "_t",
         "_theta_ref",
-        "_ts",
-        "_ts_ring",
-        "_vs",
         "_w",
-        "_ys",
-        "creep",
-        "creep_integral_m",
         "flow_fault",
         "k_q",
         "llr",
-        "product_settled",
         "s",
         "sensor_current",
         "sensor_decided",
-        "spool_integral_m",
-        "still_samples",
-        "theta_prod",
     )
 
-    def __init__(
-        self, plant: PlantParams, ts_s: float, scale_m: float, tuning: ControlTuning | None = None
-    ) -> None:
+    def __init__(self, plant: PlantParams, ts_s: float, tuning: ControlTuning | None = None) -> None:
         t = tuning if tuning is not None else ControlTuning()
         a, b = plant_matrices(plant)
         ad, bd = zoh(a, b, ts_s)
@@ -144,61 +91,24 @@ class FlowGainMonitor:
         self._on = t.flow_gain_threshold
         self._on_d = t.flow_gain_sensor_threshold
         self._min_dev = t.flow_gain_min_deviation
-        self._half_dev = 0.5 * self._min_dev
         self._min_evidence = t.flow_gain_min_evidence_s / ts_s
         self._failed_below = t.sensor_failed_below
-        self._lo, self._hi = t.k_dft_limits[0], t.k_dft_limits[1]
         self._pa = plant.load_mass_kg / plant.piston_area_m2
-        self._h = 0.5 * ts_s * plant.velocity_gain_1_s
-        self._m = t.increment_window
-        self._g = per_sample_gain(t.nlms_gain_per_ms, ts_s)
-        inc = plant.velocity_gain_1_s * scale_m * self._m * ts_s
-        self._c2 = (t.nlms_c_fraction * inc) ** 2
-        self._floor = t.flow_gain_excitation * inc
-        self._bd = math.exp(-ts_s / BASELINE_WINDOW_S)
-        self._b_min = BASELINE_MIN_S / ts_s
-        self._ts = ts_s
-        #: the piston's velocity with the spool at null (:mod:`.creep`)
-        self.creep = CreepEstimator(plant.velocity_gain_1_s * plant.spool_stroke_m)
-        self._null_m_s = self.creep.null_m_s
+        self._bd = math.exp(-ts_s / t.baseline_window_s)
+        self._b_min = t.baseline_min_s / ts_s
+        self._b_lo, self._b_hi = t.baseline_limits[0], t.baseline_limits[1]
+        self._b_dead = t.baseline_deadband
         self.reset()
 
     def reset(self) -> None:
-        """At rest, hypothesis H_D (k_Q = 1), empty window."""
+        """At rest, hypothesis H_D (k_Q = 1), empty window, no baseline."""
         self.s = (0.0, 0.0, 0.0, 0.0)
         self._mark = self.s
         self.k_q = 1.0
         self.flow_fault = False
         self.llr = 0.0
-        self.theta_prod = 1.0
         self._theta_ref = 1.0
-        self._ys = [0.0] * self._m
-        self._vs = [0.0] * self._m
-        self._ts_ring = [0.0] * self._m
-        self._p1 = (math.nan, 0.0)  # the last call's position and spool integral (m)
-        #: the variance of one sample's position increment about what the spool explains (m²)
-        self._noise_var = 0.0
-        self._t = 0.0  # time the product has spanned (s)
-        self._i = self._n = 0
-        self.creep.reset()
-        self._pend: tuple[float, float, float, float] | None = None  # the last increment
-        self._since_jump = self._m + 1  # samples since the reading last jumped
-        #: samples since the reading last moved by more than the excitation gate over an
-        #: increment (a stuck or failed sensor never does)
-        self.still_samples = 0
-        #: the creep's share of the piston's travel, ∫ĉ/θ_prod dt (m at the nominal flow gain,
-        #: beside :attr:`spool_integral_m`)
-        self.creep_integral_m = 0.0
-        #: the running integral K_c·∫y_v of the measured spool (m of piston travel at the nominal
-        #: flow gain), as of the last :meth:`product` call
-        self.spool_integral_m = self._prev = 0.0
         self._hold = 0
-        self._stale = 0  # updates since the product estimate last had an excited increment
-        self._anchor = math.inf  # θ_prod where the present run of settled updates began
-        self._nsettled = 0  # excited updates since, each within min_deviation/2 of it
-        #: the last M excited increments left θ_prod within ``min_deviation``/2 of where they
-        #: began (a span across a sensor jump, or a gain still converging, is not settled)
-        self.product_settled = False
         self.sensor_decided = False
         #: H_D decided on this sample (Λ < −``flow_gain_sensor_threshold`` on enough evidence) or
         #: by :meth:`decide_sensor` since the last :meth:`update`
@@ -211,16 +121,6 @@ class FlowGainMonitor:
         """The smallest |θ_pos − 1| taken as a deviation to attribute (dimensionless)."""
         return self._min_dev
 
-    @property
-    def increment_window(self) -> int:
-        """M, the samples an increment spans."""
-        return self._m
-
-    @property
-    def product_fresh(self) -> bool:
-        """θ_prod had an excited increment within the last M updates."""
-        return self._stale <= self._m
-
     def forget_attribution(self) -> None:
         """No hypothesis decided, no evidence (the plant model changed under them); the
         product, the creep and the pressure baseline kept."""
@@ -230,23 +130,14 @@ class FlowGainMonitor:
         self._theta_ref = 1.0
         self.restart()
 
-    def note_jump(self) -> None:
-        """The reading jumped on the last sample: the increments spanning it teach no creep."""
-        self._since_jump = 0
-
-    def decide_sensor(self) -> None:
-        """Attribute the present deviation to the sensor without the pressure test (the caller
-        has independent evidence: a jump of the reading, a level change with the piston at
-        rest); H_Q evidence can still overturn it."""
+    def decide_sensor(self, theta_prod: float) -> None:
+        """Attribute the present deviation (the product at ``theta_prod``) to the sensor without
+        the pressure test (the caller has independent evidence: a jump of the reading, a level
+        change with the piston at rest); H_Q evidence can still overturn it."""
         if not self.flow_fault:
             if not self.sensor_decided:
-                self._theta_ref = self.theta_prod
+                self._theta_ref = theta_prod
             self.sensor_decided = self.sensor_current = True
-
-    @property
-    def product_updated(self) -> bool:
-        """θ_prod took an excited increment on the last :meth:`product` call."""
-        return self._stale == 0
 
     def restart(self) -> None:
         """Empty the evidence window (the hypotheses or the pressure model changed); the
@@ -268,56 +159,6 @@ class FlowGainMonitor:
         """Back to the model state at the last :meth:`mark`."""
         self.s = self._mark
 
-    def product(self, position_m: float, spool_m: float, samples: int = 1, excited: bool = True) -> float:
-        """Offset-free estimate of k_DFT·k_Q: NLMS on M-sample increments of the position against
-        ``K_c·∫y_v``, updated only while the increments are excited (a k_Q change leaves x̂ with a
-        level offset; increments have none). ``samples``: sensor samples since the previous call
-        (the spool taken linear over those not seen), so that both sides of an increment span
-        the same time. ``excited`` False (the spool at its stop): the increment is not used."""
-        self.spool_integral_m += self._h * samples * (spool_m + self._prev)
-        dt = samples * self._ts
-        self._t += dt
-        rate = self.creep.rate_m_s
-        if rate and self.theta_prod >= self._failed_below:
-            self.creep_integral_m += dt * rate / self.theta_prod
-        self._prev = spool_m
-        y1, v1 = self._p1
-        if samples == 1 and y1 == y1:  # one sample's increment: the reading's noise
-            r = position_m - y1 - self.theta_prod * (self.spool_integral_m - v1) - rate * dt
-            self._noise_var += NOISE_WEIGHT * (r * r - self._noise_var)
-        self._p1 = (position_m, self.spool_integral_m)
-        i = self._i
-        y = position_m - self._ys[i]
-        phi = self.spool_integral_m - self._vs[i]
-        tau = self._t - self._ts_ring[i]
-        self._ys[i], self._vs[i], self._ts_ring[i] = position_m, self.spool_integral_m, self._t
-        self._i = (i + 1) % self._m
-        self._n += 1
-        self._stale += 1
-        self.still_samples = 0 if abs(y) > self._floor else self.still_samples + samples
-        # the creep learns from the last increment now that a jump inside it would be known
-        self._since_jump += 1
-        pend = self._pend
-        if pend is not None and self._since_jump > self._m:
-            self.creep.update(*pend)
-        # only an increment with the spool near null teaches the creep (CreepEstimator.update)
-        near_null = abs(phi) <= self._null_m_s * tau
-        self._pend = (y, phi, tau, self.theta_prod) if near_null and self._n > self._m and excited else None
-        y -= self.creep.rate_m_s * tau  # the creep's share of the increment is no gain
-        floor = max(self._floor, EXCITATION_SNR * math.sqrt(self._noise_var))
-        if self._n > self._m and abs(phi) > floor and excited:
-            self._stale = 0
-            t = self.theta_prod
-            t += self._g * (y - t * phi) * phi / (self._c2 + phi * phi)
-            self.theta_prod = min(max(t, self._lo), self._hi)
-            if abs(self.theta_prod - self._anchor) < self._half_dev:
-                self._nsettled += 1
-                self.product_settled = self._nsettled >= self._m
-            else:  # moved off: a new run of updates starts here
-                self._anchor, self._nsettled = self.theta_prod, 0
-                self.product_settled = False
-        return self.theta_prod
-
     def propagate(self, current_a: float) -> None:
         """Advance the unit-gain valve + cylinder model with the current echo (A)."""
         s0, s1, s2, s3 = self.s
@@ -337,13 +178,15 @@ class FlowGainMonitor:
         theta_pos: float,
         theta_level: float = 1.0,
         healthy: bool = False,
+        fresh: bool = True,
     ) -> float:
         """One sample: current echo (A), measured P_L (Pa), k̂_LOE, the product estimate
         θ_pos = k_DFT·k_Q and the position bank's level estimate θ_level (the gain its model in
         use gives the sensor); returns k̂_Q (1.0 under H_D). A decision ends only when neither
         θ_pos nor θ_level deviates: θ_pos wanders at low excitation, the bank's model stands.
         ``healthy``: the spool channel has settled on its model (k̂_LOE is known), so a sample
-        with nothing deviating may teach the pressure baseline."""
+        with nothing deviating may teach the pressure baseline. ``fresh``: θ_pos had an excited
+        increment within the last M samples (:attr:`.Increments.product_fresh`)."""
         self.propagate(current_a)
         self.sensor_current = False
         if self.flow_fault and theta_pos < self._failed_below:
@@ -354,7 +197,7 @@ class FlowGainMonitor:
         if self._hold > 0:  # no evidence now (hold_off): the decision stands
             self._hold -= 1
             return self.k_q
-        if self._stale > self._m:  # θ_pos is stale (no excited increment): nothing to test
+        if not fresh:  # θ_pos is stale (no excited increment): nothing to test
             return self.k_q
         if not self.flow_fault and abs(theta_pos - 1.0) < self._min_dev:
             # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
@@ -397,16 +240,15 @@ class FlowGainMonitor:
     @property
     def pressure_gain(self) -> float:
         """The plant's load pressure over the model's, learned while nothing deviated (both
-        hypotheses predict with it): 1 until :data:`BASELINE_MIN_S` of healthy operation, then
-        the least-squares gain within :data:`BASELINE_LIMITS`, where it is off 1 by more than
-        :data:`BASELINE_DEADBAND`. A plant whose hydraulic natural
+        hypotheses predict with it): 1 until ``baseline_min_s`` of healthy operation, then
+        the least-squares gain within ``baseline_limits``, where it is off 1 by more than
+        ``baseline_deadband``. A plant whose hydraulic natural
         frequency or mass is off the model answers the same current with another pressure; a
         test against the model's own pressure takes that for a flow-gain change."""
         if self._b_w < self._b_min or self._b_uu <= 0.0:
             return 1.0
-        lo, hi = BASELINE_LIMITS
-        g = min(max(self._b_up / self._b_uu, lo), hi)
-        return g if abs(g - 1.0) > BASELINE_DEADBAND else 1.0
+        g = min(max(self._b_up / self._b_uu, self._b_lo), self._b_hi)
+        return g if abs(g - 1.0) > self._b_dead else 1.0
 
     @property
     def sensor_favoured(self) -> bool:

@@ -1,0 +1,187 @@
+"""The increment product θ_prod: the offset-free estimate of k_DFT·k_Q from position increments.
+
+With the piston position and the spool LVDT alone only the product ``k_DFT·k_Q`` is identifiable.
+:class:`Increments` estimates it by NLMS on M-sample increments of the position reading against
+the running spool integral ``K_c·∫y_v`` (m of piston travel at the nominal flow gain): a k_Q
+change leaves x̂ with a level offset, increments have none. An increment is evidence only while
+it is excited — above the excitation gate (``flow_gain_excitation`` of the nominal increment
+K_c·S·M·Ts) and above ``excitation_snr`` times the reading's one-sample noise, estimated online
+about what the spool explains — and the spool was not at its stop. The creep (:mod:`.creep`)
+learns from the increments taken near null, and its share is taken out of each increment.
+
+What it gives the other evidence: θ_prod, whether it is fresh (an excited increment within the
+last M updates) and settled (M excited updates within ``min_deviation``/2 of where they began),
+the samples since the reading last moved (a stuck sensor never does), and the spool and creep
+integrals the jump test compares the reading with.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ...physics.params import PlantParams
+from ..estimator import per_sample_gain
+from ..tuning import ControlTuning
+from .creep import CreepEstimator
+
+
+class Increments:
+    """θ_prod and its companions, one :meth:`product` call per fresh sample.
+
+    ``scale_m``: the nominal spool amplitude S (m); it sets the excitation gate and the NLMS
+    regularization.
+    """
+
+    __slots__ = (
+        "_anchor",
+        "_c2",
+        "_failed_below",
+        "_floor",
+        "_g",
+        "_h",
+        "_half_dev",
+        "_hi",
+        "_i",
+        "_lo",
+        "_m",
+        "_n",
+        "_noise_var",
+        "_noise_w",
+        "_nsettled",
+        "_null_m_s",
+        "_p1",
+        "_pend",
+        "_prev",
+        "_since_jump",
+        "_snr",
+        "_stale",
+        "_t",
+        "_ts",
+        "_ts_ring",
+        "_vs",
+        "_ys",
+        "creep",
+        "creep_integral_m",
+        "product_fresh",
+        "product_settled",
+        "product_updated",
+        "spool_integral_m",
+        "still_samples",
+        "theta_prod",
+    )
+
+    def __init__(
+        self, plant: PlantParams, ts_s: float, scale_m: float, tuning: ControlTuning | None = None
+    ) -> None:
+        t = tuning if tuning is not None else ControlTuning()
+        self._half_dev = 0.5 * t.flow_gain_min_deviation
+        self._failed_below = t.sensor_failed_below
+        self._lo, self._hi = t.k_dft_limits[0], t.k_dft_limits[1]
+        self._h = 0.5 * ts_s * plant.velocity_gain_1_s
+        self._m = t.increment_window
+        self._g = per_sample_gain(t.nlms_gain_per_ms, ts_s)
+        inc = plant.velocity_gain_1_s * scale_m * self._m * ts_s
+        self._c2 = (t.nlms_c_fraction * inc) ** 2
+        self._floor = t.flow_gain_excitation * inc
+        self._snr = t.excitation_snr
+        self._noise_w = t.noise_weight
+        self._ts = ts_s
+        #: the piston's velocity with the spool at null (:mod:`.creep`)
+        self.creep = CreepEstimator(plant.velocity_gain_1_s * plant.spool_stroke_m, t)
+        self._null_m_s = self.creep.null_m_s
+        self.reset()
+
+    def reset(self) -> None:
+        """θ_prod = 1, empty window, no creep."""
+        self.theta_prod = 1.0
+        self._ys = [0.0] * self._m
+        self._vs = [0.0] * self._m
+        self._ts_ring = [0.0] * self._m
+        self._p1 = (math.nan, 0.0)  # the last call's position and spool integral (m)
+        #: the variance of one sample's position increment about what the spool explains (m²)
+        self._noise_var = 0.0
+        self._t = 0.0  # time the product has spanned (s)
+        self._i = self._n = 0
+        self.creep.reset()
+        self._pend: tuple[float, float, float, float] | None = None  # the last increment
+        self._since_jump = self._m + 1  # samples since the reading last jumped
+        #: samples since the reading last moved by more than the excitation gate over an
+        #: increment (a stuck or failed sensor never does)
+        self.still_samples = 0
+        #: the creep's share of the piston's travel, ∫ĉ/θ_prod dt (m at the nominal flow gain,
+        #: beside :attr:`spool_integral_m`)
+        self.creep_integral_m = 0.0
+        #: the running integral K_c·∫y_v of the measured spool (m of piston travel at the nominal
+        #: flow gain), as of the last :meth:`product` call
+        self.spool_integral_m = self._prev = 0.0
+        self._stale = 0  # updates since the product estimate last had an excited increment
+        #: θ_prod had an excited increment within the last M updates
+        self.product_fresh = True
+        #: θ_prod took an excited increment on the last :meth:`product` call
+        self.product_updated = True
+        self._anchor = math.inf  # θ_prod where the present run of settled updates began
+        self._nsettled = 0  # excited updates since, each within min_deviation/2 of it
+        #: the last M excited increments left θ_prod within ``min_deviation``/2 of where they
+        #: began (a span across a sensor jump, or a gain still converging, is not settled)
+        self.product_settled = False
+
+    @property
+    def increment_window(self) -> int:
+        """M, the samples an increment spans."""
+        return self._m
+
+    def note_jump(self) -> None:
+        """The reading jumped on the last sample: the increments spanning it teach no creep."""
+        self._since_jump = 0
+
+    def product(self, position_m: float, spool_m: float, samples: int = 1, excited: bool = True) -> float:
+        """One fresh sample: the position reading and the spool LVDT (m); ``samples``: sensor
+        samples since the previous call (the spool taken linear over those not seen), so that
+        both sides of an increment span the same time; ``excited`` False (the spool at its
+        stop): the increment is not used. Returns θ_prod."""
+        self.spool_integral_m += self._h * samples * (spool_m + self._prev)
+        dt = samples * self._ts
+        self._t += dt
+        rate = self.creep.rate_m_s
+        if rate and self.theta_prod >= self._failed_below:
+            self.creep_integral_m += dt * rate / self.theta_prod
+        self._prev = spool_m
+        y1, v1 = self._p1
+        if samples == 1 and y1 == y1:  # one sample's increment: the reading's noise
+            r = position_m - y1 - self.theta_prod * (self.spool_integral_m - v1) - rate * dt
+            self._noise_var += self._noise_w * (r * r - self._noise_var)
+        self._p1 = (position_m, self.spool_integral_m)
+        i = self._i
+        y = position_m - self._ys[i]
+        phi = self.spool_integral_m - self._vs[i]
+        tau = self._t - self._ts_ring[i]
+        self._ys[i], self._vs[i], self._ts_ring[i] = position_m, self.spool_integral_m, self._t
+        self._i = (i + 1) % self._m
+        self._n += 1
+        self._stale += 1
+        self.still_samples = 0 if abs(y) > self._floor else self.still_samples + samples
+        # the creep learns from the last increment now that a jump inside it would be known
+        self._since_jump += 1
+        pend = self._pend
+        if pend is not None and self._since_jump > self._m:
+            self.creep.update(*pend)
+        # only an increment with the spool near null teaches the creep (CreepEstimator.update)
+        near_null = abs(phi) <= self._null_m_s * tau
+        self._pend = (y, phi, tau, self.theta_prod) if near_null and self._n > self._m and excited else None
+        y -= self.creep.rate_m_s * tau  # the creep's share of the increment is no gain
+        floor = max(self._floor, self._snr * math.sqrt(self._noise_var))
+        if self._n > self._m and abs(phi) > floor and excited:
+            self._stale = 0
+            t = self.theta_prod
+            t += self._g * (y - t * phi) * phi / (self._c2 + phi * phi)
+            self.theta_prod = min(max(t, self._lo), self._hi)
+            if abs(self.theta_prod - self._anchor) < self._half_dev:
+                self._nsettled += 1
+                self.product_settled = self._nsettled >= self._m
+            else:  # moved off: a new run of updates starts here
+                self._anchor, self._nsettled = self.theta_prod, 0
+                self.product_settled = False
+        stale = self._stale
+        self.product_fresh = stale <= self._m
+        self.product_updated = stale == 0
+        return self.theta_prod
