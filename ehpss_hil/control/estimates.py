@@ -23,7 +23,7 @@ from .predictors import ModelPosition
 class Estimates:
     """x̂ (a :class:`ModelPosition`), x0, y0 (m) and the k̂ in use, changed only by the methods."""
 
-    __slots__ = ("_failed_below", "_rebase_limit_m", "k_dft", "k_loe", "k_q", "x0", "xhat", "y0")
+    __slots__ = ("_failed_below", "_kq_dead", "_rebase_limit_m", "k_dft", "k_loe", "k_q", "x0", "xhat", "y0")
 
     def __init__(self, xhat: ModelPosition, failed_below: float, rebase_limit_m: float) -> None:
         """``xhat``: the model position the sample clock advances; ``failed_below``: θ of the
@@ -39,6 +39,8 @@ class Estimates:
         #: the seed point: the sensor (m) and x̂ (m) at the first sample after the reset
         self.y0 = self.x0 = 0.0
         self.k_loe = self.k_dft = self.k_q = 1.0
+        #: the flow gain attributed when the sensor was found dead: x̂ goes on at it (1: none)
+        self._kq_dead = 1.0
 
     def seed(self, position_m: float) -> None:
         """x̂ = y_s now, as if k_DFT were 1: only differences from here are used."""
@@ -49,11 +51,13 @@ class Estimates:
         self.xhat.creep_m_s = rate_m_s
 
     def set_channels(self, k_loe: float, k_dft: float, trusted: bool) -> None:
-        """The banks' estimates in use (spool channel, position channel), k̂_Q back to 1, and
-        x̂ re-based on the sensor gain (:meth:`rebase`, while the sensor is ``trusted``)."""
-        self.k_loe = k_loe
+        """The banks' estimates in use (spool channel, position channel), k̂_Q back to 1 (to the
+        flow gain kept by :meth:`place_dead` while the sensor is dead), and x̂ re-based on the
+        sensor gain (:meth:`rebase`, while the sensor is ``trusted``)."""
+        kq = self._kq_dead
+        self.k_loe = k_loe * kq
         self.k_dft = k_dft
-        self.k_q = 1.0
+        self.k_q = kq
         if trusted:  # rebase(k_dft, True), spelled out: this runs on every sample
             x0 = self.y0 / k_dft
             if not abs(x0 - self.x0) > self._rebase_limit_m:
@@ -65,11 +69,23 @@ class Estimates:
         at ``x_hat_m`` (a dead-reckoned offset is no drift), then re-base on θ̂_D."""
         self.y0, self.x0 = position_m, x_hat_m
 
-    def place_dead(self, position_m: float, x_dead_m: float) -> None:
+    def place_dead(self, position_m: float, x_dead_m: float, k_q: float = 1.0) -> None:
         """The sensor stood still through a stop phase: x̂ where the spool took the piston, and
-        the regression from here (a stuck reading then fits the failed-sensor model)."""
+        the regression from here (a stuck reading then fits the failed-sensor model). ``k_q``:
+        the flow gain attributed before (x̂ is in x/k̂_Q units); x̂ goes on at it, and it stays
+        k̂_Q until :meth:`revive`."""
         self.xhat.x = x_dead_m
         self.y0, self.x0 = position_m, x_dead_m
+        self._kq_dead = k_q
+
+    def revive(self) -> None:
+        """The sensor found dead follows the spool again: x̂ and x0 from x/k̂_Q units into the
+        piston's, k̂_Q back to 1."""
+        kq = self._kq_dead
+        if kq != 1.0:
+            self.xhat.x *= kq
+            self.x0 *= kq
+            self._kq_dead = 1.0
 
     def rebase(self, theta: float, trusted: bool) -> None:
         """Keep x0 = y0/θ with θ = θ̂_D·k̂_Q in use: x̂ moves with x0 (x̂ − x0 is unchanged), so

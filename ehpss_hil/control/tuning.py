@@ -152,8 +152,23 @@ class ControlTuning:
     #: H_D (the sensor's) is decided only at Λ < −this: the costlier mistake is a flow loss
     #: compensated as a drift
     flow_gain_sensor_threshold: float = field(
-        default=12.0,
-        metadata=rng(0.0, 1e6, lo_open=True, unit="1 (log-likelihood)", origin="§5 asymmetric cost"),
+        default=10.0,
+        metadata=rng(
+            0.0, 1e6, lo_open=True, unit="1 (log-likelihood)", origin="§5 asymmetric cost; §9.1 poweron-drift"
+        ),
+    )
+    #: until the plant's own pressure gain is learned, either hypothesis' pressure gain is known
+    #: only within ±this: the plant's load mass, piston area and hydraulic natural frequency off
+    #: the model's move it (0: the model is exact, a commissioned plant)
+    pressure_gain_uncertainty: float = field(
+        default=0.2,
+        metadata=rng(0.0, 0.5, unit="1 (relative)", origin="the uncertainty set: load mass ±20 % (§9.1)"),
+    )
+    #: a window that held this many times ``flow_gain_min_evidence_s`` without deciding is
+    #: ambiguous about its deviation: when the product moves off it, the window starts afresh
+    undecided_evidence: float = field(
+        default=4.0,
+        metadata=rng(1.0, 1e3, unit="1 (· min evidence)", origin="§9.1: mm-kq085-kq07, poweron-drift"),
     )
     #: no flow-gain evidence for this long after samples stepped without their data
     flow_hold_s: float = field(

@@ -128,7 +128,7 @@ class SensorAttribution:
             # the level model agreed with the increments when the motion stopped: a change at
             # rest is then the reading's; one that does not agree may still be adapting
             self._level_ref = theta_d if abs(theta_d - fl.theta_prod) < self._min_dev else math.nan
-        elif abs(theta_d - self._level_ref) > self._min_dev and theta_d >= self._failed_below:
+        elif fl.at_rest and abs(theta_d - self._level_ref) > self._min_dev and theta_d >= self._failed_below:
             pt.decide_sensor(fl.theta_prod)  # a model change with the piston at rest (False while NaN)
         j = self.jump
         if broken:  # the spool integral does not span the samples missed

@@ -60,6 +60,7 @@ class Increments:
         "_ts_ring",
         "_vs",
         "_ys",
+        "at_rest",
         "creep",
         "creep_integral_m",
         "product_fresh",
@@ -108,6 +109,9 @@ class Increments:
         #: samples since the reading last moved by more than the excitation gate over an
         #: increment (a stuck or failed sensor never does)
         self.still_samples = 0
+        #: the spool integral moved less than the excitation gate over the last increment: no
+        #: flow the model knows of (whatever the reading's noise does to :attr:`product_fresh`)
+        self.at_rest = True
         #: the creep's share of the piston's travel, ∫ĉ/θ_prod dt (m at the nominal flow gain,
         #: beside :attr:`spool_integral_m`)
         self.creep_integral_m = 0.0
@@ -160,6 +164,7 @@ class Increments:
         self._n += 1
         self._stale += 1
         self.still_samples = 0 if abs(y) > self._floor else self.still_samples + samples
+        self.at_rest = abs(phi) <= self._floor
         # the creep learns from the last increment now that a jump inside it would be known
         self._since_jump += 1
         pend = self._pend

@@ -165,11 +165,18 @@ class EvidenceLayer:
         """The still sensor on this sample; True when the sensor was found dead now (x̂ is then
         placed where the spool took the piston, and the loop holds the sensor off)."""
         x_dead = self.still.update(at_stop, spool_m, position_m, x_hat_m)
-        if x_dead is None or self.pressure.flow_fault:
+        if x_dead is None:
             return False
+        k_q = 1.0
+        if self.pressure.flow_fault:
+            # a flow gain attributed before (H_Q: x̂ is in x/k̂_Q units) is the plant's: x̂ goes
+            # on at it and the compensation keeps it; the hypothesis itself ends (no sensor)
+            k_q = self.est.k_q
+            self.pressure.forget_attribution()
+            self._in_flow = False
         self.dead = True
         self._dead_evidence = 0
-        self.est.place_dead(position_m, x_dead)
+        self.est.place_dead(position_m, x_dead, k_q)
         return True
 
     # ---- after both banks ------------------------------------------------------------------
@@ -194,7 +201,18 @@ class EvidenceLayer:
             and self._spool_age >= self._baseline_settle
         )
         theta_l = self._pressure_theta_l(k_loe, warm)
-        pt.update(self.clock.echo, meas.load_pressure_pa, theta_l, prod, est.k_dft, healthy, fresh)
+        inc = self.inc
+        pt.update(
+            self.clock.echo,
+            meas.load_pressure_pa,
+            theta_l,
+            prod,
+            est.k_dft,
+            healthy,
+            fresh,
+            inc.product_updated,
+            inc.increment_window,
+        )
         if pt.flow_fault:
             est.enter_flow(meas.position_m, prod, k_loe)
             self._in_flow = True
@@ -328,6 +346,7 @@ class EvidenceLayer:
         since (a full window of excited increments after the finding, at a live gain)."""
         if self.dead and self._dead_evidence >= self.inc.increment_window and self.sensor_follows_spool():
             self.dead = False
+            self.est.revive()
         return self.dead
 
     def sensor_follows_spool(self) -> bool:

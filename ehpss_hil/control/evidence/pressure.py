@@ -57,6 +57,7 @@ class PressureTest:
         "_b_up",
         "_b_uu",
         "_b_w",
+        "_band",
         "_bd",
         "_c",
         "_d",
@@ -72,6 +73,9 @@ class PressureTest:
         "_sup",
         "_suu",
         "_theta_ref",
+        "_tq",
+        "_tq_ref",
+        "_undecided",
         "_w",
         "flow_fault",
         "k_q",
@@ -98,6 +102,8 @@ class PressureTest:
         self._b_min = t.baseline_min_s / ts_s
         self._b_lo, self._b_hi = t.baseline_limits[0], t.baseline_limits[1]
         self._b_dead = t.baseline_deadband
+        self._band = t.pressure_gain_uncertainty
+        self._undecided = t.undecided_evidence * self._min_evidence
         self.reset()
 
     def reset(self) -> None:
@@ -108,6 +114,7 @@ class PressureTest:
         self.flow_fault = False
         self.llr = 0.0
         self._theta_ref = 1.0
+        self._tq = 1.0  # θ_pos averaged over about M excited updates: H_Q's gain in the test
         self._hold = 0
         self.sensor_decided = False
         #: H_D decided on this sample (Λ < −``flow_gain_sensor_threshold`` on enough evidence) or
@@ -143,6 +150,7 @@ class PressureTest:
         """Empty the evidence window (the hypotheses or the pressure model changed); the
         decision stands until new evidence overturns it."""
         self._suu = self._sup = self._spp = self._w = 0.0
+        self._tq_ref = 1.0  # the product the window's evidence is about (set by its first sample)
 
     def hold_off(self, samples: int) -> None:
         """Take no evidence for the next ``samples`` updates (the decision stands): after
@@ -179,6 +187,8 @@ class PressureTest:
         theta_level: float = 1.0,
         healthy: bool = False,
         fresh: bool = True,
+        updated: bool = True,
+        window: int = 10,
     ) -> float:
         """One sample: current echo (A), measured P_L (Pa), k̂_LOE, the product estimate
         θ_pos = k_DFT·k_Q and the position bank's level estimate θ_level (the gain its model in
@@ -186,9 +196,13 @@ class PressureTest:
         θ_pos nor θ_level deviates: θ_pos wanders at low excitation, the bank's model stands.
         ``healthy``: the spool channel has settled on its model (k̂_LOE is known), so a sample
         with nothing deviating may teach the pressure baseline. ``fresh``: θ_pos had an excited
-        increment within the last M samples (:attr:`.Increments.product_fresh`)."""
+        increment within the last M samples (:attr:`.Increments.product_fresh`); ``updated``: it
+        had one on this sample, and ``window`` (M) of them make the average θ_pos H_Q is judged
+        with (one sample's θ_pos wanders with the position noise: a dip is no evidence)."""
         self.propagate(current_a)
         self.sensor_current = False
+        if updated:
+            self._tq += (theta_pos - self._tq) / window
         if self.flow_fault and theta_pos < self._failed_below:
             # a failed sensor is never a flow-gain loss, also while evidence is held off or
             # stale (k̂_Q = θ_pos ≈ 0 would divide the position by nothing)
@@ -217,6 +231,16 @@ class PressureTest:
             # on the one deviation and the evidence is kept
             self._theta_ref = theta_pos
             self.restart()
+        if (
+            not self.attributed
+            and self._w >= self._undecided
+            and not abs(self._tq - self._tq_ref) <= self._min_dev
+        ):
+            # the product moved off a deviation the window held without deciding (a plant the
+            # uncertainty leaves ambiguous): that evidence is about the plant, not the new change
+            self.restart()
+        if self._w == 0.0:
+            self._tq_ref = self._tq
         u = self._pa * self.s[0]
         d = self._d
         self._suu = d * self._suu + u * u
@@ -224,7 +248,7 @@ class PressureTest:
         self._spp = d * self._spp + pressure_pa * pressure_pa
         self._w = d * self._w + 1.0
         g = self.pressure_gain * theta_l
-        self.llr = self._llr(g, g * theta_pos)
+        self.llr = self._llr(g, g * self._tq)
         self._decide(theta_pos)
         self.k_q = theta_pos if self.flow_fault else 1.0
         return self.k_q
@@ -263,11 +287,20 @@ class PressureTest:
         return self.flow_fault or self.sensor_decided
 
     def _llr(self, g_d: float, g_q: float) -> float:
-        """Λ for P_L = g·u with g = g_d (H_D) against g = g_q (H_Q)."""
-        e_d = self._spp - 2.0 * g_d * self._sup + g_d * g_d * self._suu
-        e_q = self._spp - 2.0 * g_q * self._sup + g_q * g_q * self._suu
+        """Λ for P_L = g·u with g = g_d (H_D) against g = g_q (H_Q). Until the plant's own
+        pressure gain is learned each hypothesis' gain is known only within
+        ``pressure_gain_uncertainty``: each takes the gain within its band that fits best (a
+        generalized likelihood ratio; 0 where the fitted gain lies in both bands)."""
+        band = 0.0 if self._b_w >= self._b_min else self._band
+        e_d, e_q = self._fit(g_d, band), self._fit(g_q, band)
         var = min(e_d, e_q) / self._w
         return (e_d - e_q) / (2.0 * var) if var > 0.0 else 0.0
+
+    def _fit(self, g: float, band: float) -> float:
+        """Σw·(P_L − ĝ·u)² for the ĝ within g·[1 − band, 1 + band] that fits best."""
+        if band > 0.0 and self._suu > 0.0:
+            g = min(max(self._sup / self._suu, g * (1.0 - band)), g * (1.0 + band))
+        return self._spp - 2.0 * g * self._sup + g * g * self._suu
 
     def _decide(self, theta: float) -> None:
         """Enter H_Q on strong evidence and a real deviation; leave it on strong counter-evidence

@@ -33,6 +33,7 @@ class IncrementEvidence(Protocol):
     product_updated: bool
     product_settled: bool
     still_samples: int
+    at_rest: bool
     spool_integral_m: float
     creep_integral_m: float
 
@@ -83,6 +84,8 @@ class PressureEvidence(Protocol):
         theta_level: float = 1.0,
         healthy: bool = False,
         fresh: bool = True,
+        updated: bool = True,
+        window: int = 10,
     ) -> float: ...
 
     def propagate(self, current_a: float) -> None: ...
