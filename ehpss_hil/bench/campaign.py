@@ -77,7 +77,10 @@ def run(args: argparse.Namespace) -> Scorecard:
     camp = load_campaign(args.file)
     camp = replace(camp, spec=replace(camp.spec, duration_s=BENCH_DURATION_S))
     plans = plan_runs(camp)[: args.runs + 2]
-    tasks = [RunTask(p.index, p.run_hash, p.scenario, camp.spec.modes, camp.spec.transport) for p in plans]
+    tasks = [
+        RunTask(p.index, p.run_hash, p.scenario, camp.spec.modes, camp.spec.transport, camp.spec.tuning)
+        for p in plans
+    ]
     warm, tasks = tasks[:2], tasks[2:]
     for t in warm:  # imports, the DBC and the parameters loaded before timing (forked workers inherit)
         execute(t)

@@ -12,6 +12,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+from ..control.tuning import ControlTuning
 from ..physics.load import load_params
 from ..physics.params import Params
 from ..report.metrics import RunMetrics, compute_metrics
@@ -43,6 +44,8 @@ class RunTask:
     scenario: Scenario
     modes: tuple[str, ...]
     transport: str = "quantize"
+    #: the controller's tuning (None: the defaults)
+    tuning: ControlTuning | None = None
 
 
 @functools.cache
@@ -81,7 +84,7 @@ def execute(task: RunTask) -> dict[str, Any]:
     metrics: dict[str, Any] = {}
     cpu: dict[str, float] = {}
     for mode in task.modes:
-        res = run_scenario(task.scenario, mode, _params(), None, task.transport)
+        res = run_scenario(task.scenario, mode, _params(), task.tuning, task.transport)
         cpu[mode] = res.cpu_s
         for key, value in metric_columns(compute_metrics(res)).items():
             metrics[f"{mode}.{key}"] = value

@@ -26,7 +26,7 @@ from .journal import JOURNAL_NAME, Expected, Journal, read_journal
 from .progress import Progress
 from .runs import METRIC_COLUMNS, RunTask
 from .sampling import RunPlan, plan_runs
-from .spec import Campaign
+from .spec import Campaign, tuning_overrides
 from .summary import (
     WORST_DIR,
     ClassSummary,
@@ -158,7 +158,10 @@ def _run(
         outcome = Outcome(len(plans), len(plans) - len(todo), executor=ex.description)
         prog = progress if progress is not None else Progress(len(plans), outcome.skipped)
         prog.tally = outcome.tally
-        tasks = [RunTask(p.index, p.run_hash, p.scenario, camp.spec.modes, camp.spec.transport) for p in todo]
+        tasks = [
+            RunTask(p.index, p.run_hash, p.scenario, camp.spec.modes, camp.spec.transport, camp.spec.tuning)
+            for p in todo
+        ]
 
         def on_result(rec: dict[str, Any]) -> None:
             journal.append(rec)
@@ -206,6 +209,8 @@ def finish(
         header.append(
             f"- {outcome.ran} runs executed now on {outcome.executor}" + (f": {trouble}" if trouble else "")
         )
+    changed = tuning_overrides(spec.tuning)
+    header.append(f"- controller tuning: {changed or 'the defaults'}")
     sections: list[str] = []
     if spec.model_error is not None:
         ranges = spec.model_error.ranges()

@@ -12,6 +12,7 @@ frozen) and ``frame_loss`` (both directions); a kind absent from ``faults.kinds`
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import re
@@ -20,6 +21,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from ..control.registry import MODES
+from ..control.tuning import ControlTuning
 from ..errors import ConfigError
 from ..limits import MAX_CAMPAIGN_RUNS, MAX_FAULTS_PER_RUN, MAX_REFERENCE_M
 from ..physics.plantspec import LUMPED_KEYS
@@ -204,6 +206,10 @@ class CampaignSpec:
     noise_scale: tuple[float, ...] = field(default=(1.0, 1.0), metadata=_pair(0.0, 100.0, "factor"))
     #: the emulated plant's error against the controller's model, drawn per run
     model_error: ModelError | None = None
+    #: the controller's tuning in every run (keys of ControlTuning, validated like a controller
+    #: config's ``tuning:``; absent keys keep their defaults), e.g. a commissioned controller's
+    #: ``pressure_gain_uncertainty: 0`` where the plant is the controller's model
+    tuning: ControlTuning = field(default_factory=ControlTuning)
     description: str = ""
 
     def __post_init__(self) -> None:
@@ -238,6 +244,16 @@ class Campaign:
     def duration_s(self) -> float:
         """Duration of every run (s)."""
         return self.spec.duration_s if self.spec.duration_s is not None else self.base.duration_s
+
+
+def tuning_overrides(tuning: ControlTuning) -> str:
+    """The tuning keys that differ from the defaults, as ``key value, …`` ("" when none)."""
+    base = ControlTuning()
+    return ", ".join(
+        f"{f.name} {getattr(tuning, f.name)!r}"
+        for f in dataclasses.fields(tuning)
+        if getattr(tuning, f.name) != getattr(base, f.name)
+    )
 
 
 def canonical_json(data: Any) -> str:
