@@ -164,6 +164,14 @@ class ControlTuning:
         default=0.2,
         metadata=rng(0.0, 0.5, unit="1 (relative)", origin="the uncertainty set: load mass ±20 % (§9.1)"),
     )
+    #: H_Q's pressure gain is known within ± this many mean steps of θ_pos between excited
+    #: increments (the product's wander under position noise; a clean product keeps it exact)
+    product_spread: float = field(
+        default=3.0,
+        metadata=rng(
+            0.0, 100.0, unit="1 (· mean step)", origin="≈ √M; model-error draws: harm 4.5 → 2.9 %"
+        ),
+    )
     #: a window that held this many times ``flow_gain_min_evidence_s`` without deciding is
     #: ambiguous about its deviation: when the product moves off it, the window starts afresh
     undecided_evidence: float = field(

@@ -70,9 +70,12 @@ class PressureTest:
         "_on_d",
         "_pa",
         "_spp",
+        "_spread",
         "_sup",
         "_suu",
+        "_tdev",
         "_theta_ref",
+        "_tprev",
         "_tq",
         "_tq_ref",
         "_undecided",
@@ -103,6 +106,7 @@ class PressureTest:
         self._b_lo, self._b_hi = t.baseline_limits[0], t.baseline_limits[1]
         self._b_dead = t.baseline_deadband
         self._band = t.pressure_gain_uncertainty
+        self._spread = t.product_spread
         self._undecided = t.undecided_evidence * self._min_evidence
         self.reset()
 
@@ -115,6 +119,8 @@ class PressureTest:
         self.llr = 0.0
         self._theta_ref = 1.0
         self._tq = 1.0  # θ_pos averaged over about M excited updates: H_Q's gain in the test
+        self._tprev = 1.0
+        self._tdev = 0.0  # the mean step of θ_pos between excited updates (its wander)
         self._hold = 0
         self.sensor_decided = False
         #: H_D decided on this sample (Λ < −``flow_gain_sensor_threshold`` on enough evidence) or
@@ -203,6 +209,8 @@ class PressureTest:
         self.sensor_current = False
         if updated:
             self._tq += (theta_pos - self._tq) / window
+            self._tdev += (abs(theta_pos - self._tprev) - self._tdev) / window
+            self._tprev = theta_pos
         if self.flow_fault and theta_pos < self._failed_below:
             # a failed sensor is never a flow-gain loss, also while evidence is held off or
             # stale (k̂_Q = θ_pos ≈ 0 would divide the position by nothing)
@@ -290,16 +298,25 @@ class PressureTest:
         """Λ for P_L = g·u with g = g_d (H_D) against g = g_q (H_Q). Until the plant's own
         pressure gain is learned each hypothesis' gain is known only within
         ``pressure_gain_uncertainty``: each takes the gain within its band that fits best (a
-        generalized likelihood ratio; 0 where the fitted gain lies in both bands)."""
+        generalized likelihood ratio; 0 where the fitted gain lies in both bands). H_Q's gain is
+        known only as well as the product: ± ``product_spread`` times its mean step between
+        excited increments (the wander the position noise gives it)."""
         band = 0.0 if self._b_w >= self._b_min else self._band
-        e_d, e_q = self._fit(g_d, band), self._fit(g_q, band)
+        e_d = self._fit(g_d, g_d, band)
+        spread = self._spread * self._tdev * self._tq_gain(g_q)
+        e_q = self._fit(g_q - spread, g_q + spread, band)
         var = min(e_d, e_q) / self._w
         return (e_d - e_q) / (2.0 * var) if var > 0.0 else 0.0
 
-    def _fit(self, g: float, band: float) -> float:
-        """Σw·(P_L − ĝ·u)² for the ĝ within g·[1 − band, 1 + band] that fits best."""
-        if band > 0.0 and self._suu > 0.0:
-            g = min(max(self._sup / self._suu, g * (1.0 - band)), g * (1.0 + band))
+    def _tq_gain(self, g_q: float) -> float:
+        """g_q per unit of the product (the pressure gain H_Q scales by θ_pos)."""
+        return g_q / self._tq if self._tq > 0.0 else 0.0
+
+    def _fit(self, lo: float, hi: float, band: float) -> float:
+        """Σw·(P_L − ĝ·u)² for the ĝ within [lo·(1 − band), hi·(1 + band)] that fits best."""
+        g = lo
+        if (band > 0.0 or hi > lo) and self._suu > 0.0:
+            g = min(max(self._sup / self._suu, lo * (1.0 - band)), hi * (1.0 + band))
         return self._spp - 2.0 * g * self._sup + g * g * self._suu
 
     def _decide(self, theta: float) -> None:
