@@ -79,8 +79,10 @@ class PressureTest:
         "_tq",
         "_tq_ref",
         "_undecided",
+        "_vband",
         "_w",
         "flow_fault",
+        "k_base",
         "k_q",
         "llr",
         "s",
@@ -106,6 +108,7 @@ class PressureTest:
         self._b_lo, self._b_hi = t.baseline_limits[0], t.baseline_limits[1]
         self._b_dead = t.baseline_deadband
         self._band = t.pressure_gain_uncertainty
+        self._vband = t.velocity_gain_uncertainty
         self._spread = t.product_spread
         self._undecided = t.undecided_evidence * self._min_evidence
         self.reset()
@@ -115,6 +118,9 @@ class PressureTest:
         self.s = (0.0, 0.0, 0.0, 0.0)
         self._mark = self.s
         self.k_q = 1.0
+        #: the plant's own flow gain (the product's healthy value, learned at power-on): the
+        #: nominal of both hypotheses; 1 until a deviation inside the uncertainty is adopted
+        self.k_base = 1.0
         self.flow_fault = False
         self.llr = 0.0
         self._theta_ref = 1.0
@@ -221,18 +227,19 @@ class PressureTest:
             return self.k_q
         if not fresh:  # θ_pos is stale (no excited increment): nothing to test
             return self.k_q
-        if not self.flow_fault and abs(theta_pos - 1.0) < self._min_dev:
+        kb = self.k_base
+        if not self.flow_fault and abs(theta_pos - kb) < self._min_dev * kb:
             # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
             # episode is over (the window starts afresh when a deviation appears)
-            if healthy and abs(theta_level - 1.0) < self._min_dev and not self.sensor_decided:
-                self._learn_baseline(theta_l, pressure_pa)
-            if abs(theta_level - 1.0) < self._min_dev and (self._w > 0.0 or self.sensor_decided):
-                self._theta_ref = 1.0
+            if healthy and abs(theta_level - kb) < self._min_dev * kb and not self.sensor_decided:
+                self._learn_baseline(theta_l * kb, pressure_pa)
+            if abs(theta_level - kb) < self._min_dev * kb and (self._w > 0.0 or self.sensor_decided):
+                self._theta_ref = kb
                 self.sensor_decided = False
                 self.restart()
             self.llr = 0.0
-            self.k_q = 1.0
-            return 1.0
+            self.k_q = kb
+            return kb
         if self.attributed and abs(theta_pos - self._theta_ref) > self._min_dev:
             # an attributed deviation moved: gather evidence afresh (the attribution stands until
             # the new evidence overturns it); while unattributed the product is still converging
@@ -256,10 +263,24 @@ class PressureTest:
         self._spp = d * self._spp + pressure_pa * pressure_pa
         self._w = d * self._w + 1.0
         g = self.pressure_gain * theta_l
-        self.llr = self._llr(g, g * self._tq)
+        self.llr = self._llr(g * kb, g * self._tq)
         self._decide(theta_pos)
-        self.k_q = theta_pos if self.flow_fault else 1.0
+        self._adopt(theta_pos)
+        self.k_q = theta_pos if self.flow_fault else self.k_base
         return self.k_q
+
+    def _adopt(self, theta: float) -> None:
+        """A deviation the window held undecided for ``undecided_evidence`` while within the
+        plant's velocity-gain uncertainty (and beyond the product's own wander) is the plant's:
+        its flow gain becomes the nominal of both hypotheses; the window starts afresh."""
+        if self.attributed or self._w < self._undecided or self.k_base != 1.0:
+            return
+        dev = abs(self._tq - 1.0)
+        inside = self._spread * self._tdev < dev <= self._vband and dev >= self._min_dev
+        if inside and theta >= self._failed_below:
+            self.k_base = self._tq
+            self._theta_ref = self._tq
+            self.restart()
 
     def _learn_baseline(self, theta_l: float, pressure_pa: float) -> None:
         """One healthy sample into the pressure baseline: Σ(k̂_LOE·u)², Σ(k̂_LOE·u)·P_L."""
@@ -332,7 +353,7 @@ class PressureTest:
         if self.flow_fault:
             self.flow_fault = self.llr > -self._on
         else:
-            self.flow_fault = self.llr > self._on and abs(theta - 1.0) >= self._min_dev
+            self.flow_fault = self.llr > self._on and abs(theta - self.k_base) >= self._min_dev * self.k_base
         if self.flow_fault:
             self.sensor_decided = False
         elif self.llr < -self._on_d:
