@@ -41,6 +41,11 @@ PROGRAM_MODULES = frozenset({"ehpss_hil.cli", "firmware_sim.cli"})
 _OPTIONS_WITH_VALUE = frozenset({"-W", "-X", "--check-hash-based-pycs"})
 #: whether SIGINT came since :func:`release_startup` (written by the signal handler)
 _STATE = {"interrupted": False}
+#: a KeyboardInterrupt that would land in the import system is raised this much later (s)
+IMPORT_RETRY_S = 0.001
+#: the import system's module: an exception raised in its callbacks (a module lock's weakref
+#: callback) is printed as "Exception ignored" with a traceback, and the program goes on
+_IMPORT_SYSTEM = "importlib._bootstrap"
 
 
 def _exit_interrupted(signum: int, frame: FrameType | None) -> None:
@@ -49,8 +54,14 @@ def _exit_interrupted(signum: int, frame: FrameType | None) -> None:
 
 
 def _raise_interrupt(signum: int, frame: FrameType | None) -> None:
-    """SIGINT while a command runs: noted, then Python's KeyboardInterrupt."""
+    """SIGINT while a command runs: noted, then Python's KeyboardInterrupt — not inside the
+    import system, where the interpreter would print it as ignored and carry on: from there it
+    is raised :data:`IMPORT_RETRY_S` later (SIGALRM, this handler again)."""
     _STATE["interrupted"] = True
+    if frame is not None and frame.f_globals.get("__name__") == _IMPORT_SYSTEM:
+        _signal.signal(_signal.SIGALRM, _raise_interrupt)
+        _signal.setitimer(_signal.ITIMER_REAL, IMPORT_RETRY_S)
+        return
     _signal.default_int_handler(signum, frame)
 
 
