@@ -162,3 +162,42 @@ def test_a_product_that_falls_below_the_failed_sensor_bound_ends_h_q_even_when_h
     mon.hold_off(10)
     assert mon.update(current, plant.load_pressure_pa, 0.8, 0.0) == 1.0
     assert not mon.flow_fault and mon.k_q == 1.0
+
+
+def _feed(
+    pt: PressureTest,
+    plant: PlantStepper,
+    rng: np.random.Generator,
+    n: int,
+    theta: float,
+    healthy: bool,
+    noise_pa: float = 1e4,
+) -> None:
+    current = 0.0
+    for _ in range(n):
+        p = plant.load_pressure_pa + noise_pa * rng.standard_normal()
+        pt.update(current, p, theta_l=1.0, theta_pos=theta, theta_level=theta, healthy=healthy)
+        current = 1e-4 * rng.standard_normal()
+        plant.step(current)
+
+
+def test_a_plant_never_seen_healthy_gives_its_own_flow_gain_as_the_nominal() -> None:
+    """A plant 15 % slow from power-on: the pressure leaves H_D and H_Q undecided within the
+    uncertainty, so after ``undecided_evidence`` the product is the plant's flow gain (k_base),
+    the nominal both hypotheses are judged against; once the plant ran healthy at the model's
+    flow gain (a pressure baseline learned), a deviation the pressure leaves undecided (here a
+    pressure reading 100× noisier) is a change, not the plant (a realtime LOE injection on the
+    emulated plant was taken for a plant 0.8 slow)."""
+    rng = np.random.default_rng(5)
+    plant = PlantStepper(PARAMS, TS)
+    plant.set_faults(FaultState(k_q=0.85))
+    fresh = PressureTest(PARAMS.plant, TS)
+    _feed(fresh, plant, rng, 400, 0.85, healthy=False)
+    assert fresh.k_base == pytest.approx(0.85, abs=1e-6)
+    assert not fresh.attributed
+    plant = PlantStepper(PARAMS, TS)
+    seen = PressureTest(PARAMS.plant, TS)
+    _feed(seen, plant, rng, 400, 1.0, healthy=True)  # the baseline (≥ baseline_min_s) is learned
+    plant.set_faults(FaultState(k_q=0.85))
+    _feed(seen, plant, rng, 400, 0.85, healthy=False, noise_pa=1e6)
+    assert not seen.attributed and seen.k_base == 1.0

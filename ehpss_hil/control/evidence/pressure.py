@@ -272,8 +272,10 @@ class PressureTest:
     def _adopt(self, theta: float) -> None:
         """A deviation the window held undecided for ``undecided_evidence`` while within the
         plant's velocity-gain uncertainty (and beyond the product's own wander) is the plant's:
-        its flow gain becomes the nominal of both hypotheses; the window starts afresh."""
-        if self.attributed or self._w < self._undecided or self.k_base != 1.0:
+        its flow gain becomes the nominal of both hypotheses; the window starts afresh. Only
+        while the plant has not been seen healthy (no pressure baseline learned yet): a plant
+        that ran at the model's flow gain has shown its own, and a later deviation is a change."""
+        if self.attributed or self._w < self._undecided or self.k_base != 1.0 or self._b_w >= self._b_min:
             return
         dev = abs(self._tq - 1.0)
         inside = self._spread * self._tdev < dev <= self._vband and dev >= self._min_dev
