@@ -164,19 +164,13 @@ class ControlTuning:
         default=0.2,
         metadata=rng(0.0, 0.5, unit="1 (relative)", origin="the uncertainty set: load mass ±20 % (§9.1)"),
     )
-    #: the plant's velocity gain K_c may be off the model's by ± this without a fault: a
-    #: deviation of the product within it that the pressure test leaves undecided for
-    #: ``undecided_evidence`` is the plant's own flow gain, the nominal of both hypotheses from
-    #: then on (0: the model is exact, a commissioned plant)
-    velocity_gain_uncertainty: float = field(
-        default=0.3,
-        metadata=rng(0.0, 0.9, unit="1 (relative)", origin="the uncertainty set: flow gain, ω_h ±20 %"),
-    )
     #: H_Q's pressure gain is known within ± this many mean steps of θ_pos between excited
     #: increments (the product's wander under position noise; a clean product keeps it exact)
     product_spread: float = field(
         default=3.0,
-        metadata=rng(0.0, 100.0, unit="1 (· mean step)", origin="≈ √M; model-error draws: harm 4.5 → 2.9 %"),
+        metadata=rng(
+            0.0, 100.0, unit="1 (· mean step)", origin="≈ √M; model-error draws: harm 4.5 → 2.9 %"
+        ),
     )
     #: a window that held this many times ``flow_gain_min_evidence_s`` without deciding is
     #: ambiguous about its deviation: when the product moves off it, the window starts afresh

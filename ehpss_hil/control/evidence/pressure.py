@@ -79,10 +79,8 @@ class PressureTest:
         "_tq",
         "_tq_ref",
         "_undecided",
-        "_vband",
         "_w",
         "flow_fault",
-        "k_base",
         "k_q",
         "llr",
         "s",
@@ -108,7 +106,6 @@ class PressureTest:
         self._b_lo, self._b_hi = t.baseline_limits[0], t.baseline_limits[1]
         self._b_dead = t.baseline_deadband
         self._band = t.pressure_gain_uncertainty
-        self._vband = t.velocity_gain_uncertainty
         self._spread = t.product_spread
         self._undecided = t.undecided_evidence * self._min_evidence
         self.reset()
@@ -118,9 +115,6 @@ class PressureTest:
         self.s = (0.0, 0.0, 0.0, 0.0)
         self._mark = self.s
         self.k_q = 1.0
-        #: the plant's own flow gain (the product's healthy value, learned at power-on): the
-        #: nominal of both hypotheses; 1 until a deviation inside the uncertainty is adopted
-        self.k_base = 1.0
         self.flow_fault = False
         self.llr = 0.0
         self._theta_ref = 1.0
@@ -227,19 +221,18 @@ class PressureTest:
             return self.k_q
         if not fresh:  # θ_pos is stale (no excited increment): nothing to test
             return self.k_q
-        kb = self.k_base
-        if not self.flow_fault and abs(theta_pos - kb) < self._min_dev * kb:
+        if not self.flow_fault and abs(theta_pos - 1.0) < self._min_dev:
             # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
             # episode is over (the window starts afresh when a deviation appears)
-            if healthy and abs(theta_level - kb) < self._min_dev * kb and not self.sensor_decided:
-                self._learn_baseline(theta_l * kb, pressure_pa)
-            if abs(theta_level - kb) < self._min_dev * kb and (self._w > 0.0 or self.sensor_decided):
-                self._theta_ref = kb
+            if healthy and abs(theta_level - 1.0) < self._min_dev and not self.sensor_decided:
+                self._learn_baseline(theta_l, pressure_pa)
+            if abs(theta_level - 1.0) < self._min_dev and (self._w > 0.0 or self.sensor_decided):
+                self._theta_ref = 1.0
                 self.sensor_decided = False
                 self.restart()
             self.llr = 0.0
-            self.k_q = kb
-            return kb
+            self.k_q = 1.0
+            return 1.0
         if self.attributed and abs(theta_pos - self._theta_ref) > self._min_dev:
             # an attributed deviation moved: gather evidence afresh (the attribution stands until
             # the new evidence overturns it); while unattributed the product is still converging
@@ -263,26 +256,10 @@ class PressureTest:
         self._spp = d * self._spp + pressure_pa * pressure_pa
         self._w = d * self._w + 1.0
         g = self.pressure_gain * theta_l
-        self.llr = self._llr(g * kb, g * self._tq)
+        self.llr = self._llr(g, g * self._tq)
         self._decide(theta_pos)
-        self._adopt(theta_pos)
-        self.k_q = theta_pos if self.flow_fault else self.k_base
+        self.k_q = theta_pos if self.flow_fault else 1.0
         return self.k_q
-
-    def _adopt(self, theta: float) -> None:
-        """A deviation the window held undecided for ``undecided_evidence`` while within the
-        plant's velocity-gain uncertainty (and beyond the product's own wander) is the plant's:
-        its flow gain becomes the nominal of both hypotheses; the window starts afresh. Only
-        while the plant has not been seen healthy (no pressure baseline learned yet): a plant
-        that ran at the model's flow gain has shown its own, and a later deviation is a change."""
-        if self.attributed or self._w < self._undecided or self.k_base != 1.0 or self._b_w >= self._b_min:
-            return
-        dev = abs(self._tq - 1.0)
-        inside = self._spread * self._tdev < dev <= self._vband and dev >= self._min_dev
-        if inside and theta >= self._failed_below:
-            self.k_base = self._tq
-            self._theta_ref = self._tq
-            self.restart()
 
     def _learn_baseline(self, theta_l: float, pressure_pa: float) -> None:
         """One healthy sample into the pressure baseline: Σ(k̂_LOE·u)², Σ(k̂_LOE·u)·P_L."""
@@ -355,7 +332,7 @@ class PressureTest:
         if self.flow_fault:
             self.flow_fault = self.llr > -self._on
         else:
-            self.flow_fault = self.llr > self._on and abs(theta - self.k_base) >= self._min_dev * self.k_base
+            self.flow_fault = self.llr > self._on and abs(theta - 1.0) >= self._min_dev
         if self.flow_fault:
             self.sensor_decided = False
         elif self.llr < -self._on_d:

@@ -54,8 +54,6 @@ class PressureEvidence(Protocol):
     """H_D (sensor) against H_Q (flow gain) from the load pressure; the sample clock steps its
     P_L model (``propagate``/``mark``/``rewind``)."""
 
-    k_base: float
-
     flow_fault: bool
     k_q: float
     sensor_decided: bool
