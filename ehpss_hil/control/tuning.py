@@ -168,9 +168,7 @@ class ControlTuning:
     #: increments (the product's wander under position noise; a clean product keeps it exact)
     product_spread: float = field(
         default=3.0,
-        metadata=rng(
-            0.0, 100.0, unit="1 (· mean step)", origin="≈ √M; model-error draws: harm 4.5 → 2.9 %"
-        ),
+        metadata=rng(0.0, 100.0, unit="1 (· mean step)", origin="≈ √M; model-error draws: harm 4.5 → 2.9 %"),
     )
     #: a window that held this many times ``flow_gain_min_evidence_s`` without deciding is
     #: ambiguous about its deviation: when the product moves off it, the window starts afresh
