@@ -162,3 +162,81 @@ def test_a_product_that_falls_below_the_failed_sensor_bound_ends_h_q_even_when_h
     mon.hold_off(10)
     assert mon.update(current, plant.load_pressure_pa, 0.8, 0.0) == 1.0
     assert not mon.flow_fault and mon.k_q == 1.0
+
+
+def _feed(
+    pt: PressureTest,
+    plant: PlantStepper,
+    rng: np.random.Generator,
+    n: int,
+    theta: float,
+    healthy: bool,
+    noise_pa: float = 1e4,
+) -> None:
+    current = 0.0
+    for _ in range(n):
+        p = plant.load_pressure_pa + noise_pa * rng.standard_normal()
+        pt.update(current, p, theta_l=1.0, theta_pos=theta, theta_level=theta, healthy=healthy)
+        current = 1e-4 * rng.standard_normal()
+        plant.step(current)
+
+
+def test_a_plant_never_seen_at_the_model_gives_its_own_flow_gain_as_the_nominal() -> None:
+    """A plant 15 % slow from power-on: the pressure leaves H_D and H_Q undecided within the
+    uncertainty, so after ``undecided_evidence`` the product is the plant's flow gain (k_base),
+    the nominal both hypotheses are judged against."""
+    rng = np.random.default_rng(5)
+    plant = PlantStepper(PARAMS, TS)
+    plant.set_faults(FaultState(k_q=0.85))
+    fresh = PressureTest(PARAMS.plant, TS)
+    _feed(fresh, plant, rng, 400, 0.85, healthy=False)
+    assert fresh.k_base == pytest.approx(0.85, abs=1e-6)
+    assert not fresh.attributed and not fresh.plant_seen
+
+
+@pytest.mark.parametrize("baseline", [True, False], ids=["baseline-learned", "product-only"])
+def test_a_deviation_after_the_plant_ran_at_the_model_is_a_change(baseline: bool) -> None:
+    """Once the plant ran at the model's flow gain — a pressure baseline learned, or, where
+    gaps held the baseline off (a loaded realtime host), the averaged product at 1 for
+    ``plant_seen_s`` — a deviation the pressure leaves undecided (here a pressure reading 100×
+    noisier) is a change, never the plant's flow gain: the realtime monitor test took a drift
+    0.8 injected 0.36 s after an LOE for a plant 0.8 slow."""
+    rng = np.random.default_rng(5)
+    plant = PlantStepper(PARAMS, TS)
+    seen = PressureTest(PARAMS.plant, TS)
+    n_seen = round(ControlTuning().plant_seen_s / TS)
+    _feed(seen, plant, rng, 400 if baseline else n_seen + 5, 1.0, healthy=baseline)
+    assert seen.plant_seen and (seen.pressure_gain_learned if baseline else not seen.pressure_gain_learned)
+    plant.set_faults(FaultState(k_q=0.85))
+    _feed(seen, plant, rng, 400, 0.85, healthy=False, noise_pa=1e6)
+    assert not seen.attributed and seen.k_base == 1.0
+
+
+def test_the_product_seen_at_1_too_briefly_is_no_sight_of_the_plant() -> None:
+    """The averaged product starts at 1 and passes through the band on its way to a power-on
+    deviation: fewer than ``plant_seen_s`` of excited updates in a row are not the plant seen."""
+    rng = np.random.default_rng(5)
+    plant = PlantStepper(PARAMS, TS)
+    pt = PressureTest(PARAMS.plant, TS)
+    n_seen = round(ControlTuning().plant_seen_s / TS)
+    _feed(pt, plant, rng, n_seen - 1, 1.0, healthy=False)
+    assert not pt.plant_seen
+    _feed(pt, plant, rng, 1, 1.0, healthy=False)
+    assert pt.plant_seen
+
+
+def test_a_recovery_keeps_what_is_known_of_the_plant_and_power_on_forgets_it() -> None:
+    """:meth:`reset` (leaving the fail-safe) keeps the plant's flow gain, its sight at the
+    model's and the pressure baseline: the plant did not change; :meth:`forget_plant` (a new
+    controller) forgets them."""
+    rng = np.random.default_rng(5)
+    plant = PlantStepper(PARAMS, TS)
+    plant.set_faults(FaultState(k_q=0.85))
+    pt = PressureTest(PARAMS.plant, TS)
+    _feed(pt, plant, rng, 400, 0.85, healthy=False)
+    assert pt.k_base == pytest.approx(0.85, abs=1e-6)
+    pt.reset()
+    assert pt.k_base == pytest.approx(0.85, abs=1e-6) and pt.k_q == pt.k_base
+    pt.forget_plant()
+    pt.reset()
+    assert (pt.k_base, pt.k_q, pt.plant_seen, pt.pressure_gain_learned) == (1.0, 1.0, False, False)

@@ -48,7 +48,7 @@ POWER_ON_S = 0.1
 #: the rows on the plant = model (shipped, unseen, envelope): the controller's params are the
 #: plant's, as after commissioning (``identify``), so it is told its model is exact; the plant ≠
 #: model family runs with the default tuning (docs/control.md §9.1)
-COMMISSIONED = ControlTuning(pressure_gain_uncertainty=0.0)
+COMMISSIONED = ControlTuning(pressure_gain_uncertainty=0.0, velocity_gain_uncertainty=0.0)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

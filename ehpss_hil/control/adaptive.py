@@ -99,7 +99,8 @@ class MmacController(LoopBase):
             self._banks(meas, v, xh, tl_prev, broken)
             tl = 1.0 if self.spool_sup.guarded else self.spool_bank.theta[self.spool_sup.active]
             td = self.pos_bank.theta[self.pos_sup.active]
-            est.set_channels(tl, td, self.sensor_alive(td) and not self.pos_sup.guarded)
+            alive = self.sensor_alive(td) and not self.pos_sup.guarded
+            est.set_channels(tl, td, alive, self._pressure.k_base)
             if self._flow_on:
                 att = self.evidence.update(
                     meas, tl, self._spool_hold == 0, self._warm_left > 0, broken, self._was_trusted
@@ -145,7 +146,7 @@ class MmacController(LoopBase):
         est = self.est
         flow = self._pressure.flow_fault
         if broken or stopped:
-            td = est.k_dft
+            td = est.theta_d
             if not self.pos_sup.guarded and self.sensor_alive(td) and not flow:
                 est.reanchor(meas.position_m, xh)
                 est.rebase(td, True)  # trusted: checked just above
@@ -162,7 +163,7 @@ class MmacController(LoopBase):
     def _bridge_gain(self) -> float | None:
         """θ̂_D when the position sensor may place x̂ across a redone span: trusted (not guarded,
         not failed) and not under the flow-gain hypothesis; else None."""
-        td = self.est.k_dft
+        td = self.est.theta_d
         if self.pos_sup.guarded or not self.sensor_alive(td) or self._pressure.flow_fault:
             return None
         return td

@@ -149,7 +149,9 @@ class Controller(ABC):
 
     @abstractmethod
     def reset(self) -> None:
-        """Back to the initial state (integrators, estimates, indices, active models)."""
+        """Back to the initial state (integrators, estimates, indices, active models); what a
+        law learned of the plant itself (mmac: its flow gain, the pressure baseline) is kept —
+        leaving the fail-safe does not change the plant; :meth:`configure` forgets it."""
 
     @abstractmethod
     def step(self, meas: Measurement) -> ValveCommand:

@@ -23,7 +23,18 @@ from .predictors import ModelPosition
 class Estimates:
     """x̂ (a :class:`ModelPosition`), x0, y0 (m) and the k̂ in use, changed only by the methods."""
 
-    __slots__ = ("_failed_below", "_kq_dead", "_rebase_limit_m", "k_dft", "k_loe", "k_q", "x0", "xhat", "y0")
+    __slots__ = (
+        "_failed_below",
+        "_kq_dead",
+        "_rebase_limit_m",
+        "k_dft",
+        "k_loe",
+        "k_q",
+        "theta_d",
+        "x0",
+        "xhat",
+        "y0",
+    )
 
     def __init__(self, xhat: ModelPosition, failed_below: float, rebase_limit_m: float) -> None:
         """``xhat``: the model position the sample clock advances; ``failed_below``: θ of the
@@ -39,6 +50,8 @@ class Estimates:
         #: the seed point: the sensor (m) and x̂ (m) at the first sample after the reset
         self.y0 = self.x0 = 0.0
         self.k_loe = self.k_dft = self.k_q = 1.0
+        #: the position bank's gain in use (k_DFT times the plant's flow gain k_base)
+        self.theta_d = 1.0
         #: the flow gain attributed when the sensor was found dead: x̂ goes on at it (1: none)
         self._kq_dead = 1.0
 
@@ -50,13 +63,14 @@ class Estimates:
         """x̂ moves with the creep, in its own units (m/s of x/k̂_Q: the sensor read through θ_prod)."""
         self.xhat.creep_m_s = rate_m_s
 
-    def set_channels(self, k_loe: float, k_dft: float, trusted: bool) -> None:
+    def set_channels(self, k_loe: float, k_dft: float, trusted: bool, k_base: float = 1.0) -> None:
         """The banks' estimates in use (spool channel, position channel), k̂_Q back to 1 (to the
         flow gain kept by :meth:`place_dead` while the sensor is dead), and x̂ re-based on the
         sensor gain (:meth:`rebase`, while the sensor is ``trusted``)."""
-        kq = self._kq_dead
+        kq = self._kq_dead if self._kq_dead != 1.0 else k_base
         self.k_loe = k_loe * kq
-        self.k_dft = k_dft
+        self.theta_d = k_dft
+        self.k_dft = k_dft / k_base
         self.k_q = kq
         if trusted:  # rebase(k_dft, True), spelled out: this runs on every sample
             x0 = self.y0 / k_dft
@@ -116,9 +130,11 @@ class Estimates:
         self.xhat.x = position_m / prod if live else position_m
         self.x0 = self.y0 / prod if live else self.y0
 
-    def set_sensor_gain(self, k_dft: float) -> None:
-        """The position model in use after the bank was re-seeded."""
-        self.k_dft = k_dft
+    def set_sensor_gain(self, theta_d: float, k_base: float = 1.0) -> None:
+        """The position model in use after the bank was re-seeded: its gain ``theta_d`` is the
+        sensor's times the plant's flow gain ``k_base``."""
+        self.theta_d = theta_d
+        self.k_dft = theta_d / k_base
 
     def restart(self, position_m: float) -> None:
         """The plant model changed under the position channel: x̂ = y_s, nominal k̂_Q."""

@@ -164,6 +164,23 @@ class ControlTuning:
         default=0.2,
         metadata=rng(0.0, 0.5, unit="1 (relative)", origin="the uncertainty set: load mass ±20 % (§9.1)"),
     )
+    #: the plant's velocity gain K_c may be off the model's by ± this without a fault: a
+    #: deviation of the product within it that the pressure test leaves undecided for
+    #: ``undecided_evidence`` is the plant's own flow gain, the nominal of both hypotheses from
+    #: then on (0: the model is exact, a commissioned plant)
+    velocity_gain_uncertainty: float = field(
+        default=0.3,
+        metadata=rng(0.0, 0.9, unit="1 (relative)", origin="the uncertainty set: flow gain, ω_h ±20 %"),
+    )
+    #: the plant has shown the model's flow gain once the averaged product stayed within
+    #: ``flow_gain_min_deviation`` of 1 for this long of excited increments in a row: a later
+    #: deviation is a change (a fault), never the plant's own flow gain
+    plant_seen_s: float = field(
+        default=0.05,
+        metadata=rng(
+            0.0, 10.0, unit="s (excited increments)", origin="§9.1: a drift 0.36 s after a recovery, realtime"
+        ),
+    )
     #: H_Q's pressure gain is known within ± this many mean steps of θ_pos between excited
     #: increments (the product's wander under position noise; a clean product keeps it exact)
     product_spread: float = field(

@@ -167,7 +167,7 @@ class EvidenceLayer:
         x_dead = self.still.update(at_stop, spool_m, position_m, x_hat_m)
         if x_dead is None:
             return False
-        k_q = 1.0
+        k_q = self.est.k_q
         if self.pressure.flow_fault:
             # a flow gain attributed before (H_Q: x̂ is in x/k̂_Q units) is the plant's: x̂ goes
             # on at it and the compensation keeps it; the hypothesis itself ends (no sensor)
@@ -207,11 +207,10 @@ class EvidenceLayer:
             meas.load_pressure_pa,
             theta_l,
             prod,
-            est.k_dft,
+            est.theta_d,
             healthy,
             fresh,
             inc.product_updated,
-            inc.increment_window,
         )
         if pt.flow_fault:
             est.enter_flow(meas.position_m, prod, k_loe)
@@ -221,11 +220,11 @@ class EvidenceLayer:
             est.leave_flow(meas.position_m, prod)
             self.pos_bank.seed_ria(prod)
             self.pos_sup.force(self.pos_bank.ria)
-            est.set_sensor_gain(self.pos_bank.theta[self.pos_bank.ria])
+            est.set_sensor_gain(self.pos_bank.theta[self.pos_bank.ria], pt.k_base)
         rec.fallback = self._watch(k_loe, fresh)
         rec.reason = self.monitor.reason
         ps = self.pos_sup
-        sensor = self.attribution.update(meas.position_m, est.k_dft, ps.active, ps.guarded, broken, trusted)
+        sensor = self.attribution.update(meas.position_m, est.theta_d, ps.active, ps.guarded, broken, trusted)
         flow = pt.flow_fault
         rec.position_nominal = not (sensor or flow)
         rec.ramp_samples = 1 if self.attribution.by_jump else self._ramp_n
@@ -286,7 +285,7 @@ class EvidenceLayer:
         pa, sa = self.pos_sup.active, self.spool_sup.active
         guarded = self.position_guarded()
         est = self.est
-        at_limit = (pa >= pb.n_fixed and not guarded and est.k_dft >= self._lim_d_hi) or (
+        at_limit = (pa >= pb.n_fixed and not guarded and est.theta_d >= self._lim_d_hi) or (
             sa >= sb.n_fixed and not self.spool_sup.guarded and k_loe <= self._lim_l_lo
         )
         # the position check only where the sensor is read through θ̂_D: under the guard the loop
@@ -319,9 +318,10 @@ class EvidenceLayer:
             return None
         if att.since_guard < inc.increment_window:
             return None
+        kb = self.pressure.k_base  # the gains below are the product's: k_DFT times the plant's
         if math.isfinite(att.jump_gain) and att.jump_gain >= self._alive:
-            return att.jump_gain
-        return inc.theta_prod if self.pressure.sensor_favoured else 1.0
+            return att.jump_gain / kb
+        return inc.theta_prod / kb if self.pressure.sensor_favoured else 1.0
 
     def sensor_live(self) -> bool:
         """The sensor follows the spool, so it may be fed back raw. Under the guard with no jump

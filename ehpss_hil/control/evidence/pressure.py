@@ -63,12 +63,15 @@ class PressureTest:
         "_d",
         "_failed_below",
         "_hold",
+        "_m",
         "_mark",
         "_min_dev",
         "_min_evidence",
         "_on",
         "_on_d",
         "_pa",
+        "_seen",
+        "_seen_n",
         "_spp",
         "_spread",
         "_sup",
@@ -79,10 +82,13 @@ class PressureTest:
         "_tq",
         "_tq_ref",
         "_undecided",
+        "_vband",
         "_w",
         "flow_fault",
+        "k_base",
         "k_q",
         "llr",
+        "plant_seen",
         "s",
         "sensor_current",
         "sensor_decided",
@@ -106,18 +112,36 @@ class PressureTest:
         self._b_lo, self._b_hi = t.baseline_limits[0], t.baseline_limits[1]
         self._b_dead = t.baseline_deadband
         self._band = t.pressure_gain_uncertainty
+        self._vband = t.velocity_gain_uncertainty
         self._spread = t.product_spread
         self._undecided = t.undecided_evidence * self._min_evidence
+        self._seen_n = max(1, round(t.plant_seen_s / ts_s))
+        self._m = t.increment_window
+        self.forget_plant()
         self.reset()
 
+    def forget_plant(self) -> None:
+        """Nothing known of the plant (power-on): the model's flow gain, not seen yet, no
+        pressure baseline."""
+        #: the plant's own flow gain (the product's healthy value, learned at power-on): the
+        #: nominal of both hypotheses; 1 until a deviation inside the uncertainty is adopted
+        self.k_base = 1.0
+        #: the averaged product stood at 1 for ``plant_seen_s``: the plant runs at the model's
+        #: flow gain, and no later deviation is adopted as its own
+        self.plant_seen = False
+        self._seen = 0  # excited updates in a row with the averaged product at 1
+        self._b_uu = self._b_up = self._b_w = 0.0
+
     def reset(self) -> None:
-        """At rest, hypothesis H_D (k_Q = 1), empty window, no baseline."""
+        """At rest, hypothesis H_D (k_Q = 1 · k_base), empty window; what is known of the plant
+        (its flow gain, whether it was seen at the model's, the pressure baseline) is kept: a
+        fail-safe recovery does not change the plant (:meth:`forget_plant` forgets it)."""
         self.s = (0.0, 0.0, 0.0, 0.0)
         self._mark = self.s
-        self.k_q = 1.0
+        self.k_q = self.k_base
         self.flow_fault = False
         self.llr = 0.0
-        self._theta_ref = 1.0
+        self._theta_ref = self.k_base
         self._tq = 1.0  # θ_pos averaged over about M excited updates: H_Q's gain in the test
         self._tprev = 1.0
         self._tdev = 0.0  # the mean step of θ_pos between excited updates (its wander)
@@ -126,7 +150,6 @@ class PressureTest:
         #: H_D decided on this sample (Λ < −``flow_gain_sensor_threshold`` on enough evidence) or
         #: by :meth:`decide_sensor` since the last :meth:`update`
         self.sensor_current = False
-        self._b_uu = self._b_up = self._b_w = 0.0
         self.restart()
 
     @property
@@ -138,9 +161,9 @@ class PressureTest:
         """No hypothesis decided, no evidence (the plant model changed under them); the
         product, the creep and the pressure baseline kept."""
         self.flow_fault = self.sensor_decided = self.sensor_current = False
-        self.k_q = 1.0
+        self.k_q = self.k_base
         self.llr = 0.0
-        self._theta_ref = 1.0
+        self._theta_ref = self.k_base
         self.restart()
 
     def decide_sensor(self, theta_prod: float) -> None:
@@ -194,7 +217,6 @@ class PressureTest:
         healthy: bool = False,
         fresh: bool = True,
         updated: bool = True,
-        window: int = 10,
     ) -> float:
         """One sample: current echo (A), measured P_L (Pa), k̂_LOE, the product estimate
         θ_pos = k_DFT·k_Q and the position bank's level estimate θ_level (the gain its model in
@@ -203,36 +225,44 @@ class PressureTest:
         ``healthy``: the spool channel has settled on its model (k̂_LOE is known), so a sample
         with nothing deviating may teach the pressure baseline. ``fresh``: θ_pos had an excited
         increment within the last M samples (:attr:`.Increments.product_fresh`); ``updated``: it
-        had one on this sample, and ``window`` (M) of them make the average θ_pos H_Q is judged
+        had one on this sample, and ``increment_window`` (M) of them make the average θ_pos H_Q is judged
         with (one sample's θ_pos wanders with the position noise: a dip is no evidence)."""
         self.propagate(current_a)
         self.sensor_current = False
         if updated:
-            self._tq += (theta_pos - self._tq) / window
-            self._tdev += (abs(theta_pos - self._tprev) - self._tdev) / window
+            m = self._m
+            self._tq += (theta_pos - self._tq) / m
+            self._tdev += (abs(theta_pos - self._tprev) - self._tdev) / m
             self._tprev = theta_pos
+            if abs(self._tq - 1.0) < self._min_dev:
+                self._seen += 1
+                if self._seen >= self._seen_n:
+                    self.plant_seen = True
+            else:
+                self._seen = 0
         if self.flow_fault and theta_pos < self._failed_below:
             # a failed sensor is never a flow-gain loss, also while evidence is held off or
             # stale (k̂_Q = θ_pos ≈ 0 would divide the position by nothing)
             self.flow_fault = False
-            self.k_q = 1.0
+            self.k_q = self.k_base
         if self._hold > 0:  # no evidence now (hold_off): the decision stands
             self._hold -= 1
             return self.k_q
         if not fresh:  # θ_pos is stale (no excited increment): nothing to test
             return self.k_q
-        if not self.flow_fault and abs(theta_pos - 1.0) < self._min_dev:
+        kb = self.k_base
+        if not self.flow_fault and abs(theta_pos - kb) < self._min_dev * kb:
             # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
             # episode is over (the window starts afresh when a deviation appears)
-            if healthy and abs(theta_level - 1.0) < self._min_dev and not self.sensor_decided:
-                self._learn_baseline(theta_l, pressure_pa)
-            if abs(theta_level - 1.0) < self._min_dev and (self._w > 0.0 or self.sensor_decided):
-                self._theta_ref = 1.0
+            if healthy and abs(theta_level - kb) < self._min_dev * kb and not self.sensor_decided:
+                self._learn_baseline(theta_l * kb, pressure_pa)
+            if abs(theta_level - kb) < self._min_dev * kb and (self._w > 0.0 or self.sensor_decided):
+                self._theta_ref = kb
                 self.sensor_decided = False
                 self.restart()
             self.llr = 0.0
-            self.k_q = 1.0
-            return 1.0
+            self.k_q = kb
+            return kb
         if self.attributed and abs(theta_pos - self._theta_ref) > self._min_dev:
             # an attributed deviation moved: gather evidence afresh (the attribution stands until
             # the new evidence overturns it); while unattributed the product is still converging
@@ -256,10 +286,29 @@ class PressureTest:
         self._spp = d * self._spp + pressure_pa * pressure_pa
         self._w = d * self._w + 1.0
         g = self.pressure_gain * theta_l
-        self.llr = self._llr(g, g * self._tq)
+        self.llr = self._llr(g * kb, g * self._tq, self._spread * self._tdev * g)
         self._decide(theta_pos)
-        self.k_q = theta_pos if self.flow_fault else 1.0
+        self._adopt(theta_pos)
+        self.k_q = theta_pos if self.flow_fault else self.k_base
         return self.k_q
+
+    def _adopt(self, theta: float) -> None:
+        """A deviation the window held undecided for ``undecided_evidence`` while within the
+        plant's velocity-gain uncertainty (and beyond the product's own wander) is the plant's:
+        its flow gain becomes the nominal of both hypotheses; the window starts afresh. Only
+        while the plant has not been seen at the model's flow gain (:attr:`plant_seen`, or a
+        pressure baseline learned): a plant that ran at it has shown its own, and a later
+        deviation is a change."""
+        if self.attributed or self._w < self._undecided or self.k_base != 1.0:
+            return
+        if self.plant_seen or self.pressure_gain_learned:
+            return
+        dev = abs(self._tq - 1.0)
+        inside = self._spread * self._tdev < dev <= self._vband and dev >= self._min_dev
+        if inside and theta >= self._failed_below:
+            self.k_base = self._tq
+            self._theta_ref = self._tq
+            self.restart()
 
     def _learn_baseline(self, theta_l: float, pressure_pa: float) -> None:
         """One healthy sample into the pressure baseline: Σ(k̂_LOE·u)², Σ(k̂_LOE·u)·P_L."""
@@ -268,6 +317,11 @@ class PressureTest:
         self._b_uu = d * self._b_uu + u * u
         self._b_up = d * self._b_up + u * pressure_pa
         self._b_w = d * self._b_w + 1.0
+
+    @property
+    def pressure_gain_learned(self) -> bool:
+        """The plant's pressure gain was learned (``baseline_min_s`` of healthy operation)."""
+        return self._b_w >= self._b_min
 
     @property
     def pressure_gain(self) -> float:
@@ -294,23 +348,19 @@ class PressureTest:
         decided on enough evidence)."""
         return self.flow_fault or self.sensor_decided
 
-    def _llr(self, g_d: float, g_q: float) -> float:
+    def _llr(self, g_d: float, g_q: float, spread: float) -> float:
         """Λ for P_L = g·u with g = g_d (H_D) against g = g_q (H_Q). Until the plant's own
         pressure gain is learned each hypothesis' gain is known only within
         ``pressure_gain_uncertainty``: each takes the gain within its band that fits best (a
         generalized likelihood ratio; 0 where the fitted gain lies in both bands). H_Q's gain is
-        known only as well as the product: ± ``product_spread`` times its mean step between
-        excited increments (the wander the position noise gives it)."""
+        known only as well as the product: ± ``spread`` (``product_spread`` times its mean step
+        between excited increments, the wander the position noise gives it, in pressure-gain
+        units)."""
         band = 0.0 if self._b_w >= self._b_min else self._band
         e_d = self._fit(g_d, g_d, band)
-        spread = self._spread * self._tdev * self._tq_gain(g_q)
         e_q = self._fit(g_q - spread, g_q + spread, band)
         var = min(e_d, e_q) / self._w
         return (e_d - e_q) / (2.0 * var) if var > 0.0 else 0.0
-
-    def _tq_gain(self, g_q: float) -> float:
-        """g_q per unit of the product (the pressure gain H_Q scales by θ_pos)."""
-        return g_q / self._tq if self._tq > 0.0 else 0.0
 
     def _fit(self, lo: float, hi: float, band: float) -> float:
         """Σw·(P_L − ĝ·u)² for the ĝ within [lo·(1 − band), hi·(1 + band)] that fits best."""
@@ -332,7 +382,7 @@ class PressureTest:
         if self.flow_fault:
             self.flow_fault = self.llr > -self._on
         else:
-            self.flow_fault = self.llr > self._on and abs(theta - 1.0) >= self._min_dev
+            self.flow_fault = self.llr > self._on and abs(theta - self.k_base) >= self._min_dev * self.k_base
         if self.flow_fault:
             self.sensor_decided = False
         elif self.llr < -self._on_d:

@@ -54,6 +54,9 @@ class PressureEvidence(Protocol):
     """H_D (sensor) against H_Q (flow gain) from the load pressure; the sample clock steps its
     P_L model (``propagate``/``mark``/``rewind``)."""
 
+    k_base: float
+    plant_seen: bool
+
     flow_fault: bool
     k_q: float
     sensor_decided: bool
@@ -85,7 +88,6 @@ class PressureEvidence(Protocol):
         healthy: bool = False,
         fresh: bool = True,
         updated: bool = True,
-        window: int = 10,
     ) -> float: ...
 
     def propagate(self, current_a: float) -> None: ...
