@@ -6,6 +6,7 @@ increment regression (:class:`Increments`) with synthetic readings; samples are 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from ehpss_hil.control.evidence.attribution import SensorAttribution
 from ehpss_hil.control.evidence.increments import Increments
@@ -32,13 +33,19 @@ class Rig:
         self.rng = np.random.default_rng(3)
 
     def run(
-        self, n: int, theta_d: float, gain: float = 1.0, spool_m: float = SPOOL_M, model: int = 0
+        self,
+        n: int,
+        theta_d: float,
+        gain: float = 1.0,
+        spool_m: float = SPOOL_M,
+        model: int = 0,
+        bias_m: float = 0.0,
     ) -> list[bool]:
         out = []
         for _ in range(n):
             self.x += K_C * 0.5 * (spool_m + self.spool) * TS  # the spool integral, trapezoidal
             self.spool = spool_m
-            y = gain * self.x + 5e-7 * self.rng.standard_normal()
+            y = gain * self.x + bias_m + 5e-7 * self.rng.standard_normal()
             self.inc.product(y, spool_m)
             # no pressure evidence
             self.pt.update(0.0, 0.0, 1.0, self.inc.theta_prod, theta_d, fresh=self.inc.product_fresh)
@@ -85,6 +92,35 @@ def test_a_jump_attributes_the_model_change_it_explains_and_only_that() -> None:
     r.run(3, 1.0, gain=0.8)
     assert r.run(hold, 0.6, gain=0.8) == [False] * hold  # a change the jump does not explain
     assert not r.pt.sensor_decided
+
+
+def test_a_jump_the_settled_increments_refute_is_withdrawn_and_one_they_confirm_stands() -> None:
+    """A bias stepping in at x = 1.2 mm jumps the reading by the ratio 0.8 as a drift of 0.8
+    does, and the model moves to 0.8 in both cases: attributed at once. The increments settle
+    again within ~M + a few excited updates: after the bias they read 1 (an offset moves no
+    increment), and the attribution is withdrawn; after the drift they read 0.8, and it stands."""
+    for bias, gain, stands in ((True, 1.0, False), (False, 0.8, True)):
+        r = Rig()
+        r.run(300, 1.0)
+        b = -0.2 * r.x if bias else 0.0
+        r.run(3, 1.0, gain=gain, bias_m=b)
+        assert r.run(1, 0.8, gain=gain, bias_m=b) == [True]
+        later = r.run(200, 0.8, gain=gain, bias_m=b)
+        assert later[-1] is stands and r.pt.sensor_decided is stands
+        assert r.inc.theta_prod == pytest.approx(gain, abs=0.02)
+
+
+def test_a_change_at_rest_is_verified_when_the_motion_resumes() -> None:
+    """At rest a bias and a drift move the level model alike; when the piston moves again the
+    increments tell them apart: the attribution made at rest is withdrawn for the bias."""
+    for bias, gain, stands in ((True, 1.0, False), (False, 0.8, True)):
+        r = Rig()
+        r.run(300, 1.0)
+        r.run(50, 1.0, spool_m=0.0)
+        b = -0.2 * r.x if bias else 0.0
+        assert r.run(1, 0.8, gain=gain, spool_m=0.0, bias_m=b) == [True]
+        later = r.run(200, 0.8, gain=gain, bias_m=b)
+        assert later[-1] is stands and r.pt.sensor_decided is stands
 
 
 def test_a_jump_inside_the_pressure_tests_band_is_compensated_while_the_model_stays() -> None:

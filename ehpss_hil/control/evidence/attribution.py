@@ -19,6 +19,13 @@ The evidence, each enough on its own:
   stays attributed while it stays within ``min_deviation``/2 of the gain the jump explained,
   also inside the band the pressure test cannot resolve.
 
+The reading alone cannot tell a gain change from an offset (a bias stepping in jumps the
+reading too, by a ratio (y + b)/y), but the increments can: an offset moves no increment. So
+an attribution made by a jump or at rest is verified once the product settles again on
+increments that span no jump: it moved by the ratio (a gain change: it stands) or stayed where
+it was (an offset: the attribution is withdrawn, :meth:`.PressureTest.withdraw_sensor`, and the
+offset is left to the plain loop).
+
 Every attribution but the last is the pressure test's state (:meth:`.PressureTest.decide_sensor`),
 which H_Q evidence can still overturn. An attribution belongs to the deviation it was made for: a
 switch of the position supervisor to a model whose gain differs by more than ``min_deviation``
@@ -44,12 +51,15 @@ class SensorAttribution:
         "_gain",
         "_hold",
         "_inc",
+        "_jump_decided",
         "_kd_before",
         "_left",
         "_level_ref",
         "_min_change",
         "_min_dev",
         "_model",
+        "_prod_before",
+        "_prod_jumped",
         "_pt",
         "_theta_before",
         "_to",
@@ -91,6 +101,11 @@ class SensorAttribution:
         self._to = 1.0  # the gain such a model moves to
         self._kd_before = 1.0  # θ̂_D in use before the last jump
         self._gain = math.nan  # the model a jump explained, while it is in use
+        self._prod_before = 1.0  # θ_prod when last settled with no jump to verify
+        #: the product a gain jump predicts (θ_prod before it × its ratio) until the settled
+        #: product confirms or refutes it; NaN: nothing to verify
+        self._prod_jumped = math.nan
+        self._jump_decided = False  # the sensor was decided on the jump being verified
         self._model = -1  # the position model in use at the last sample
         self._theta_before = 1.0  # its θ̂_D
         self._unexplained = False  # the model in use was switched to without evidence since
@@ -105,6 +120,21 @@ class SensorAttribution:
         #: the model in use is the gain a jump of the reading explained: the reading stepped, so
         #: its compensation applies at once (no ramp)
         self.by_jump = False
+
+    def _settled_product(self, theta_prod: float) -> None:
+        """The product settled on excited increments none of which spans a jump. After a jump
+        it tells a gain change (the product moved by the jump's ratio) from an offset, a bias
+        stepping in (the product stayed where it was): the attribution such a jump made is
+        withdrawn — an offset is left to the plain loop."""
+        to = self._prod_jumped
+        if to == to and abs(theta_prod - self._prod_before) < abs(theta_prod - to):
+            self._left = 0
+            if self._jump_decided:
+                self._pt.withdraw_sensor()
+            self._gain = self.jump_gain = math.nan
+        self._prod_jumped = math.nan
+        self._jump_decided = False
+        self._prod_before = theta_prod
 
     def update(
         self, position_m: float, theta_d: float, model: int, guarded: bool, broken: bool, trusted: bool
@@ -129,7 +159,11 @@ class SensorAttribution:
             # rest is then the reading's; one that does not agree may still be adapting
             self._level_ref = theta_d if abs(theta_d - fl.theta_prod) < self._min_dev else math.nan
         elif fl.at_rest and abs(theta_d - self._level_ref) > self._min_dev and theta_d >= self._failed_below:
-            pt.decide_sensor(fl.theta_prod)  # a model change with the piston at rest (False while NaN)
+            # a model change with the piston at rest (False while NaN): verified like a jump
+            if not pt.sensor_decided:
+                self._prod_jumped = self._prod_before * theta_d / self._level_ref
+                self._jump_decided = True
+            pt.decide_sensor(fl.theta_prod)
         j = self.jump
         if broken:  # the spool integral does not span the samples missed
             j.break_chain()
@@ -141,11 +175,16 @@ class SensorAttribution:
             if trusted and math.isfinite(j.ratio):  # a ratio to a gain the loop trusted
                 self._left = self._hold
                 self._to = self.jump_gain = self._kd_before * j.ratio
+                self._prod_jumped = self._prod_before * j.ratio
+                self._jump_decided = False
+        elif fl.product_settled and fl.product_updated:
+            self._settled_product(fl.theta_prod)
         if self._left > 0:
             self._left -= 1
             moved = abs(theta_d - self._kd_before) > self._min_change
             if moved and abs(theta_d - self._to) < self._min_dev and theta_d >= self._failed_below:
                 pt.decide_sensor(fl.theta_prod)
+                self._jump_decided = True
                 self._gain = theta_d
                 self._left = 0
         near = abs(theta_d - self._gain) <= 0.5 * self._min_dev  # False while NaN

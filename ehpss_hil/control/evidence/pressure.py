@@ -175,6 +175,12 @@ class PressureTest:
                 self._theta_ref = theta_prod
             self.sensor_decided = self.sensor_current = True
 
+    def withdraw_sensor(self) -> None:
+        """The evidence the caller attributed the deviation to the sensor with (a jump) turned
+        out to be no gain change: H_D no longer decided (the test may decide it again)."""
+        if not self.flow_fault:
+            self.sensor_decided = self.sensor_current = False
+
     def restart(self) -> None:
         """Empty the evidence window (the hypotheses or the pressure model changed); the
         decision stands until new evidence overturns it."""

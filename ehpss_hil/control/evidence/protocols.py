@@ -78,6 +78,8 @@ class PressureEvidence(Protocol):
 
     def decide_sensor(self, theta_prod: float) -> None: ...
 
+    def withdraw_sensor(self) -> None: ...
+
     def update(
         self,
         current_a: float,
