@@ -123,6 +123,16 @@ def test_a_change_at_rest_is_verified_when_the_motion_resumes() -> None:
         assert later[-1] is stands and r.pt.sensor_decided is stands
 
 
+def test_a_change_at_rest_from_a_failed_sensors_model_is_no_ratio_to_verify() -> None:
+    """The model agreed with the increments at 0 (a failed sensor, both at 0), then a model
+    at 0.8 at rest: there is no gain ratio to verify against (a division by 0 ended a campaign)."""
+    r = Rig()
+    r.run(300, 0.0, gain=0.0)
+    r.run(50, 0.0, gain=0.0, spool_m=0.0)
+    assert r.inc.theta_prod < ControlTuning().sensor_failed_below
+    assert r.run(1, 0.8, gain=0.0, spool_m=0.0) == [True]  # a change at rest, as before
+
+
 def test_a_jump_inside_the_pressure_tests_band_is_compensated_while_the_model_stays() -> None:
     """A 3 % gain step: the pressure test cannot resolve it (band ±5 %), the jump can."""
     r = Rig()

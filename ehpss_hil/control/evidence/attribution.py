@@ -160,7 +160,7 @@ class SensorAttribution:
             self._level_ref = theta_d if abs(theta_d - fl.theta_prod) < self._min_dev else math.nan
         elif fl.at_rest and abs(theta_d - self._level_ref) > self._min_dev and theta_d >= self._failed_below:
             # a model change with the piston at rest (False while NaN): verified like a jump
-            if not pt.sensor_decided:
+            if not pt.sensor_decided and self._level_ref >= self._failed_below:
                 self._prod_jumped = self._prod_before * theta_d / self._level_ref
                 self._jump_decided = True
             pt.decide_sensor(fl.theta_prod)
