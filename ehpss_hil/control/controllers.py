@@ -124,11 +124,13 @@ class LoopBase(Controller):
 
     # ---- the cycle -------------------------------------------------------------------------
     def _finish(self, meas: Measurement, feedback: float) -> ValveCommand:
-        self.pi.saturated = self._saturation(meas)
-        i = compensated_current(self.pi.step(meas.reference_m, feedback), self._applied_loe, self.min_theta_l)
-        self._cmd.current_a = i
+        pi = self.pi
+        pi.saturated = self._saturation(meas)
+        i = compensated_current(pi.step(meas.reference_m, feedback), self._applied_loe, self.min_theta_l)
+        cmd = self._cmd
+        cmd.current_a = i
         self._sent_prev, self._sent = self._sent, (i if math.isfinite(i) else 0.0)
-        return self._cmd
+        return cmd
 
     def set_nominal(self, nominal: bool) -> None:
         """Compensate nominally (k̂ = 1: the plain PI loop on the raw sensor) or with the
@@ -193,21 +195,20 @@ class LoopBase(Controller):
         ``y_s/θ̂_D``); untrusted: x̂ alone. This makes the return to the sensor bumpless.
         """
         td = self.k_dft_hat
+        fresh = meas.fresh
         guarded = self._position_guarded()
         self._judge_failed(meas, td, guarded)
         g: float | None = None
-        model_trusted = (
-            sensor_trusted(td, self._failed_below, guarded, meas.fresh) and not self.sensor_held_off
-        )
+        model_trusted = sensor_trusted(td, self._failed_below, guarded, fresh) and not self.sensor_held_off
         if self.nominal:  # the estimates set aside, the guard (no model explains the sensor) not,
             # unless the sensor's increments follow the spool (a live sensor the level models miss)
-            trusted = meas.fresh and (not guarded or self._sensor_live())
+            trusted = fresh and (not guarded or self._sensor_live())
         elif model_trusted:
             trusted = True
         else:  # the raw sensor, when the position channel compensates nominally and it is live;
             # under the guard, a live sensor read through the gain the evidence gives it
-            g = self._guarded_gain() if guarded and meas.fresh else None
-            trusted = g is not None or (self.position_nominal and meas.fresh and self._sensor_live())
+            g = self._guarded_gain() if guarded and fresh else None
+            trusted = g is not None or (self.position_nominal and fresh and self._sensor_live())
         self.sensor_trusted = trusted
         self._apply()
         xh, kq = self.xhat, self.k_q_hat
@@ -216,14 +217,15 @@ class LoopBase(Controller):
         if warm:
             self._warm_left -= 1
         if trusted:
+            pos = meas.position_m
             if model_trusted:  # x̂ follows the sensor as the models read it
-                ym = meas.position_m / td
+                ym = pos / td
                 if warm and self.warmup_tracks_sensor:  # x̂ is the sensor (no model yet)
                     xh.x = ym / kq
                 else:
                     xh.anchor(ym / kq)
             fd = self._applied_dft if g is None else g
-            y = meas.position_m / fd if fd > 0.0 else meas.position_m
+            y = pos / fd if fd > 0.0 else pos
             b = self._blend
             if b < 1.0:
                 b = self._blend = min(1.0, b + self._blend_step)
