@@ -124,8 +124,23 @@ class LoopBase(Controller):
 
     # ---- the cycle -------------------------------------------------------------------------
     def _finish(self, meas: Measurement, feedback: float) -> ValveCommand:
+        """The PI on ``feedback`` (sensor units), its current divided by the divisor in use: the
+        cycle's command. The PI's anti-windup is told +1/−1 when the actuator is saturated
+        upwards/downwards, judged on this sample: the spool LVDT at the stop, or a current echo
+        short of the command it answers (the one sent two cycles ago: one sample of transport
+        delay) by more than ``echo_short_a`` (A); a sample without data keeps the previous
+        judgement."""
         pi = self.pi
-        pi.saturated = self._saturation(meas)
+        if meas.fresh:
+            y_v, lvl = meas.spool_m, self._stop_level_m
+            if y_v >= lvl:
+                pi.saturated = 1
+            elif y_v <= -lvl:
+                pi.saturated = -1
+            else:
+                sent = self._sent_prev
+                short = abs(sent) - abs(meas.coil_current_a) > self._echo_short_a
+                pi.saturated = (1 if sent > 0.0 else -1) if short else 0
         i = compensated_current(pi.step(meas.reference_m, feedback), self._applied_loe, self.min_theta_l)
         cmd = self._cmd
         cmd.current_a = i
@@ -169,23 +184,6 @@ class LoopBase(Controller):
             r[0] -= 1
             td += r[0] / r[1] * (r[2] - td)
         self._applied_loe, self._applied_dft = tl, td
-
-    def _saturation(self, meas: Measurement) -> int:
-        """+1/−1 when the actuator is saturated upwards/downwards, judged on this sample: the
-        spool LVDT at the stop, or a current echo short of the command it answers (the one sent
-        two cycles ago: one sample of transport delay) by more than ``echo_short_a`` (A). A
-        sample without data keeps the previous judgement."""
-        if not meas.fresh:
-            return self.pi.saturated
-        y_v = meas.spool_m
-        if y_v >= self._stop_level_m:
-            return 1
-        if y_v <= -self._stop_level_m:
-            return -1
-        sent = self._sent_prev
-        if abs(sent) - abs(meas.coil_current_a) > self._echo_short_a:
-            return 1 if sent > 0.0 else -1
-        return 0
 
     def _close(self, meas: Measurement) -> ValveCommand:
         """Common tail: trust decision, anchoring, feedback, PI, compensation.

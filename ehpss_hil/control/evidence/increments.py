@@ -171,7 +171,7 @@ class Increments:
         phi = si - vs[i]
         tau = t_now - ring[i]
         ys[i], vs[i], ring[i] = position_m, si, t_now
-        self._i = i + 1 if i + 1 < m else 0
+        self._i = (i + 1) % m
         n = self._n = self._n + 1
         stale = self._stale + 1
         gate = self._floor
