@@ -196,7 +196,13 @@ class PlantEmulation:
         """The sensor sample y[k] (draws this sample's noise; call exactly once per sample).
 
         The plant's outputs are read once each (this runs every sample of every simulation)."""
-        e_pos, e_spool, e_p = self._noise.next()
+        noise = self._noise  # _SensorNoise.next written out (once a sample)
+        i = noise._i
+        if i < noise._n:
+            noise._i = i + 1
+            e_pos, e_spool, e_p = noise._buf[i]
+        else:
+            e_pos, e_spool, e_p = noise.next()
         plant, k = self.plant, self.k
         f = plant.faults
         x, spool = plant.position_m, plant.spool_actual_m

@@ -12,8 +12,6 @@ paper's joint-model modes (``smac``, ``mmac-paper``) are in :mod:`.joint`.
 
 from __future__ import annotations
 
-import math
-
 from .bank import ScalarBank
 from .base import Measurement, ValveCommand
 from .controllers import POSITION_SLOT0, SPOOL_SLOT0, LoopBase
@@ -84,23 +82,33 @@ class MmacController(LoopBase):
         self._spool_hold = 0  # samples left without spool evidence (the spool was at its stop)
 
     def step(self, meas: Measurement) -> ValveCommand:
-        """Sample clock → spool bank → position bank → evidence → estimates → close."""
-        est = self.est
+        """Sample clock → spool bank → position bank → evidence → estimates → close.
+
+        This runs on every cycle: attributes are read once into locals, and the one-line
+        questions (:meth:`sensor_alive`, :meth:`_bridge_gain`, the no-change test of
+        :meth:`set_nominal`) are written out."""
+        est, clock = self.est, self.clock
         if meas.fresh:
             tl_prev = est.k_loe / est.k_q
-            self.valve.stop_m = self.stroke_m / max(tl_prev, self.min_theta_l)
-            seeding = self.clock.seed
-            gap, resync, v, xh = self.clock.sample(meas, tl_prev, self._bridge_gain())
+            lim = self.min_theta_l
+            self.valve.stop_m = self.stroke_m / (lim if lim > tl_prev else tl_prev)  # max(tl_prev, lim)
+            ps, pt = self.pos_sup, self._pressure
+            failed_below = self._failed_below
+            td = est.theta_d  # _bridge_gain(): θ̂_D when the sensor may place x̂, else None
+            trusted = not ps.guarded and td >= failed_below and not self.sensor_held_off
+            seeding = clock.seed
+            gap, resync, v, xh = clock.sample(meas, tl_prev, td if trusted and not pt.flow_fault else None)
             if seeding:
                 est.seed(meas.position_m)
             if gap:
                 self.evidence.gap()
             broken = gap and not resync
             self._banks(meas, v, xh, tl_prev, broken)
-            tl = 1.0 if self.spool_sup.guarded else self.spool_bank.theta[self.spool_sup.active]
-            td = self.pos_bank.theta[self.pos_sup.active]
-            alive = self.sensor_alive(td) and not self.pos_sup.guarded
-            est.set_channels(tl, td, alive, self._pressure.k_base)
+            ss = self.spool_sup
+            tl = 1.0 if ss.guarded else self.spool_bank.theta[ss.active]
+            td = self.pos_bank.theta[ps.active]
+            alive = td >= failed_below and not self.sensor_held_off and not ps.guarded
+            est.set_channels(tl, td, alive, pt.k_base)
             if self._flow_on:
                 att = self.evidence.update(
                     meas, tl, self._spool_hold == 0, self._warm_left > 0, broken, self._was_trusted
@@ -108,16 +116,17 @@ class MmacController(LoopBase):
                 if att.restarted:  # the raw sensor, not held off, after a restart
                     self.sensor_held_off = False
                     self.set_position_nominal(True, self._ramp_n)
-                self.set_nominal(att.fallback)
-                self.set_position_nominal(att.position_nominal, att.ramp_samples)
+                if att.fallback != self.nominal:
+                    self.set_nominal(att.fallback)
+                if att.position_nominal != self.position_nominal:
+                    self.set_position_nominal(att.position_nominal, att.ramp_samples)
             self.k_loe_hat, self.k_dft_hat, self.k_q_hat = est.k_loe, est.k_dft, est.k_q
         else:
-            self.clock.dead_cycle(est.k_loe / est.k_q)
+            clock.dead_cycle(est.k_loe / est.k_q)
         cmd = self._close(meas)
         if meas.fresh:
             self._was_trusted = self.sensor_trusted and not self.nominal
-        sent = cmd.current_a if math.isfinite(cmd.current_a) else 0.0  # as the loop sends it
-        self.clock.commanded(sent, meas.command_sent)
+        clock.commanded(self._sent, meas.command_sent)  # _finish's current, as the loop sends it
         return cmd
 
     def _banks(self, meas: Measurement, v: float, xh: float, tl_prev: float, broken: bool) -> None:
@@ -128,19 +137,21 @@ class MmacController(LoopBase):
         under H_Q; after x̂ missed samples, was dead-reckoned, or integrated a spool slamming
         into its stop (a transient no model of the valve follows exactly) it re-anchors on the
         trusted sensor and starts over from here (a dead-reckoned offset is no drift)."""
-        y_v = meas.spool_m
+        y_v, pos = meas.spool_m, meas.position_m
         lvl = self._stop_level_m
         at_stop = y_v >= lvl or y_v <= -lvl
+        ev = self.evidence
         if at_stop or abs(tl_prev * v) >= lvl or broken:
             self._spool_hold = self._stop_hold
-            self.evidence.spool_stop()
-        stopped = self._spool_hold > 0
+            ev.spool_stop()
+        hold = self._spool_hold
+        stopped = hold > 0
         if stopped:  # at or just off the stop: not evidence of k_LOE
-            self._spool_hold -= 1
+            self._spool_hold = hold - 1
         else:
             self.spool_bank.update(y_v, v)
             self.spool_sup.update(abs(v) * self._inv_s_spool)
-        if self.evidence.stop_phase(at_stop, y_v, meas.position_m, xh):
+        if ev.stop_phase(at_stop, y_v, pos, xh):
             self.sensor_held_off = True  # found dead: held off, x̂ placed (Estimates.place_dead)
             xh = self.xhat.x
         est = self.est
@@ -148,12 +159,13 @@ class MmacController(LoopBase):
         if broken or stopped:
             td = est.theta_d
             if not self.pos_sup.guarded and self.sensor_alive(td) and not flow:
-                est.reanchor(meas.position_m, xh)
+                est.reanchor(pos, xh)
                 est.rebase(td, True)  # trusted: checked just above
                 return
         if not flow:
-            self.pos_bank.update(meas.position_m - est.y0, xh - est.x0)
-            self.pos_sup.update(abs(xh - est.x0) * self._inv_s_pos)
+            dx = xh - est.x0
+            self.pos_bank.update(pos - est.y0, dx)
+            self.pos_sup.update(abs(dx) * self._inv_s_pos)
 
     def observe(self, meas: Measurement) -> None:
         """A sample superseded within this cycle: the sample clock steps the predictors on it."""

@@ -124,11 +124,28 @@ class LoopBase(Controller):
 
     # ---- the cycle -------------------------------------------------------------------------
     def _finish(self, meas: Measurement, feedback: float) -> ValveCommand:
-        self.pi.saturated = self._saturation(meas)
-        i = compensated_current(self.pi.step(meas.reference_m, feedback), self._applied_loe, self.min_theta_l)
-        self._cmd.current_a = i
+        """The PI on ``feedback`` (sensor units), its current divided by the divisor in use: the
+        cycle's command. The PI's anti-windup is told +1/−1 when the actuator is saturated
+        upwards/downwards, judged on this sample: the spool LVDT at the stop, or a current echo
+        short of the command it answers (the one sent two cycles ago: one sample of transport
+        delay) by more than ``echo_short_a`` (A); a sample without data keeps the previous
+        judgement."""
+        pi = self.pi
+        if meas.fresh:
+            y_v, lvl = meas.spool_m, self._stop_level_m
+            if y_v >= lvl:
+                pi.saturated = 1
+            elif y_v <= -lvl:
+                pi.saturated = -1
+            else:
+                sent = self._sent_prev
+                short = abs(sent) - abs(meas.coil_current_a) > self._echo_short_a
+                pi.saturated = (1 if sent > 0.0 else -1) if short else 0
+        i = compensated_current(pi.step(meas.reference_m, feedback), self._applied_loe, self.min_theta_l)
+        cmd = self._cmd
+        cmd.current_a = i
         self._sent_prev, self._sent = self._sent, (i if math.isfinite(i) else 0.0)
-        return self._cmd
+        return cmd
 
     def set_nominal(self, nominal: bool) -> None:
         """Compensate nominally (k̂ = 1: the plain PI loop on the raw sensor) or with the
@@ -168,23 +185,6 @@ class LoopBase(Controller):
             td += r[0] / r[1] * (r[2] - td)
         self._applied_loe, self._applied_dft = tl, td
 
-    def _saturation(self, meas: Measurement) -> int:
-        """+1/−1 when the actuator is saturated upwards/downwards, judged on this sample: the
-        spool LVDT at the stop, or a current echo short of the command it answers (the one sent
-        two cycles ago: one sample of transport delay) by more than ``echo_short_a`` (A). A
-        sample without data keeps the previous judgement."""
-        if not meas.fresh:
-            return self.pi.saturated
-        y_v = meas.spool_m
-        if y_v >= self._stop_level_m:
-            return 1
-        if y_v <= -self._stop_level_m:
-            return -1
-        sent = self._sent_prev
-        if abs(sent) - abs(meas.coil_current_a) > self._echo_short_a:
-            return 1 if sent > 0.0 else -1
-        return 0
-
     def _close(self, meas: Measurement) -> ValveCommand:
         """Common tail: trust decision, anchoring, feedback, PI, compensation.
 
@@ -193,21 +193,20 @@ class LoopBase(Controller):
         ``y_s/θ̂_D``); untrusted: x̂ alone. This makes the return to the sensor bumpless.
         """
         td = self.k_dft_hat
+        fresh = meas.fresh
         guarded = self._position_guarded()
         self._judge_failed(meas, td, guarded)
         g: float | None = None
-        model_trusted = (
-            sensor_trusted(td, self._failed_below, guarded, meas.fresh) and not self.sensor_held_off
-        )
+        model_trusted = sensor_trusted(td, self._failed_below, guarded, fresh) and not self.sensor_held_off
         if self.nominal:  # the estimates set aside, the guard (no model explains the sensor) not,
             # unless the sensor's increments follow the spool (a live sensor the level models miss)
-            trusted = meas.fresh and (not guarded or self._sensor_live())
+            trusted = fresh and (not guarded or self._sensor_live())
         elif model_trusted:
             trusted = True
         else:  # the raw sensor, when the position channel compensates nominally and it is live;
             # under the guard, a live sensor read through the gain the evidence gives it
-            g = self._guarded_gain() if guarded and meas.fresh else None
-            trusted = g is not None or (self.position_nominal and meas.fresh and self._sensor_live())
+            g = self._guarded_gain() if guarded and fresh else None
+            trusted = g is not None or (self.position_nominal and fresh and self._sensor_live())
         self.sensor_trusted = trusted
         self._apply()
         xh, kq = self.xhat, self.k_q_hat
@@ -216,14 +215,15 @@ class LoopBase(Controller):
         if warm:
             self._warm_left -= 1
         if trusted:
+            pos = meas.position_m
             if model_trusted:  # x̂ follows the sensor as the models read it
-                ym = meas.position_m / td
+                ym = pos / td
                 if warm and self.warmup_tracks_sensor:  # x̂ is the sensor (no model yet)
                     xh.x = ym / kq
                 else:
                     xh.anchor(ym / kq)
             fd = self._applied_dft if g is None else g
-            y = meas.position_m / fd if fd > 0.0 else meas.position_m
+            y = pos / fd if fd > 0.0 else pos
             b = self._blend
             if b < 1.0:
                 b = self._blend = min(1.0, b + self._blend_step)

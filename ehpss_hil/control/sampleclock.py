@@ -61,6 +61,10 @@ class Advance(NamedTuple):
     x: float
 
 
+#: builds an :class:`Advance` without the Python-level ``__new__`` of a NamedTuple (per sample)
+_new_advance = tuple.__new__
+
+
 class SampleClock:
     """Valve model, x̂ and (optionally) the pressure model, advanced once per sensor sample."""
 
@@ -115,7 +119,16 @@ class SampleClock:
         """The cycle's own fresh sample: the predictors up to it (see the module). ``gain``:
         k̂_LOE of the model spool; ``bridge_gain``: θ̂_D when the position sensor may place x̂
         across a redone span (None: it may not). Seeds x̂ on the first sample after a reset."""
-        adv = self._advance(meas, True, gain, bridge_gain)
+        if self._dead == 0 and meas.samples <= 1:
+            # the regular sample (no gap, nothing to redo): :meth:`_advance` written out, this
+            # runs on every fresh sample
+            echo = self.echo = meas.coil_current_a
+            adv = _new_advance(
+                Advance, (False, False, self.valve.step(echo), self.xhat.integrate(meas.spool_m))
+            )
+            self.y_seen = meas.position_m
+        else:
+            adv = self._advance(meas, True, gain, bridge_gain)
         self.span, self._observed = self._observed + (meas.samples if adv.resync else 1), 0
         if self.seed:  # the plant is where the sensor says (it is at rest or the sensor is all)
             self.seed = False

@@ -111,24 +111,21 @@ class Supervisor:
 
     def update(self, excitation: float) -> int:
         """Decide after the bank scored this sample; ``excitation`` = |φ|/S. Returns the active."""
-        self._k += 1
-        j = self.bank.j
+        k = self._k = self._k + 1
+        bank = self.bank
+        j = bank.j
         jb = min(j)
-        g = (self._win * self.bank.noise_floor()) if self._sustained else jb
+        g = (self._win * bank.noise_floor()) if self._sustained else jb
         if self.guarded:
             if g < self._release:
                 self.guarded = False
         elif g > self._jmax:
             self.guarded = True
         act = self.active
-        if (
-            jb < j[act]
-            and self._k >= self._warm
-            and self._k - self._last >= self._dwell
-            and excitation >= self._floor
-        ):
+        ja = j[act]
+        if jb < ja and k >= self._warm and k - self._last >= self._dwell and excitation >= self._floor:
             best = j.index(jb)
-            if self.bank.separation(best, act) > self._sep and jb < (1.0 - self._h) * j[act] - self.margin:
+            if bank.separation(best, act) > self._sep and jb < (1.0 - self._h) * ja - self.margin:
                 self._streak = self._streak + 1 if best == self._cand else 1
                 self._cand = best
                 if self._streak >= self._confirm:

@@ -1,13 +1,13 @@
 """The frame layer between the emulated plant and the controller in a lockstep run.
 
 ``quantize``: each value goes through :meth:`FrameCodec.quantize` (the DBC scaling a receiver
-decodes) into the values of a decoded frame, without the bytes — fast. ``frames``: every frame
+decodes), without the bytes — fast. ``frames``: every frame
 is built with :meth:`FrameCodec.encode` (bytes, E2E CRC and counter) and checked with
 :meth:`FrameCodec.classify` on the receiving side — slow, but the real thing. Both give
 bit-identical values (a test checks it). Frame loss is decided by the caller; a lost frame is
 simply never delivered (the receiver's E2E counter then reports OK_SOME_LOST). Either way the
-sensor pair reaches the controller's driver as decoded frames, through
-:meth:`~ehpss_hil.driver.ControllerDriver.take` (the daemon's mapping).
+sensor pair reaches the controller's driver as the daemon's mapping
+(:meth:`~ehpss_hil.driver.ControllerDriver.take`) puts decoded frames onto it.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from collections.abc import Callable
 from cantools.database.conversion import LinearConversion, LinearIntegerConversion
 
 from ..codec.frames import FrameCodec
-from ..codec.verdict import Decoded, Verdict
+from ..codec.verdict import Decoded
 from ..driver import ControllerDriver
 
 
@@ -80,6 +80,11 @@ class QuantizeTransport:
     simulator's hot path). So is the load pressure's ``LinearIntegerConversion`` (the shipped
     DBC's 10 Pa), expression for expression: ``r = v − offset``, ``r // scale`` when that
     divides exactly, else ``r / scale``, rounded; any other conversion is called through cantools.
+    The quantized values go onto the driver's :meth:`~ehpss_hil.driver.ControllerDriver.position`
+    and :meth:`~ehpss_hil.driver.ControllerDriver.aux`, where
+    :meth:`~ehpss_hil.driver.ControllerDriver.take` puts a decoded SENSOR_POS and SENSOR_AUX (no
+    frame object and no dict per sample; tests/test_driver_mapping.py pins the driver's input to
+    the frames transport's).
     """
 
     def __init__(self, codec: FrameCodec) -> None:
@@ -95,10 +100,6 @@ class QuantizeTransport:
         self._press = _quantizer(codec, "SENSOR_AUX", "LoadPressure")
         #: the load pressure's integer (scale, offset) when written out inline, else None
         self._press_int = _integer_scale(codec, "SENSOR_AUX", "LoadPressure")
-        self._pos_values: dict[str, float] = {"Position": 0.0, "Spool": 0.0}
-        self._aux_values: dict[str, float] = {"LoadPressure": 0.0, "CoilCurrent": 0.0}
-        self._pos = Decoded(Verdict.OK, "SENSOR_POS", self._pos_values)  # type: ignore[arg-type]
-        self._aux = Decoded(Verdict.OK, "SENSOR_AUX", self._aux_values)  # type: ignore[arg-type]
 
     def sensor(
         self,
@@ -112,29 +113,23 @@ class QuantizeTransport:
         lost: bool,
     ) -> bool:
         """Sample ``k``'s SENSOR_POS + SENSOR_AUX onto ``drv`` as the controller decodes them
-        (m, m, Pa, A; the E2E counter k mod 16 the emulator's frames carry); False if lost. The
-        two decoded frames are this transport's own, refilled each sample."""
+        (m, m, Pa, A; the E2E counter k mod 16 the emulator's frames carry); False if lost."""
         if lost:
             return False
         pos = -0.5 if pos < -0.5 else 0.5 if pos > 0.5 else pos
         spool = -0.01 if spool < -0.01 else 0.01 if spool > 0.01 else spool
         coil = -1.0 if coil < -1.0 else 1.0 if coil > 1.0 else coil
         ps, po, ss, so, cs, co = self._ps, self._po, self._ss, self._so, self._cs, self._co
-        d_pos, d_aux, v_pos, v_aux = self._pos, self._aux, self._pos_values, self._aux_values
-        v_pos["Position"] = round((pos - po) / ps) * ps + po
-        v_pos["Spool"] = round((spool - so) / ss) * ss + so
         pressure = -4e7 if pressure < -4e7 else 4e7 if pressure > 4e7 else pressure
         if self._press_int is None:
-            v_aux["LoadPressure"] = self._press(pressure)
+            p_q = self._press(pressure)
         else:
             p_s, p_o = self._press_int
             r = pressure - p_o
             q, rem = divmod(r, p_s)
-            v_aux["LoadPressure"] = round(q if rem == 0 else r / p_s) * p_s + p_o
-        v_aux["CoilCurrent"] = round((coil - co) / cs) * cs + co
-        d_pos.counter = k & 0x0F
-        drv.take(d_pos)
-        drv.take(d_aux)
+            p_q = round(q if rem == 0 else r / p_s) * p_s + p_o
+        drv.position(round((pos - po) / ps) * ps + po, round((spool - so) / ss) * ss + so, k & 0x0F)
+        drv.aux(round((coil - co) / cs) * cs + co, p_q)
         return True
 
     def command(self, current_a: float, k: int, lost: bool) -> float | None:

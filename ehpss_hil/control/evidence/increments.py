@@ -49,7 +49,8 @@ class Increments:
         "_noise_w",
         "_nsettled",
         "_null_m_s",
-        "_p1",
+        "_p1_v",
+        "_p1_y",
         "_pend",
         "_prev",
         "_since_jump",
@@ -98,7 +99,7 @@ class Increments:
         self._ys = [0.0] * self._m
         self._vs = [0.0] * self._m
         self._ts_ring = [0.0] * self._m
-        self._p1 = (math.nan, 0.0)  # the last call's position and spool integral (m)
+        self._p1_y, self._p1_v = math.nan, 0.0  # the last call's position and spool integral (m)
         #: the variance of one sample's position increment about what the spool explains (m²)
         self._noise_var = 0.0
         self._t = 0.0  # time the product has spanned (s)
@@ -142,51 +143,71 @@ class Increments:
         """One fresh sample: the position reading and the spool LVDT (m); ``samples``: sensor
         samples since the previous call (the spool taken linear over those not seen), so that
         both sides of an increment span the same time; ``excited`` False (the spool at its
-        stop): the increment is not used. Returns θ_prod."""
-        self.spool_integral_m += self._h * samples * (spool_m + self._prev)
+        stop): the increment is not used. Returns θ_prod.
+
+        Attributes are read once into locals (this runs on every fresh sample); the arithmetic
+        is the same expression for expression."""
+        si = self.spool_integral_m + self._h * samples * (spool_m + self._prev)
+        self.spool_integral_m = si
         dt = samples * self._ts
-        self._t += dt
-        rate = self.creep.rate_m_s
-        if rate and self.theta_prod >= self._failed_below:
-            self.creep_integral_m += dt * rate / self.theta_prod
+        t_now = self._t + dt
+        self._t = t_now
+        creep = self.creep
+        rate = creep.rate_m_s
+        tp = self.theta_prod
+        if rate and tp >= self._failed_below:
+            self.creep_integral_m += dt * rate / tp
         self._prev = spool_m
-        y1, v1 = self._p1
+        y1 = self._p1_y
+        nv = self._noise_var
         if samples == 1 and y1 == y1:  # one sample's increment: the reading's noise
-            r = position_m - y1 - self.theta_prod * (self.spool_integral_m - v1) - rate * dt
-            self._noise_var += self._noise_w * (r * r - self._noise_var)
-        self._p1 = (position_m, self.spool_integral_m)
-        i = self._i
-        y = position_m - self._ys[i]
-        phi = self.spool_integral_m - self._vs[i]
-        tau = self._t - self._ts_ring[i]
-        self._ys[i], self._vs[i], self._ts_ring[i] = position_m, self.spool_integral_m, self._t
-        self._i = (i + 1) % self._m
-        self._n += 1
-        self._stale += 1
-        self.still_samples = 0 if abs(y) > self._floor else self.still_samples + samples
-        self.at_rest = abs(phi) <= self._floor
+            r = position_m - y1 - tp * (si - self._p1_v) - rate * dt
+            nv += self._noise_w * (r * r - nv)
+            self._noise_var = nv
+        self._p1_y, self._p1_v = position_m, si
+        i, m = self._i, self._m
+        ys, vs, ring = self._ys, self._vs, self._ts_ring
+        y = position_m - ys[i]
+        phi = si - vs[i]
+        tau = t_now - ring[i]
+        ys[i], vs[i], ring[i] = position_m, si, t_now
+        self._i = (i + 1) % m
+        n = self._n = self._n + 1
+        stale = self._stale + 1
+        gate = self._floor
+        self.still_samples = 0 if abs(y) > gate else self.still_samples + samples
+        self.at_rest = abs(phi) <= gate
         # the creep learns from the last increment now that a jump inside it would be known
-        self._since_jump += 1
+        since = self._since_jump = self._since_jump + 1
         pend = self._pend
-        if pend is not None and self._since_jump > self._m:
-            self.creep.update(*pend)
+        if pend is not None and since > m:
+            creep.update(*pend)
         # only an increment with the spool near null teaches the creep (CreepEstimator.update)
-        near_null = abs(phi) <= self._null_m_s * tau
-        self._pend = (y, phi, tau, self.theta_prod) if near_null and self._n > self._m and excited else None
-        y -= self.creep.rate_m_s * tau  # the creep's share of the increment is no gain
-        floor = max(self._floor, self._snr * math.sqrt(self._noise_var))
-        if self._n > self._m and abs(phi) > floor and excited:
-            self._stale = 0
-            t = self.theta_prod
+        if n > m and excited and abs(phi) <= self._null_m_s * tau:
+            self._pend = (y, phi, tau, tp)
+        else:
+            self._pend = None
+        y -= creep.rate_m_s * tau  # the creep's share of the increment is no gain
+        floor = self._snr * math.sqrt(nv)
+        if not floor > gate:  # max(gate, floor), written out
+            floor = gate
+        if n > m and abs(phi) > floor and excited:
+            stale = 0
+            t = tp
             t += self._g * (y - t * phi) * phi / (self._c2 + phi * phi)
-            self.theta_prod = min(max(t, self._lo), self._hi)
-            if abs(self.theta_prod - self._anchor) < self._half_dev:
+            lo, hi = self._lo, self._hi
+            if lo > t:  # min(max(t, lo), hi), written out
+                t = lo
+            if hi < t:
+                t = hi
+            self.theta_prod = t
+            if abs(t - self._anchor) < self._half_dev:
                 self._nsettled += 1
-                self.product_settled = self._nsettled >= self._m
+                self.product_settled = self._nsettled >= m
             else:  # moved off: a new run of updates starts here
-                self._anchor, self._nsettled = self.theta_prod, 0
+                self._anchor, self._nsettled = t, 0
                 self.product_settled = False
-        stale = self._stale
-        self.product_fresh = stale <= self._m
+        self._stale = stale
+        self.product_fresh = stale <= m
         self.product_updated = stale == 0
         return self.theta_prod

@@ -200,7 +200,8 @@ class EvidenceLayer:
             and not self.pos_sup.guarded
             and self._spool_age >= self._baseline_settle
         )
-        theta_l = self._pressure_theta_l(k_loe, warm)
+        ss = self.spool_sup
+        theta_l = self._pressure_theta_l(k_loe, warm) if warm or ss.guarded else k_loe
         inc = self.inc
         pt.update(
             self.clock.echo,
@@ -283,7 +284,7 @@ class EvidenceLayer:
         """The do-no-harm monitor on this sample; True: compensate nominally."""
         pb, sb = self.pos_bank, self.spool_bank
         pa, sa = self.pos_sup.active, self.spool_sup.active
-        guarded = self.position_guarded()
+        guarded = self.pos_sup.guarded and not self.pressure.flow_fault  # position_guarded()
         est = self.est
         at_limit = (pa >= pb.n_fixed and not guarded and est.theta_d >= self._lim_d_hi) or (
             sa >= sb.n_fixed and not self.spool_sup.guarded and k_loe <= self._lim_l_lo

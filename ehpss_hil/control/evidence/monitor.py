@@ -35,6 +35,12 @@ class FallbackReason(IntEnum):
     ESTIMATE_AT_LIMIT = 2
 
 
+#: the reasons bound once (looking up an enum member on its class costs several attribute reads)
+_NONE = FallbackReason.NONE
+_MISMATCH = FallbackReason.PRODUCT_MISMATCH
+_AT_LIMIT = FallbackReason.ESTIMATE_AT_LIMIT
+
+
 class HarmMonitor:
     """Consistency check with hysteresis in time; :attr:`fallback` True means: compensate
     nominally (k̂_LOE = k̂_DFT = k̂_Q = 1 in the loop, the raw sensor fed back)."""
@@ -94,21 +100,21 @@ class HarmMonitor:
         ring[i] = theta_prod
         self._i = (i + 1) % len(ring)
         if at_limit:
-            return FallbackReason.ESTIMATE_AT_LIMIT
+            return _AT_LIMIT
         if not (prod_fresh and settled):
-            return FallbackReason.NONE
+            return _NONE
         du, dp = theta_used - 1.0, theta_prod - 1.0
         if du * dp < 0.0 and abs(du) > self._min_dev and abs(dp) > self._min_dev:
-            return FallbackReason.PRODUCT_MISMATCH
+            return _MISMATCH
         if theta_used < self._failed_below and theta_prod >= self._alive:
-            return FallbackReason.PRODUCT_MISMATCH  # "failed" sensor that follows the spool
-        return FallbackReason.NONE
+            return _MISMATCH  # "failed" sensor that follows the spool
+        return _NONE
 
     def update(self, theta_used: float, theta_prod: float, prod_fresh: bool, at_limit: bool) -> bool:
         """One fresh sample: θ_used = θ̂_D·k̂_Q in use, θ_prod and whether it is fresh, whether an
         adaptive estimate in use is at its clip. Returns :attr:`fallback`."""
         r = self.check(theta_used, theta_prod, prod_fresh, at_limit)
-        if r is not FallbackReason.NONE:
+        if r is not _NONE:
             self._ok = 0
             self._streak = self._streak + 1 if r == self._pending else 1
             self._pending = r
@@ -118,7 +124,7 @@ class HarmMonitor:
                 self.fallbacks += 1
             return self.fallback
         self._streak = 0
-        self._pending = FallbackReason.NONE
+        self._pending = _NONE
         if self.fallback:
             self._ok += 1
             if self._ok >= self._reengage:

@@ -99,7 +99,8 @@ class PressureTest:
         a, b = plant_matrices(plant)
         ad, bd = zoh(a, b, ts_s)
         idx = (ACC, VEL, SPOOL_VEL, SPOOL)
-        self._c = tuple((*tuple(float(ad[i, j]) for j in idx), float(bd[i, 0])) for i in idx)
+        # the rows [A_d row i, B_d row i] one after the other (propagate unpacks them at once)
+        self._c = tuple(c for i in idx for c in (*(float(ad[i, j]) for j in idx), float(bd[i, 0])))
         self._d = math.exp(-ts_s / t.flow_gain_window_s)
         self._on = t.flow_gain_threshold
         self._on_d = t.flow_gain_sensor_threshold
@@ -205,12 +206,15 @@ class PressureTest:
     def propagate(self, current_a: float) -> None:
         """Advance the unit-gain valve + cylinder model with the current echo (A)."""
         s0, s1, s2, s3 = self.s
-        r0, r1, r2, r3 = self._c
+        # the rows' coefficients unpacked at once (one unpack instead of 20 subscripts)
+        a00, a01, a02, a03, b0, a10, a11, a12, a13, b1, a20, a21, a22, a23, b2, a30, a31, a32, a33, b3 = (
+            self._c
+        )
         self.s = (
-            r0[0] * s0 + r0[1] * s1 + r0[2] * s2 + r0[3] * s3 + r0[4] * current_a,
-            r1[0] * s0 + r1[1] * s1 + r1[2] * s2 + r1[3] * s3 + r1[4] * current_a,
-            r2[0] * s0 + r2[1] * s1 + r2[2] * s2 + r2[3] * s3 + r2[4] * current_a,
-            r3[0] * s0 + r3[1] * s1 + r3[2] * s2 + r3[3] * s3 + r3[4] * current_a,
+            a00 * s0 + a01 * s1 + a02 * s2 + a03 * s3 + b0 * current_a,
+            a10 * s0 + a11 * s1 + a12 * s2 + a13 * s3 + b1 * current_a,
+            a20 * s0 + a21 * s1 + a22 * s2 + a23 * s3 + b2 * current_a,
+            a30 * s0 + a31 * s1 + a32 * s2 + a33 * s3 + b3 * current_a,
         )
 
     def update(
@@ -269,14 +273,15 @@ class PressureTest:
             self.llr = 0.0
             self.k_q = kb
             return kb
-        if self.attributed and abs(theta_pos - self._theta_ref) > self._min_dev:
+        attributed = self.flow_fault or self.sensor_decided  # :attr:`attributed`, until _decide
+        if attributed and abs(theta_pos - self._theta_ref) > self._min_dev:
             # an attributed deviation moved: gather evidence afresh (the attribution stands until
             # the new evidence overturns it); while unattributed the product is still converging
             # on the one deviation and the evidence is kept
             self._theta_ref = theta_pos
             self.restart()
         if (
-            not self.attributed
+            not attributed
             and self._w >= self._undecided
             and not abs(self._tq - self._tq_ref) <= self._min_dev
         ):
@@ -305,7 +310,7 @@ class PressureTest:
         while the plant has not been seen at the model's flow gain (:attr:`plant_seen`, or a
         pressure baseline learned): a plant that ran at it has shown its own, and a later
         deviation is a change."""
-        if self.attributed or self._w < self._undecided or self.k_base != 1.0:
+        if self.flow_fault or self.sensor_decided or self._w < self._undecided or self.k_base != 1.0:
             return
         if self.plant_seen or self.pressure_gain_learned:
             return
@@ -384,7 +389,7 @@ class PressureTest:
             return
         if self._w < self._min_evidence:
             return
-        was = self.attributed
+        was = self.flow_fault or self.sensor_decided
         if self.flow_fault:
             self.flow_fault = self.llr > -self._on
         else:
@@ -393,5 +398,5 @@ class PressureTest:
             self.sensor_decided = False
         elif self.llr < -self._on_d:
             self.sensor_decided = self.sensor_current = True
-        if self.attributed and not was:
+        if (self.flow_fault or self.sensor_decided) and not was:
             self._theta_ref = theta
