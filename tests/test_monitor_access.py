@@ -2,7 +2,7 @@
 over 127.0.0.1 against the real aiohttp app, the listener on a real python-can ``virtual`` bus
 whose peer sees every FAULT_INJECT that goes out. A hostile page's requests are imitated by
 their headers (what a browser sends: ``Origin`` of the other page, ``Host`` of a rebound name);
-``tests/test_monitor_browser.py`` has a real second origin in headless Chromium."""
+``tests/test_monitor_origins.py`` has a real second origin in headless Chromium."""
 
 from __future__ import annotations
 

@@ -1,0 +1,187 @@
+"""The bench the browser tests of the live monitor share: emulator (truth + FAULT_INJECT
+accepted) and an ``mmac`` controller realtime in a private network namespace, ``ehpss-hil
+monitor --netns … --allow-inject`` serving its page on the host's 127.0.0.1, headless Chromium
+(Debian's ``chromium`` + ``chromium-driver``, driven by selenium), and the waits (generous limits
+only; nothing is timed)."""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from _proc import EHPSS_HIL, EMU_CFG_PATH, FIRMWARE_SIM, ROOT, Proc
+
+from ehpss_hil.bus.netns import PrivateNetns, netns_unavailable_reason
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMEDRIVER = shutil.which("chromedriver")
+try:
+    import selenium  # noqa: F401
+
+    SELENIUM = True
+except ImportError:
+    SELENIUM = False
+
+
+def skip_reason() -> str | None:
+    if (why := netns_unavailable_reason()) is not None:
+        return f"cross-process test: {why}"
+    if CHROMIUM is None or CHROMEDRIVER is None:
+        return (
+            "headless browser test: chromium and chromedriver not installed "
+            "(apt-get install chromium chromium-driver)"
+        )
+    if not SELENIUM:
+        return "headless browser test: selenium not installed (pip install -e '.[test]')"
+    return None
+
+
+#: the marks of every test on this bench
+PAGE_MARKS = [pytest.mark.netns, pytest.mark.skipif(skip_reason() is not None, reason=str(skip_reason()))]
+
+CTL_YAML = """\
+bus: {{interface: udp_multicast, channel: 239.74.163.2}}
+mode: mmac
+rate_hz: 1000
+reference: {{kind: sine, amplitude_m: 0.001, omega_rad_s: 5.0}}
+watchdog: {{timeout_cycles: 10, recovery_cycles: 50, auto_recover: true, failsafe: zero}}
+params: {root}/configs/params.yaml
+dbc: {root}/dbc/ehpss.dbc
+"""
+#: a generous limit for anything to show on a loaded host (s); not a timing requirement
+WAIT_S = 90.0
+
+
+@dataclass
+class Monitored:
+    """The page's URL, the monitor's process (its output), the controller's and the emulator's
+    processes and their logs (candump -L: every frame each sent is in its own), and where the
+    monitor writes captures."""
+
+    url: str
+    monitor: Proc
+    controller: Proc
+    emulator: Proc
+    log: Path
+    emulator_log: Path
+    captures: Path
+
+
+@contextmanager
+def monitored_bench(tmp_path: Path) -> Iterator[Monitored]:
+    """Emulator + controller in a namespace and the monitor attached (stopped on exit)."""
+    cfg = tmp_path / "controller.yaml"
+    cfg.write_text(CTL_YAML.format(root=ROOT))
+    procs: list[Proc] = []
+    with PrivateNetns() as ns:
+        try:
+            emu_log = tmp_path / "emulator.log"
+            emu = Proc(
+                ns.prefix()
+                + FIRMWARE_SIM
+                + ["-c", EMU_CFG_PATH, "--truth", "--fault-inject", "--log", str(emu_log)]
+            )
+            procs.append(emu)
+            assert emu.wait_for("realtime on"), emu.text
+            netns = f"/proc/{ns.pid}/ns/net"
+            # the monitor before the controller: it sees the first ACTIVE cycle, so x_d is aligned
+            mon = Proc(
+                [
+                    *EHPSS_HIL,
+                    "monitor",
+                    "--netns",
+                    netns,
+                    "--config",
+                    str(cfg),
+                    "--port",
+                    "0",
+                    "--allow-inject",
+                    "--capture-dir",
+                    str(tmp_path / "captures"),
+                ]
+            )
+            procs.append(mon)
+            assert mon.wait_for("monitor: http://"), mon.text
+            url = re.search(r"http://[\d.]+:\d+/", mon.text)
+            assert url is not None, mon.text
+            log = tmp_path / "controller.log"
+            ctl = Proc(ns.prefix() + EHPSS_HIL + ["controller", "-c", str(cfg), "--log", str(log)])
+            procs.append(ctl)
+            assert ctl.wait_for("first sensor data: ACTIVE"), ctl.text + emu.text
+            yield Monitored(url.group(0), mon, ctl, emu, log, emu_log, tmp_path / "captures")
+        finally:
+            for p in reversed(procs):
+                p.terminate()
+            for p in reversed(procs):
+                p.wait()
+
+
+def browser(downloads: Path | None = None) -> object:
+    from selenium import webdriver
+    from selenium.webdriver.chrome.options import Options
+    from selenium.webdriver.chrome.service import Service
+
+    opts = Options()
+    opts.binary_location = str(CHROMIUM)
+    if downloads is not None:
+        opts.add_experimental_option(
+            "prefs", {"download.default_directory": str(downloads), "download.prompt_for_download": False}
+        )
+    for a in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1500,1150"):
+        opts.add_argument(a)
+    return webdriver.Chrome(service=Service(executable_path=str(CHROMEDRIVER)), options=opts)
+
+
+def until(what: str, check: Callable[[], bool]) -> None:
+    end = time.monotonic() + WAIT_S
+    while time.monotonic() < end:
+        if check():
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"the page never showed {what} within {WAIT_S:g} s")
+
+
+def until_controlling(
+    what: str, check: Callable[[], bool], text: Callable[[str], str], overruns0: float
+) -> None:
+    """Like :func:`_until` for what only a controller that keeps time shows (k̂ following a
+    fault): when it does not show and the page says the host starved the controller since
+    ``overruns0`` (the overrun count shown when the step began: more overruns since, or the
+    fail-safe with a starvation or timeout reason), that is what a loaded host does — adaptation
+    freezes on late or lost samples and leaving the fail-safe restarts the estimators — and the
+    test says so and skips the rest; it does not judge the estimates."""
+    try:
+        until(what, check)
+    except AssertionError:
+        state, reason, overruns = text("state"), text("failsafe-reason"), number(text("overruns"))
+        if math.isnan(overruns0):  # not shown yet when the step began
+            overruns0 = 0.0
+        starved = overruns > overruns0 or (
+            state == "FAULT" and reason in ("LOOP_OVERRUN", "SENSOR_TIMEOUT", "E2E_ERRORS")
+        )
+        if starved:
+            pytest.skip(
+                f"the host starved the controller ({overruns - overruns0:g} overruns during the wait, "
+                f"state {state} {reason}): {what} not judged"
+            )
+        raise
+
+
+def number(text: str) -> float:
+    try:
+        return float(text.split()[0])
+    except (ValueError, IndexError):
+        return float("nan")
+
+
+def theta(text: str) -> float:
+    """θ of a model cell "M2 (θ 0.500)" (NaN when not shown)."""
+    m = re.search(r"θ ([-\d.]+)", text)
+    return float(m.group(1)) if m else float("nan")
