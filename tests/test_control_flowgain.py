@@ -181,15 +181,21 @@ def _feed(
         plant.step(current)
 
 
+def _on_a_slow_plant() -> PressureTest:
+    """A pressure test after 0.4 s on a plant 15 % slow from power-on."""
+    rng = np.random.default_rng(5)
+    plant = PlantStepper(PARAMS, TS)
+    plant.set_faults(FaultState(k_q=0.85))
+    pt = PressureTest(PARAMS.plant, TS)
+    _feed(pt, plant, rng, 400, 0.85, healthy=False)
+    return pt
+
+
 def test_a_plant_never_seen_at_the_model_gives_its_own_flow_gain_as_the_nominal() -> None:
     """A plant 15 % slow from power-on: the pressure leaves H_D and H_Q undecided within the
     uncertainty, so after ``undecided_evidence`` the product is the plant's flow gain (k_base),
     the nominal both hypotheses are judged against."""
-    rng = np.random.default_rng(5)
-    plant = PlantStepper(PARAMS, TS)
-    plant.set_faults(FaultState(k_q=0.85))
-    fresh = PressureTest(PARAMS.plant, TS)
-    _feed(fresh, plant, rng, 400, 0.85, healthy=False)
+    fresh = _on_a_slow_plant()
     assert fresh.k_base == pytest.approx(0.85, abs=1e-6)
     assert not fresh.attributed and not fresh.plant_seen
 
@@ -229,11 +235,7 @@ def test_a_recovery_keeps_what_is_known_of_the_plant_and_power_on_forgets_it() -
     """:meth:`reset` (leaving the fail-safe) keeps the plant's flow gain, its sight at the
     model's and the pressure baseline: the plant did not change; :meth:`forget_plant` (a new
     controller) forgets them."""
-    rng = np.random.default_rng(5)
-    plant = PlantStepper(PARAMS, TS)
-    plant.set_faults(FaultState(k_q=0.85))
-    pt = PressureTest(PARAMS.plant, TS)
-    _feed(pt, plant, rng, 400, 0.85, healthy=False)
+    pt = _on_a_slow_plant()
     assert pt.k_base == pytest.approx(0.85, abs=1e-6)
     pt.reset()
     assert pt.k_base == pytest.approx(0.85, abs=1e-6) and pt.k_q == pt.k_base
