@@ -195,7 +195,7 @@ class PlantEmulation:
     def measure(self) -> SensorSample:
         """The sensor sample y[k] (draws this sample's noise; call exactly once per sample).
 
-        The plant's outputs are read once each (this runs every sample of every simulation)."""
+        The plant's outputs are read in one call (this runs every sample of every simulation)."""
         noise = self._noise  # _SensorNoise.next written out (once a sample)
         i = noise._i
         if i < noise._n:
@@ -205,7 +205,7 @@ class PlantEmulation:
             e_pos, e_spool, e_p = noise.next()
         plant, k = self.plant, self.k
         f = plant.faults
-        x, spool = plant.position_m, plant.spool_actual_m
+        x, spool, p_l, echo = plant.outputs()
         if f.stuck:
             pos = self._stuck_value_m
         else:
@@ -218,8 +218,8 @@ class PlantEmulation:
             k * self.ts_s,
             pos,
             spool + e_spool,
-            plant.load_pressure_pa + e_p,
-            plant.coil_current_a,
+            p_l + e_p,
+            echo,
             x,
             spool,
             f,

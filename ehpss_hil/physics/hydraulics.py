@@ -175,6 +175,13 @@ class NonlinearPlant:
         self._spool_stop_m = self.hp.spool_stroke_m / faults.k_loe  # where x_v stops (m)
 
     # ---- sensors ----------------------------------------------------------------------------
+    def outputs(self) -> tuple[float, float, float, float]:
+        """``(x, k_loe·x_v, P_L, applied current)`` (m, m, Pa, A): the properties below in one
+        call (the emulation reads them every sample), expression for expression."""
+        hp = self.hp
+        p_l = self._pa - hp.area_b_m2 / hp.area_a_m2 * self._pb
+        return self._x, self.faults.k_loe * self._xv, p_l, self._u
+
     @property
     def position_m(self) -> float:
         """True piston position x (m)."""

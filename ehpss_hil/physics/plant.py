@@ -26,7 +26,9 @@ from .plantspec import PlantSpec
 
 class Plant(Protocol):
     """What the emulation needs of a plant: one sample per :meth:`step` with the coil current
-    held (A), the faults in force, and what the sensors measure (SI)."""
+    held (A), the faults in force, and what the sensors measure (SI): each output on its own
+    (the properties) or all four in one call (:meth:`outputs`, what the emulation reads every
+    sample)."""
 
     ts_s: float
     faults: FaultState
@@ -42,6 +44,10 @@ class Plant(Protocol):
 
     def step(self, current_a: float) -> float:
         """Advance one sample with ``current_a`` held; returns the applied (limited) current (A)."""
+
+    def outputs(self) -> tuple[float, float, float, float]:
+        """``(position_m, spool_actual_m, load_pressure_pa, coil_current_a)`` now, in one call:
+        the same values as the four properties (m, m, Pa, A)."""
 
     @property
     def position_m(self) -> float:
@@ -161,6 +167,12 @@ class LinearPlant:
                 held,
             ]
         return u
+
+    def outputs(self) -> tuple[float, float, float, float]:
+        """``(x, k_loe·x_v, P_L, applied current)`` (m, m, Pa, A): the four properties below in
+        one call (the emulation reads them every sample), expression for expression."""
+        s = self._s
+        return s[POS], self.faults.k_loe * s[SPOOL], self._p_per_acc * s[ACC], self._u
 
     @property
     def position_m(self) -> float:
