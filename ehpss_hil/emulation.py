@@ -239,6 +239,23 @@ class PlantEmulation:
         st._i = i + 1
         return st._buf[i] < p
 
+    def frame_losses(self) -> tuple[bool, bool]:
+        """Both loss draws of this sample in one call: ``(frame_lost(0), frame_lost(1))``, the
+        sensor frames' and the command frame's (the simulator draws both every sample; each
+        direction has its own stream, so drawing them together gives the same draws)."""
+        loss, (s0, s1) = self.loss, self._loss
+        i = s0._i  # _Stream.next written out, as in frame_lost
+        if i >= s0._n:
+            sensor = s0.next() < loss.sensor
+        else:
+            s0._i = i + 1
+            sensor = s0._buf[i] < loss.sensor
+        i = s1._i
+        if i >= s1._n:
+            return sensor, s1.next() < loss.command
+        s1._i = i + 1
+        return sensor, s1._buf[i] < loss.command
+
     # ---- dynamics ---------------------------------------------------------------------------
     def advance(self, current_a: float) -> float:
         """Hold ``current_a`` (A) over [k, k+1), step to k+1; returns the applied current (A)."""
