@@ -100,6 +100,19 @@ class ControllerDriver:
         self.meas.coil_current_a = coil_current_a
         self.meas.load_pressure_pa = load_pressure_pa
 
+    def sensors(
+        self, position_m: float, spool_m: float, counter: int, coil_current_a: float, load_pressure_pa: float
+    ) -> None:
+        """A usable SENSOR_POS and SENSOR_AUX of one sample in one call: :meth:`position` then
+        :meth:`aux`, written out (the simulator's quantize transport hands both every sample)."""
+        m = self.meas
+        if self._fresh and self._observe is not None:
+            self._held.append(hold_sample(m, self._counter))
+        m.position_m, m.spool_m = position_m, spool_m
+        m.coil_current_a, m.load_pressure_pa = coil_current_a, load_pressure_pa
+        self._fresh = True
+        self._counter = counter
+
     def setpoint(self, override_m: float | None) -> None:
         """A SETPOINT override of x_d (m), or None to follow the reference again."""
         self.override_m = override_m

@@ -195,7 +195,7 @@ class PlantEmulation:
     def measure(self) -> SensorSample:
         """The sensor sample y[k] (draws this sample's noise; call exactly once per sample).
 
-        The plant's outputs are read once each (this runs every sample of every simulation)."""
+        The plant's outputs are read in one call (this runs every sample of every simulation)."""
         noise = self._noise  # _SensorNoise.next written out (once a sample)
         i = noise._i
         if i < noise._n:
@@ -205,7 +205,7 @@ class PlantEmulation:
             e_pos, e_spool, e_p = noise.next()
         plant, k = self.plant, self.k
         f = plant.faults
-        x, spool = plant.position_m, plant.spool_actual_m
+        x, spool, p_l, echo = plant.outputs()
         if f.stuck:
             pos = self._stuck_value_m
         else:
@@ -218,8 +218,8 @@ class PlantEmulation:
             k * self.ts_s,
             pos,
             spool + e_spool,
-            plant.load_pressure_pa + e_p,
-            plant.coil_current_a,
+            p_l + e_p,
+            echo,
             x,
             spool,
             f,
@@ -238,6 +238,23 @@ class PlantEmulation:
             return st.next() < p
         st._i = i + 1
         return st._buf[i] < p
+
+    def frame_losses(self) -> tuple[bool, bool]:
+        """Both loss draws of this sample in one call: ``(frame_lost(0), frame_lost(1))``, the
+        sensor frames' and the command frame's (the simulator draws both every sample; each
+        direction has its own stream, so drawing them together gives the same draws)."""
+        loss, (s0, s1) = self.loss, self._loss
+        i = s0._i  # _Stream.next written out, as in frame_lost
+        if i >= s0._n:
+            sensor = s0.next() < loss.sensor
+        else:
+            s0._i = i + 1
+            sensor = s0._buf[i] < loss.sensor
+        i = s1._i
+        if i >= s1._n:
+            return sensor, s1.next() < loss.command
+        s1._i = i + 1
+        return sensor, s1._buf[i] < loss.command
 
     # ---- dynamics ---------------------------------------------------------------------------
     def advance(self, current_a: float) -> float:

@@ -17,9 +17,12 @@ from ehpss_hil.control.tuning import ControlTuning, gate_table
 from ehpss_hil.errors import ConfigError
 
 CONTROL = PROJECT_ROOT / "ehpss_hil" / "control"
-#: module-level numbers that are not gates: the DBC's model slots and the protocol's reach
+#: module-level numbers that are not gates: the DBC's model slots and fallback reasons (the
+#: monitor binds its FallbackReason members once, for its per-sample update) and the protocol's
+#: reach
 NOT_GATES = {
     "controllers": {"SPOOL_SLOT0", "POSITION_SLOT0", "JOINT_SLOT0", "SMAC_SLOT"},
+    "monitor": {"_NONE", "_MISMATCH", "_AT_LIMIT"},
     "sampleclock": {"RESYNC_SAMPLES", "WIRE_COMMANDS"},
 }
 

@@ -165,3 +165,32 @@ def test_the_sample_log_and_the_simulators_transports_give_the_driver_the_same_i
             assert taken is (i not in LOST)
             got.append(_inputs(drv))
         assert got == want, type(transport).__name__
+
+
+def test_sensors_is_position_then_aux_including_a_superseded_sample() -> None:
+    """``ControllerDriver.sensors`` (the quantize transport's one call per sample) does what
+    ``position`` then ``aux`` do: two mmac controllers, one fed each way, with every third
+    cycle carrying two samples (the first superseded: held and observed before the step), give
+    the same commands and end in the same driver and estimator state."""
+    drivers = [
+        ControllerDriver(make_controller("mmac", PARAMS, TS_S), lambda k: 1e-3 * math.sin(k / 9))
+        for _ in "ab"
+    ]
+    a, b = drivers
+    seen: list[list[tuple[float, int]]] = [[], []]  # per cycle: the command, the samples stepped
+    k = 0
+    for cycle in range(14):
+        for _ in range(2 if cycle % 3 == 2 else 1):
+            pos, spool, pressure, coil = SAMPLES[k % len(SAMPLES)]
+            a.position(pos, spool, k & 0x0F)
+            a.aux(coil, pressure)
+            b.sensors(pos, spool, k & 0x0F, coil, pressure)
+            k += 1
+        for drv, out in zip(drivers, seen, strict=True):
+            out.append((drv.step()[0], drv.meas.samples))
+    assert seen[0] == seen[1] and len({c for c, _ in seen[0]}) > 5
+    # the superseded sample was observed, so the step stands one sample on from it
+    assert {n for _, n in seen[1][1:]} == {1}
+    assert _inputs(a) == _inputs(b)
+    ca, cb = a.controller, b.controller
+    assert ca.xhat.x == cb.xhat.x and ca.valve.v == cb.valve.v  # type: ignore[attr-defined]

@@ -28,3 +28,24 @@ def test_noise_is_sigma_times_each_seeded_stream_across_blocks() -> None:
         np.testing.assert_array_equal(got[:, i], want)
     emu.reset()  # identically seeded again
     assert emu.measure().position_m == got[0, 0]
+
+
+def test_frame_losses_are_both_directions_draws_across_blocks_and_a_loss_change() -> None:
+    """``frame_losses()`` (the simulator's one call per sample) draws exactly what
+    ``frame_lost(0)`` and ``frame_lost(1)`` draw on an identically seeded emulation, sample for
+    sample across a block boundary, with the two directions' probabilities kept apart."""
+    from ehpss_hil.scenario import FrameLoss
+
+    sc = load_scenario(PROJECT_ROOT / "scenarios" / "fault-free.yaml")
+    sc = replace(sc, duration_s=10.0, events=(), seed=11)
+    one, two = PlantEmulation(load_params(), sc), PlantEmulation(load_params(), sc)
+    got, want = [], []
+    for k in range(_BLOCK + 50):
+        if k == 100:  # a change of the loss (as a scheduled event or an injection makes it)
+            one.loss = two.loss = FrameLoss(0.3, 0.7)
+        got.append(one.frame_losses())
+        want.append((two.frame_lost(0), two.frame_lost(1)))
+    assert got == want
+    sensor, command = np.array(got[100:]).mean(axis=0)
+    assert abs(sensor - 0.3) < 0.03 and abs(command - 0.7) < 0.03
+    assert not any(any(g) for g in got[:100])  # no loss before the change

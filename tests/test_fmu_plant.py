@@ -91,6 +91,8 @@ def test_a_shorter_fmu_step_is_taken_in_sub_steps(fmus: dict[str, Path]) -> None
     assert ref.position_m != 0.0
     assert fmu.position_m == pytest.approx(ref.position_m, rel=1e-9)
     assert fmu.load_pressure_pa == pytest.approx(ref.load_pressure_pa, rel=1e-9)
+    # the emulation's one-call read of the outputs is the properties'
+    assert fmu.outputs() == (fmu.position_m, fmu.spool_actual_m, fmu.load_pressure_pa, fmu.coil_current_a)
 
 
 # ---- the map, at check-config ---------------------------------------------------------------------

@@ -205,3 +205,20 @@ def test_faults_act_on_the_nonlinear_plant() -> None:
     for _ in range(50):
         loe.step(3e-3)  # 49 mm commanded: the actual spool stops at the 10 mm stroke
     assert loe.spool_actual_m == BASE.spool_stroke_m
+
+
+@pytest.mark.parametrize("model", ["linear", "nonlinear"])
+def test_outputs_are_the_four_sensor_properties_in_one_call(model: str) -> None:
+    """``Plant.outputs()`` (what the emulation reads each sample) gives exactly the properties
+    position, actual spool, load pressure and current echo, in that order, also under a k_LOE
+    fault and a current limit (values that differ from one another, each non-zero)."""
+    from ehpss_hil.physics.faults import FaultState
+
+    plant = make_plant(PlantSpec(model=model), BASE, TS)  # type: ignore[arg-type]
+    plant.set_faults(FaultState(k_loe=0.7, current_limit_a=0.004))
+    for k in range(200):
+        plant.step(0.01 * math.sin(0.05 * k))
+        out = plant.outputs()
+        assert out == (plant.position_m, plant.spool_actual_m, plant.load_pressure_pa, plant.coil_current_a)
+    assert len(set(out)) == 4 and all(v != 0.0 for v in out)
+    assert abs(out[3]) <= 0.004

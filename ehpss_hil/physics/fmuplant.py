@@ -290,6 +290,11 @@ class FmuPlant:
             self._echo_a = out[3]
 
     # ---- sensors ----------------------------------------------------------------------------
+    def outputs(self) -> tuple[float, float, float, float]:
+        """``(position, actual spool, load pressure, current echo)`` (m, m, Pa, A): the
+        properties below in one call (the emulation reads them every sample)."""
+        return self._position_m, self._spool_m, self._load_pressure_pa, self.coil_current_a
+
     @property
     def position_m(self) -> float:
         """Piston position x (m), the FMU's output."""

@@ -175,6 +175,13 @@ class NonlinearPlant:
         self._spool_stop_m = self.hp.spool_stroke_m / faults.k_loe  # where x_v stops (m)
 
     # ---- sensors ----------------------------------------------------------------------------
+    def outputs(self) -> tuple[float, float, float, float]:
+        """``(x, k_loe·x_v, P_L, applied current)`` (m, m, Pa, A): the properties below in one
+        call (the emulation reads them every sample), expression for expression."""
+        hp = self.hp
+        p_l = self._pa - hp.area_b_m2 / hp.area_a_m2 * self._pb
+        return self._x, self.faults.k_loe * self._xv, p_l, self._u
+
     @property
     def position_m(self) -> float:
         """True piston position x (m)."""
@@ -218,30 +225,20 @@ class NonlinearPlant:
         lim = self.faults.current_limit_a
         u = -lim if current_a < -lim else lim if current_a > lim else current_a  # min(max(…)) inline
         self._u = u
-        self._hydraulics(self._spool_path(u))
+        self._substeps(u)
         return u
 
-    def _spool_path(self, u: float) -> list[float]:
-        """Step the valve over the sample's sub-steps (exact ZOH each, the actual spool stopped
-        inelastically at the stroke); returns the mean actual spool of each sub-step (m)."""
+    def _substeps(self, u: float) -> None:
+        """The sample's sub-steps, each: the valve (exact ZOH, the actual spool stopped
+        inelastically at the stroke), then with the sub-step's mean actual spool (m, held over
+        it) a linearly implicit trapezoidal step of ``(P_A, P_B, x, ẋ)``, then the end stops.
+        Each solves ``(I − h/2·J)·Δ = h·f`` with the analytic Jacobian J: Δx = h·ẋ + h/2·Δẋ
+        eliminated, then (ΔP_A, ΔP_B) in terms of Δẋ (2×2), then Δẋ (scalar). One loop over
+        locals only: the simulator's hot path (the valve does not depend on the cylinder, so
+        stepping both in one loop is the same arithmetic as the valve's path first)."""
         (v0, v1, vb), (x0, x1, xb) = self._valve
         k_loe, stop = self.faults.k_loe, self._spool_stop_m
         vv, xv = self._vv, self._xv
-        path = []
-        for _ in range(self.substeps):
-            xs0 = xv
-            vv, xv = v0 * vv + v1 * xv + vb * u, x0 * vv + x1 * xv + xb * u
-            if xv > stop or xv < -stop:
-                xv, vv = (stop if xv > 0.0 else -stop), 0.0
-            path.append(0.5 * k_loe * (xs0 + xv))
-        self._vv, self._xv = vv, xv
-        return path
-
-    def _hydraulics(self, spools: list[float]) -> None:
-        """Linearly implicit trapezoidal sub-steps of ``(P_A, P_B, x, ẋ)``, one per actual spool
-        in ``spools`` (m, held over the sub-step), then the end stops. Each solves
-        ``(I − h/2·J)·Δ = h·f`` with the analytic Jacobian J: Δx = h·ẋ + h/2·Δẋ eliminated, then
-        (ΔP_A, ΔP_B) in terms of Δẋ (2×2), then Δẋ (scalar). Locals only: the simulator's hot path."""
         kv, lam = self._kv, self._p_lam
         (h, hba, hbb, length, ps, pt, lap, cl2, leak0, aa, ab, ci, bv, fc, vs, ks, fext, stroke, th) = (
             self._consts[:19]
@@ -250,7 +247,12 @@ class NonlinearPlant:
         den_viscous = cv0 + cvf * bv  # the Δẋ coefficient's friction part without Coulomb friction
         pa, pb, x, v = self._pa, self._pb, self._x, self._v
         sqrt = math.sqrt
-        for xs in spools:
+        for _ in range(self.substeps):
+            xs0 = xv  # the valve over this sub-step, and its mean actual spool xs
+            vv, xv = v0 * vv + v1 * xv + vb * u, x0 * vv + x1 * xv + xb * u
+            if xv > stop or xv < -stop:
+                xv, vv = (stop if xv > 0.0 else -stop), 0.0
+            xs = 0.5 * k_loe * (xs0 + xv)
             hea = hba / (length + x)  # h·β_e/V_A
             heb = hbb / (length - x)  # h·β_e/V_B
             tea, teb = 0.5 * hea, 0.5 * heb
@@ -317,11 +319,12 @@ class NonlinearPlant:
                 x, v = stroke, min(v, 0.0)
             elif x < -stroke:
                 x, v = -stroke, max(v, 0.0)
+        self._vv, self._xv = vv, xv
         self._pa, self._pb, self._x, self._v = pa, pb, x, v
 
 
 def _step_constants(hp: HydraulicParams, h: float) -> tuple[float, ...]:
-    """The per-sub-step constants of :meth:`NonlinearPlant._hydraulics` for sub-step ``h`` (s),
+    """The per-sub-step constants of :meth:`NonlinearPlant._substeps` for sub-step ``h`` (s),
     computed once with the same operations (and so the same values) as written out per step:
     ``(h, h·β_e/A_A, h·β_e/A_B, L_0, P_S, P_T, overlap, 2·C_l, land leak at zero pressure, A_A,
     A_B, C_i, B_v, F_c, v_s, k, F_ext, piston stroke, h/2)`` and the v row's coefficients

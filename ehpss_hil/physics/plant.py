@@ -26,7 +26,9 @@ from .plantspec import PlantSpec
 
 class Plant(Protocol):
     """What the emulation needs of a plant: one sample per :meth:`step` with the coil current
-    held (A), the faults in force, and what the sensors measure (SI)."""
+    held (A), the faults in force, and what the sensors measure (SI): each output on its own
+    (the properties) or all four in one call (:meth:`outputs`, what the emulation reads every
+    sample)."""
 
     ts_s: float
     faults: FaultState
@@ -42,6 +44,10 @@ class Plant(Protocol):
 
     def step(self, current_a: float) -> float:
         """Advance one sample with ``current_a`` held; returns the applied (limited) current (A)."""
+
+    def outputs(self) -> tuple[float, float, float, float]:
+        """``(position_m, spool_actual_m, load_pressure_pa, coil_current_a)`` now, in one call:
+        the same values as the four properties (m, m, Pa, A)."""
 
     @property
     def position_m(self) -> float:
@@ -83,7 +89,8 @@ class LinearPlant:
         #: the piston [ẍ, ẋ, x] driven by a held spool x_v, for samples the spool spends on its stop
         self._zoh_stop = ZohCache(self._continuous_piston, ts_s)
         self._s: list[float] = [0.0] * 5
-        self._rows: tuple[tuple[float, ...], ...] = ()
+        #: the free map's rows [A_d row i, B_d row i], i = 0…4, one after the other
+        self._c: tuple[float, ...] = ()
         self._rows_stop: tuple[tuple[float, ...], ...] = ()
         self._key: Hashable = None
         self._u = 0.0
@@ -110,8 +117,8 @@ class LinearPlant:
         key = faults.dynamics_key
         if key != self._key:
             ad, bd = self._zoh.get(key)
-            # each row: the state coefficients, then the input's
-            self._rows = tuple((*map(float, ad[i]), float(bd[i, 0])) for i in range(5))
+            # each row: the state coefficients, then the input's (step unpacks them at once)
+            self._c = tuple(c for i in range(5) for c in (*map(float, ad[i]), float(bd[i, 0])))
             ad, bd = self._zoh_stop.get(key)
             self._rows_stop = tuple((*map(float, ad[i]), float(bd[i, 0])) for i in range(3))
             self._key = key
@@ -139,15 +146,17 @@ class LinearPlant:
         u = -lim if current_a < -lim else lim if current_a > lim else current_a  # min(max(…)) inline
         self._u = u
         s0, s1, s2, s3, s4 = self._s
-        r0, r1, r2, r3, r4 = self._rows
-        xv = r4[0] * s0 + r4[1] * s1 + r4[2] * s2 + r4[3] * s3 + r4[4] * s4 + r4[5] * u
+        # the coefficients unpacked at once (one unpack instead of 30 subscripts: every sample)
+        (a00, a01, a02, a03, a04, b0, a10, a11, a12, a13, a14, b1, a20, a21, a22, a23, a24, b2,
+         a30, a31, a32, a33, a34, b3, a40, a41, a42, a43, a44, b4) = self._c  # fmt: skip
+        xv = a40 * s0 + a41 * s1 + a42 * s2 + a43 * s3 + a44 * s4 + b4 * u
         stop = self._stop_m
         if -stop <= xv <= stop:
             self._s = [
-                r0[0] * s0 + r0[1] * s1 + r0[2] * s2 + r0[3] * s3 + r0[4] * s4 + r0[5] * u,
-                r1[0] * s0 + r1[1] * s1 + r1[2] * s2 + r1[3] * s3 + r1[4] * s4 + r1[5] * u,
-                r2[0] * s0 + r2[1] * s1 + r2[2] * s2 + r2[3] * s3 + r2[4] * s4 + r2[5] * u,
-                r3[0] * s0 + r3[1] * s1 + r3[2] * s2 + r3[3] * s3 + r3[4] * s4 + r3[5] * u,
+                a00 * s0 + a01 * s1 + a02 * s2 + a03 * s3 + a04 * s4 + b0 * u,
+                a10 * s0 + a11 * s1 + a12 * s2 + a13 * s3 + a14 * s4 + b1 * u,
+                a20 * s0 + a21 * s1 + a22 * s2 + a23 * s3 + a24 * s4 + b2 * u,
+                a30 * s0 + a31 * s1 + a32 * s2 + a33 * s3 + a34 * s4 + b3 * u,
                 xv,
             ]
         else:
@@ -161,6 +170,12 @@ class LinearPlant:
                 held,
             ]
         return u
+
+    def outputs(self) -> tuple[float, float, float, float]:
+        """``(x, k_loe·x_v, P_L, applied current)`` (m, m, Pa, A): the four properties below in
+        one call (the emulation reads them every sample), expression for expression."""
+        s = self._s
+        return s[POS], self.faults.k_loe * s[SPOOL], self._p_per_acc * s[ACC], self._u
 
     @property
     def position_m(self) -> float:

@@ -172,12 +172,13 @@ def _loop(
     drv = ControllerDriver(ctrl, x_d.__getitem__)
     queue: deque[float | None] = deque([0.0] * delay)
     held = 0.0
-    measure, lost, advance = emu.measure, emu.frame_lost, emu.advance
+    measure, losses, advance = emu.measure, emu.frame_losses, emu.advance
     sensor, command = tr.sensor, tr.command
     step = drv.step
     probe, index_values, push = ctrl.probe, ctrl.index_values, rows.append
     for k in range(len(x_d)):
         s = measure()
+        sensor_lost, command_lost = losses()  # both directions' draws (own streams)
         fresh = sensor(
             drv,
             k,
@@ -186,12 +187,12 @@ def _loop(
             s.load_pressure_pa,
             s.coil_current_a,
             s.current_saturated,
-            lost(0),
+            sensor_lost,
         )
         if set_truth is not None:
             set_truth(s.faults)
         current, enable = step()
-        queue.append(command(current if enable else 0.0, k, lost(1)))
+        queue.append(command(current if enable else 0.0, k, command_lost))
         arrived = queue.popleft()
         if arrived is not None:
             held = arrived

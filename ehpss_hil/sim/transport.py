@@ -80,8 +80,9 @@ class QuantizeTransport:
     simulator's hot path). So is the load pressure's ``LinearIntegerConversion`` (the shipped
     DBC's 10 Pa), expression for expression: ``r = v − offset``, ``r // scale`` when that
     divides exactly, else ``r / scale``, rounded; any other conversion is called through cantools.
-    The quantized values go onto the driver's :meth:`~ehpss_hil.driver.ControllerDriver.position`
-    and :meth:`~ehpss_hil.driver.ControllerDriver.aux`, where
+    The quantized values go onto the driver in one :meth:`~ehpss_hil.driver.ControllerDriver.sensors`
+    call (its :meth:`~ehpss_hil.driver.ControllerDriver.position` and
+    :meth:`~ehpss_hil.driver.ControllerDriver.aux` together), where
     :meth:`~ehpss_hil.driver.ControllerDriver.take` puts a decoded SENSOR_POS and SENSOR_AUX (no
     frame object and no dict per sample; tests/test_driver_mapping.py pins the driver's input to
     the frames transport's).
@@ -128,8 +129,13 @@ class QuantizeTransport:
             r = pressure - p_o
             q, rem = divmod(r, p_s)
             p_q = round(q if rem == 0 else r / p_s) * p_s + p_o
-        drv.position(round((pos - po) / ps) * ps + po, round((spool - so) / ss) * ss + so, k & 0x0F)
-        drv.aux(round((coil - co) / cs) * cs + co, p_q)
+        drv.sensors(
+            round((pos - po) / ps) * ps + po,
+            round((spool - so) / ss) * ss + so,
+            k & 0x0F,
+            round((coil - co) / cs) * cs + co,
+            p_q,
+        )
         return True
 
     def command(self, current_a: float, k: int, lost: bool) -> float | None:

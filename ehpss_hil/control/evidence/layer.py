@@ -187,22 +187,39 @@ class EvidenceLayer:
         ``k_loe``: the spool channel's k̂_LOE in use; ``excited``: the spool not at or just off
         its stop; ``warm``: the loop still in its warm-up; ``broken``: samples were missed and
         not redone; ``trusted``: the loop fed the sensor back at the last fresh sample. The
-        current echo and the samples this one stands for come from the sample clock."""
+        current echo and the samples this one stands for come from the sample clock.
+
+        This runs on every fresh sample: the layer's own steps around the pieces (the creep in
+        use, the inputs of the monitor) are written out here, one call per piece."""
         rec = self.record
         rec.restarted = False
-        prod = self._increments(meas, excited)
-        # the pressure test, and H_Q entered or left in the estimates
-        est, pt = self.est, self.pressure
-        fresh = self.inc.product_fresh
-        healthy = (
-            not warm
-            and not self.spool_sup.guarded
-            and not self.pos_sup.guarded
-            and self._spool_age >= self._baseline_settle
-        )
-        ss = self.spool_sup
+        est, pt, inc = self.est, self.pressure, self.inc
+        ss, ps = self.spool_sup, self.pos_sup
+        position_m = meas.position_m
+        # 1. increments: θ_prod, and the creep on this sample (x̂ moves with it, in x/k̂_Q units)
+        prod = inc.product(position_m, meas.spool_m, self.clock.span, excited)
+        if self.dead and inc.product_updated:
+            self._dead_evidence += 1
+        spool_model = ss.active
+        if spool_model != self._flow_spool_model:
+            # the pressure prediction scales with k̂_LOE: evidence taken with another k̂_LOE
+            # favours the wrong hypothesis
+            self._flow_spool_model = spool_model
+            pt.restart()
+            pt.hold_off(self._flow_hold)
+        rate = inc.creep.rate_m_s
+        creep = rate / prod if prod >= self._failed_below else 0.0
+        if creep != est.xhat.creep_m_s:  # unchanged on most samples: no call
+            est.set_creep(creep)
+        if (rate != 0.0) != self._creep_on:
+            self._creep_on = not self._creep_on
+            self._restart_position(position_m)
+        age = self._spool_age = self._spool_age + 1 if spool_model == self._spool_age_model else 0
+        self._spool_age_model = spool_model
+        # 2. the pressure test, and H_Q entered or left in the estimates
+        fresh = inc.product_fresh
+        healthy = not warm and not ss.guarded and not ps.guarded and age >= self._baseline_settle
         theta_l = self._pressure_theta_l(k_loe, warm) if warm or ss.guarded else k_loe
-        inc = self.inc
         pt.update(
             self.clock.echo,
             meas.load_pressure_pa,
@@ -214,46 +231,33 @@ class EvidenceLayer:
             inc.product_updated,
         )
         if pt.flow_fault:
-            est.enter_flow(meas.position_m, prod, k_loe)
+            est.enter_flow(position_m, prod, k_loe)
             self._in_flow = True
         elif self._in_flow:  # back to H_D: the product is the sensor's gain (≈ 1 when it vanished)
             self._in_flow = False
-            est.leave_flow(meas.position_m, prod)
+            est.leave_flow(position_m, prod)
             self.pos_bank.seed_ria(prod)
-            self.pos_sup.force(self.pos_bank.ria)
+            ps.force(self.pos_bank.ria)
             est.set_sensor_gain(self.pos_bank.theta[self.pos_bank.ria], pt.k_base)
-        rec.fallback = self._watch(k_loe, fresh)
-        rec.reason = self.monitor.reason
-        ps = self.pos_sup
-        sensor = self.attribution.update(meas.position_m, est.theta_d, ps.active, ps.guarded, broken, trusted)
+        # 3. the do-no-harm monitor: the position check only where the sensor is read through
+        # θ̂_D; under the guard (position_guarded()) the loop runs on x̂ (no model explains the
+        # sensor; θ_prod, fitted on the same sensor, neither)
+        guarded = ps.guarded and not pt.flow_fault
+        at_limit = (ps.active >= self.pos_bank.n_fixed and not guarded and est.theta_d >= self._lim_d_hi) or (
+            spool_model >= self.spool_bank.n_fixed and not ss.guarded and k_loe <= self._lim_l_lo
+        )
+        mon = self.monitor
+        rec.fallback = mon.update(est.k_dft * est.k_q, inc.theta_prod, fresh and not guarded, at_limit)
+        rec.reason = mon.reason
+        # 4. the jump attribution
+        att = self.attribution
+        sensor = att.update(position_m, est.theta_d, ps.active, ps.guarded, broken, trusted)
         flow = pt.flow_fault
         rec.position_nominal = not (sensor or flow)
-        rec.ramp_samples = 1 if self.attribution.by_jump else self._ramp_n
+        rec.ramp_samples = 1 if att.by_jump else self._ramp_n
         rec.hypothesis = self._hyp[2 if flow else (1 if sensor else 0)]
         rec.k_q = est.k_q
         return rec
-
-    def _increments(self, meas: Measurement, excited: bool) -> float:
-        """θ_prod and the creep on this sample; x̂ moves with the creep (in x/k̂_Q units)."""
-        inc = self.inc
-        prod = inc.product(meas.position_m, meas.spool_m, self.clock.span, excited)
-        if self.dead and inc.product_updated:
-            self._dead_evidence += 1
-        spool_model = self.spool_sup.active
-        if spool_model != self._flow_spool_model:
-            # the pressure prediction scales with k̂_LOE: evidence taken with another k̂_LOE
-            # favours the wrong hypothesis
-            self._flow_spool_model = spool_model
-            self.pressure.restart()
-            self.pressure.hold_off(self._flow_hold)
-        rate = inc.creep.rate_m_s
-        self.est.set_creep(rate / prod if prod >= self._failed_below else 0.0)
-        if (rate != 0.0) != self._creep_on:
-            self._creep_on = not self._creep_on
-            self._restart_position(meas.position_m)
-        self._spool_age = self._spool_age + 1 if spool_model == self._spool_age_model else 0
-        self._spool_age_model = spool_model
-        return prod
 
     def _restart_position(self, position_m: float) -> None:
         """The plant model changed (a creep came into use or left it): what the position channel
@@ -279,20 +283,6 @@ class EvidenceLayer:
             j = self.spool_bank.j
             return self.spool_bank.theta[j.index(min(j))]
         return k_loe
-
-    def _watch(self, k_loe: float, product_fresh: bool) -> bool:
-        """The do-no-harm monitor on this sample; True: compensate nominally."""
-        pb, sb = self.pos_bank, self.spool_bank
-        pa, sa = self.pos_sup.active, self.spool_sup.active
-        guarded = self.pos_sup.guarded and not self.pressure.flow_fault  # position_guarded()
-        est = self.est
-        at_limit = (pa >= pb.n_fixed and not guarded and est.theta_d >= self._lim_d_hi) or (
-            sa >= sb.n_fixed and not self.spool_sup.guarded and k_loe <= self._lim_l_lo
-        )
-        # the position check only where the sensor is read through θ̂_D: under the guard the loop
-        # runs on x̂ (no model explains the sensor; θ_prod, fitted on the same sensor, neither)
-        fresh = product_fresh and not guarded
-        return self.monitor.update(est.k_dft * est.k_q, self.inc.theta_prod, fresh, at_limit)
 
     # ---- questions the loop asks while it closes -------------------------------------------
     def position_guarded(self) -> bool:

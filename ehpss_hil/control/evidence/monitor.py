@@ -93,27 +93,26 @@ class HarmMonitor:
         self.fallback = False
         self.reason = FallbackReason.NONE
 
-    def check(self, theta_used: float, theta_prod: float, prod_fresh: bool, at_limit: bool) -> FallbackReason:
-        """The rule that fires on this sample (NONE if none), and θ_prod's history advanced."""
-        ring, i = self._ring, self._i
-        settled = abs(theta_prod - ring[i]) < self._min_dev
-        ring[i] = theta_prod
-        self._i = (i + 1) % len(ring)
-        if at_limit:
-            return _AT_LIMIT
-        if not (prod_fresh and settled):
-            return _NONE
-        du, dp = theta_used - 1.0, theta_prod - 1.0
-        if du * dp < 0.0 and abs(du) > self._min_dev and abs(dp) > self._min_dev:
-            return _MISMATCH
-        if theta_used < self._failed_below and theta_prod >= self._alive:
-            return _MISMATCH  # "failed" sensor that follows the spool
-        return _NONE
-
     def update(self, theta_used: float, theta_prod: float, prod_fresh: bool, at_limit: bool) -> bool:
         """One fresh sample: θ_used = θ̂_D·k̂_Q in use, θ_prod and whether it is fresh, whether an
-        adaptive estimate in use is at its clip. Returns :attr:`fallback`."""
-        r = self.check(theta_used, theta_prod, prod_fresh, at_limit)
+        adaptive estimate in use is at its clip. Returns :attr:`fallback`.
+
+        The rule that fires (the module's: the clip first, then on a fresh, settled θ_prod the
+        mismatch rules) is judged here, θ_prod's history advanced, then the hysteresis in time:
+        one call per sample, as this runs on every fresh sample."""
+        ring, i, min_dev = self._ring, self._i, self._min_dev
+        settled = abs(theta_prod - ring[i]) < min_dev
+        ring[i] = theta_prod
+        self._i = (i + 1) % len(ring)
+        r = _NONE
+        if at_limit:
+            r = _AT_LIMIT
+        elif prod_fresh and settled:
+            du, dp = theta_used - 1.0, theta_prod - 1.0
+            if du * dp < 0.0 and abs(du) > min_dev and abs(dp) > min_dev:
+                r = _MISMATCH
+            elif theta_used < self._failed_below and theta_prod >= self._alive:
+                r = _MISMATCH  # "failed" sensor that follows the spool
         if r is not _NONE:
             self._ok = 0
             self._streak = self._streak + 1 if r == self._pending else 1
