@@ -149,3 +149,26 @@ def test_reference_from_a_run_directory(bench_log: Path, tmp_path: Path) -> None
     assert any("run.json" in n for n in run.notes)
     _, ref, ts = reference_of({"config": str(PROJECT_ROOT / "configs" / "controller.yaml")}, tmp_path)
     assert ref is not None and ts == pytest.approx(1e-3)
+
+
+def test_the_answer_to_the_last_sample_with_truth_counts_however_late() -> None:
+    """The rows scored against the ground truth end 1.5 periods after the emulator's last
+    PLANT_TRUTH frame — and, on a loaded host, the answer to the last sample sent with it may
+    come later (a lockstep run's last command logged 5 ms after its truth frame: 1499 of 1500
+    samples under stress-ng). That row is kept; the fail-safe cycles after the emulator stopped
+    (no sensor frame since the row before them) are not, in one chunk or across chunks."""
+    from ehpss_hil.report.logdata import rows_with_truth
+
+    ts = 1e-3
+    truth_last, sensors = 1.0, np.array([0.998, 0.999, 1.0])
+    late = np.array([0.9982, 0.9991, 1.0052, 1.0063, 1.0074])  # the answer to 1.0 came 5.2 ms late
+    assert rows_with_truth(late, truth_last, sensors, ts).tolist() == [True, True, True, False, False]
+    timely = np.array([0.9995, 1.0004, 1.0014, 1.0024, 1.0034])  # realtime: fail-safe cycles after
+    assert rows_with_truth(timely, truth_last, sensors, ts).tolist() == [True, True, True, False, False]
+    # a streamed chunk that starts at the late row: the row before it is the last chunk's
+    assert rows_with_truth(late[2:], truth_last, sensors, ts, t_before=0.9991).tolist() == [
+        True,
+        False,
+        False,
+    ]
+    assert rows_with_truth(late[3:], truth_last, sensors, ts, t_before=1.0052).tolist() == [False, False]

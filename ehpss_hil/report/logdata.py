@@ -154,7 +154,8 @@ def _within_truth(
     truth = frames.get("PLANT_TRUTH")
     if truth is None or not len(truth["t_s"]) or not len(t_rows):
         return k, t_rows, i_cmd
-    keep = t_rows <= float(np.max(truth["t_s"])) + 1.5 * ts_s
+    pos = frames.get("SENSOR_POS", {"t_s": np.zeros(0)})["t_s"]
+    keep = rows_with_truth(t_rows, float(np.max(truth["t_s"])), pos, ts_s)
     n_drop = len(t_rows) - int(np.count_nonzero(keep))
     if n_drop:
         notes.append(
@@ -162,6 +163,26 @@ def _within_truth(
             "(the emulator had stopped) are left out"
         )
     return k[keep], t_rows[keep], i_cmd[keep]
+
+
+def rows_with_truth(
+    t_rows: np.ndarray, last_truth_s: float, t_pos: np.ndarray, ts_s: float, t_before: float = -np.inf
+) -> np.ndarray:
+    """Which controller rows (times in s) have ground truth to be scored against: those up to
+    1.5 periods after the emulator's last PLANT_TRUTH frame, and the first later row when a
+    SENSOR_POS frame (times ``t_pos``) sent up to then arrived after the row before it — the
+    answer to the last sample with truth, which a loaded host may send periods late (a lockstep
+    run lost its last sample so, its command logged 5 ms after the truth frame). ``t_before``:
+    the time of the row before ``t_rows[0]`` (a streamed chunk's predecessor)."""
+    t_end = last_truth_s + 1.5 * ts_s
+    keep = t_rows <= t_end
+    beyond = np.flatnonzero(~keep)
+    if len(beyond):
+        i = int(beyond[0])
+        prev = float(t_rows[i - 1]) if i else t_before
+        if np.any((t_pos > prev) & (t_pos <= t_end)):
+            keep[i] = True
+    return keep
 
 
 def _fresh(t_pos: np.ndarray, t_rows: np.ndarray) -> np.ndarray:

@@ -36,7 +36,7 @@ from ..physics.reference import ReferenceModel
 from .annotate import injection_events
 from .logbounds import check_sample_time, check_span
 from .logclock import STEP_WINDOW, ClockStep, clock_follows_cycles, undo_clock_steps, unwrap_counter
-from .logdata import _assemble, _median_period, _sorted
+from .logdata import _assemble, _median_period, _sorted, rows_with_truth
 from .logmeta import RunInfo
 from .result import SimResult
 
@@ -248,7 +248,8 @@ class LogStream:
             )
             check_sample_time(self.log, ts, "from the log's timing")
         if final and np.isfinite(self.last_truth):
-            keep = t_rows <= self.last_truth + 1.5 * ts
+            pos = frames.get("SENSOR_POS", {"t_s": np.zeros(0)})["t_s"]
+            keep = rows_with_truth(t_rows, self.last_truth, pos, ts, self.t_last)
             self.state.dropped_after_truth += len(k) - int(np.count_nonzero(keep))
             k, t_rows, i_cmd = k[keep], t_rows[keep], i_cmd[keep]
         if len(k) == 0:
