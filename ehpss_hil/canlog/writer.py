@@ -365,7 +365,8 @@ class CandumpLogger:
                 self._error = self._error or f"cannot finish the {self.format} file: {exc}"
             return
         if self._fh is not None:
-            self._error = self._error or self._fh.close()
+            error = self._fh.close()  # closed whatever failed before (a full disk)
+            self._error = self._error or error
 
     def _file_name(self, i: int) -> Path:
         return self.path if i == 0 else numbered(self.path, i)

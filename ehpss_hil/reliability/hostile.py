@@ -56,7 +56,14 @@ class SmallTmpfs:
     def __exit__(
         self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None
     ) -> None:
-        subprocess.run(["umount", str(self.where)], check=False, capture_output=True)
+        """Unmount; a file system still busy (a file left open on it) is detached lazily and,
+        unless the block already failed, raised as an error: no mount outlives the block."""
+        done = subprocess.run(["umount", str(self.where)], check=False, capture_output=True)
+        if done.returncode != 0:
+            subprocess.run(["umount", "-l", str(self.where)], check=False, capture_output=True)
+            if et is None:
+                msg = done.stderr.decode(errors="replace").strip()
+                raise RuntimeError(f"{self.where}: {msg or 'umount failed'} (a file left open on it?)")
 
 
 def short_scenario(path: Path, duration_s: float = 0.5) -> Path:
