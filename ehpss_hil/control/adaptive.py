@@ -109,6 +109,11 @@ class MmacController(LoopBase):
             td = self.pos_bank.theta[ps.active]
             alive = td >= failed_below and not self.sensor_held_off and not ps.guarded
             est.set_channels(tl, td, alive, pt.k_base)
+            if est.y0 != 0.0 and alive and td == pt.k_base and not pt.flow_fault:
+                # the nominal model in use: once the increments confirm it, the sensor reads the
+                # piston, and the position regression goes through the sensor's zero
+                if self.evidence.inc.confirms(td):
+                    est.pivot_to_zero(td)
             if self._flow_on:
                 att = self.evidence.update(
                     meas, tl, self._spool_hold == 0, self._warm_left > 0, broken, self._was_trusted

@@ -101,6 +101,14 @@ class Estimates:
             self.x0 *= kq
             self._kq_dead = 1.0
 
+    def pivot_to_zero(self, theta: float) -> None:
+        """The increments confirm θ = θ̂_D (the reading is θ·x now, offset-free): if x̂ is
+        re-based on it (x0 = y0/θ), the regression goes through the sensor's zero from here,
+        x̂ unchanged. A pivot away from the zero would read a later change of the sensor's
+        gain, which scales the reading about its zero, as an offset of (gain change × pivot)."""
+        if self.x0 == self.y0 / theta:
+            self.y0 = self.x0 = 0.0
+
     def rebase(self, theta: float, trusted: bool) -> None:
         """Keep x0 = y0/θ with θ = θ̂_D·k̂_Q in use: x̂ moves with x0 (x̂ − x0 is unchanged), so
         it stays the absolute position while the sensor gain estimate changes. Not while the

@@ -59,6 +59,7 @@ class SensorAttribution:
         "_min_dev",
         "_model",
         "_prod_before",
+        "_prod_from",
         "_prod_jumped",
         "_pt",
         "_theta_before",
@@ -105,6 +106,7 @@ class SensorAttribution:
         #: the product a gain jump predicts (θ_prod before it × its ratio) until the settled
         #: product confirms or refutes it; NaN: nothing to verify
         self._prod_jumped = math.nan
+        self._prod_from = 1.0  # the gain the jump being verified is judged from
         self._jump_decided = False  # the sensor was decided on the jump being verified
         self._model = -1  # the position model in use at the last sample
         self._theta_before = 1.0  # its θ̂_D
@@ -127,7 +129,7 @@ class SensorAttribution:
         stepping in (the product stayed where it was): the attribution such a jump made is
         withdrawn — an offset is left to the plain loop."""
         to = self._prod_jumped
-        if to == to and abs(theta_prod - self._prod_before) < abs(theta_prod - to):
+        if to == to and abs(theta_prod - self._prod_from) < abs(theta_prod - to):
             self._left = 0
             if self._jump_decided:
                 self._pt.withdraw_sensor()
@@ -135,6 +137,14 @@ class SensorAttribution:
         self._prod_jumped = math.nan
         self._jump_decided = False
         self._prod_before = theta_prod
+
+    def _verified_from(self) -> float:
+        """The gain before a jump that its verification compares the settled product with: the
+        position model in use when it agrees with the last settled product within
+        ``min_deviation`` (the model averages far more increments than one settled product,
+        whose noise made a drift of 8 % look like an offset), else that product."""
+        kd, prod = self._kd_before, self._prod_before
+        return kd if abs(kd - prod) < self._min_dev else prod
 
     def update(
         self, position_m: float, theta_d: float, model: int, guarded: bool, broken: bool, trusted: bool
@@ -161,6 +171,7 @@ class SensorAttribution:
         elif fl.at_rest and abs(theta_d - self._level_ref) > self._min_dev and theta_d >= self._failed_below:
             # a model change with the piston at rest (False while NaN): verified like a jump
             if not pt.sensor_decided and self._level_ref >= self._failed_below:
+                self._prod_from = self._prod_before
                 self._prod_jumped = self._prod_before * theta_d / self._level_ref
                 self._jump_decided = True
             pt.decide_sensor(fl.theta_prod)
@@ -175,7 +186,8 @@ class SensorAttribution:
             if trusted and math.isfinite(j.ratio):  # a ratio to a gain the loop trusted
                 self._left = self._hold
                 self._to = self.jump_gain = self._kd_before * j.ratio
-                self._prod_jumped = self._prod_before * j.ratio
+                self._prod_from = self._verified_from()
+                self._prod_jumped = self._prod_from * j.ratio
                 self._jump_decided = False
         elif fl.product_settled and fl.product_updated:
             self._settled_product(fl.theta_prod)

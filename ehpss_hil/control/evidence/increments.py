@@ -139,6 +139,11 @@ class Increments:
         """The reading jumped on the last sample: the increments spanning it teach no creep."""
         self._since_jump = 0
 
+    def confirms(self, theta: float) -> bool:
+        """θ_prod is settled within ``flow_gain_min_deviation``/2 of ``theta``: the increments
+        say the reading is ``theta`` times the piston's travel at the nominal flow gain."""
+        return self.product_settled and abs(self.theta_prod - theta) < self._half_dev
+
     def product(self, position_m: float, spool_m: float, samples: int = 1, excited: bool = True) -> float:
         """One fresh sample: the position reading and the spool LVDT (m); ``samples``: sensor
         samples since the previous call (the spool taken linear over those not seen), so that

@@ -49,6 +49,8 @@ class IncrementEvidence(Protocol):
 
     def note_jump(self) -> None: ...
 
+    def confirms(self, theta: float) -> bool: ...
+
 
 class PressureEvidence(Protocol):
     """H_D (sensor) against H_Q (flow gain) from the load pressure; the sample clock steps its
