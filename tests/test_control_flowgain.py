@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ehpss_hil.control.evidence.baseline import PressureBaseline
 from ehpss_hil.control.evidence.increments import Increments
 from ehpss_hil.control.evidence.pressure import PressureTest
 from ehpss_hil.control.tuning import ControlTuning
@@ -242,3 +243,23 @@ def test_a_recovery_keeps_what_is_known_of_the_plant_and_power_on_forgets_it() -
     pt.forget_plant()
     pt.reset()
     assert (pt.k_base, pt.k_q, pt.plant_seen, pt.pressure_gain_learned) == (1.0, 1.0, False, False)
+
+
+def test_the_pressure_baseline_is_the_healthy_gain_once_learned_within_its_limits() -> None:
+    """``PressureBaseline``: 1 until ``baseline_min_s`` of samples, then the least-squares gain
+    of P_L on u — clipped to ``baseline_limits``, and 1 inside ``baseline_deadband``; forgotten
+    at power-on."""
+    t = ControlTuning()
+    n_min = round(t.baseline_min_s / TS)
+    rng = np.random.default_rng(11)
+    for true_gain, expect in ((1.3, 1.3), (1.02, 1.0), (3.0, t.baseline_limits[1])):
+        b = PressureBaseline(TS, t)
+        for k in range(n_min + 50):
+            u = 2e4 * rng.standard_normal()
+            b.learn(u, true_gain * u + 1e3 * rng.standard_normal())
+            if k < n_min - 2:
+                assert not b.learned and b.gain == 1.0
+        assert b.learned
+        assert b.gain == pytest.approx(expect, abs=0.01)
+        b.forget()
+        assert not b.learned and b.gain == 1.0

@@ -41,24 +41,19 @@ from ...physics.discretize import zoh
 from ...physics.model import ACC, SPOOL, SPOOL_VEL, VEL, plant_matrices
 from ...physics.params import PlantParams
 from ..tuning import ControlTuning
+from .baseline import PressureBaseline
 
 
 class PressureTest:
     """Decides H_D / H_Q each sample; :attr:`k_q` is 1.0 (H_D) or the estimated product (H_Q).
     The product θ_pos comes from :class:`.Increments`; this class holds the P_L model (stepped by
     the sample clock: :meth:`propagate`, :meth:`mark`, :meth:`rewind`), the evidence window,
-    the healthy baseline and the decision."""
+    the plant's flow gain and the decision; the healthy pressure baseline is a
+    :class:`.PressureBaseline`."""
 
     __slots__ = (
-        "_b_dead",
-        "_b_hi",
-        "_b_lo",
-        "_b_min",
-        "_b_up",
-        "_b_uu",
-        "_b_w",
         "_band",
-        "_bd",
+        "_baseline",
         "_c",
         "_d",
         "_failed_below",
@@ -108,10 +103,7 @@ class PressureTest:
         self._min_evidence = t.flow_gain_min_evidence_s / ts_s
         self._failed_below = t.sensor_failed_below
         self._pa = plant.load_mass_kg / plant.piston_area_m2
-        self._bd = math.exp(-ts_s / t.baseline_window_s)
-        self._b_min = t.baseline_min_s / ts_s
-        self._b_lo, self._b_hi = t.baseline_limits[0], t.baseline_limits[1]
-        self._b_dead = t.baseline_deadband
+        self._baseline = PressureBaseline(ts_s, t)
         self._band = t.pressure_gain_uncertainty
         self._vband = t.velocity_gain_uncertainty
         self._spread = t.product_spread
@@ -131,7 +123,7 @@ class PressureTest:
         #: flow gain, and no later deviation is adopted as its own
         self.plant_seen = False
         self._seen = 0  # excited updates in a row with the averaged product at 1
-        self._b_uu = self._b_up = self._b_w = 0.0
+        self._baseline.forget()
 
     def reset(self) -> None:
         """At rest, hypothesis H_D (k_Q = 1 · k_base), empty window; what is known of the plant
@@ -265,7 +257,7 @@ class PressureTest:
             # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
             # episode is over (the window starts afresh when a deviation appears)
             if healthy and abs(theta_level - kb) < self._min_dev * kb and not self.sensor_decided:
-                self._learn_baseline(theta_l * kb, pressure_pa)
+                self._baseline.learn(theta_l * kb * self._pa * self.s[0], pressure_pa)
             if abs(theta_level - kb) < self._min_dev * kb and (self._w > 0.0 or self.sensor_decided):
                 self._theta_ref = kb
                 self.sensor_decided = False
@@ -321,31 +313,16 @@ class PressureTest:
             self._theta_ref = self._tq
             self.restart()
 
-    def _learn_baseline(self, theta_l: float, pressure_pa: float) -> None:
-        """One healthy sample into the pressure baseline: Σ(k̂_LOE·u)², Σ(k̂_LOE·u)·P_L."""
-        u = theta_l * self._pa * self.s[0]
-        d = self._bd
-        self._b_uu = d * self._b_uu + u * u
-        self._b_up = d * self._b_up + u * pressure_pa
-        self._b_w = d * self._b_w + 1.0
-
     @property
     def pressure_gain_learned(self) -> bool:
         """The plant's pressure gain was learned (``baseline_min_s`` of healthy operation)."""
-        return self._b_w >= self._b_min
+        return self._baseline.learned
 
     @property
     def pressure_gain(self) -> float:
         """The plant's load pressure over the model's, learned while nothing deviated (both
-        hypotheses predict with it): 1 until ``baseline_min_s`` of healthy operation, then
-        the least-squares gain within ``baseline_limits``, where it is off 1 by more than
-        ``baseline_deadband``. A plant whose hydraulic natural
-        frequency or mass is off the model answers the same current with another pressure; a
-        test against the model's own pressure takes that for a flow-gain change."""
-        if self._b_w < self._b_min or self._b_uu <= 0.0:
-            return 1.0
-        g = min(max(self._b_up / self._b_uu, self._b_lo), self._b_hi)
-        return g if abs(g - 1.0) > self._b_dead else 1.0
+        hypotheses predict with it; :class:`.PressureBaseline`)."""
+        return self._baseline.gain
 
     @property
     def sensor_favoured(self) -> bool:
@@ -367,7 +344,7 @@ class PressureTest:
         known only as well as the product: ± ``spread`` (``product_spread`` times its mean step
         between excited increments, the wander the position noise gives it, in pressure-gain
         units)."""
-        band = 0.0 if self._b_w >= self._b_min else self._band
+        band = 0.0 if self._baseline.learned else self._band
         e_d = self._fit(g_d, g_d, band)
         e_q = self._fit(g_q - spread, g_q + spread, band)
         var = min(e_d, e_q) / self._w
