@@ -45,6 +45,10 @@ class SensorSample:
     current_saturated: bool
 
 
+#: :class:`SensorSample`'s fields as a tuple, in its order (:meth:`PlantEmulation.sample`)
+SampleValues = tuple[int, float, float, float, float, float, float, float, FaultState, bool]
+
+
 class _Stream:
     """Seeded random numbers drawn in blocks (cheap per sample, reproducible for any length)."""
 
@@ -193,7 +197,12 @@ class PlantEmulation:
         return y
 
     def measure(self) -> SensorSample:
-        """The sensor sample y[k] (draws this sample's noise; call exactly once per sample).
+        """The sensor sample y[k] (draws this sample's noise; call exactly once per sample)."""
+        return SensorSample(*self.sample())
+
+    def sample(self) -> SampleValues:
+        """:meth:`measure`'s values as a plain tuple, in :class:`SensorSample`'s field order
+        (the lockstep simulator unpacks it every sample: no object built, no attribute read).
 
         The plant's outputs are read in one call (this runs every sample of every simulation)."""
         noise = self._noise  # _SensorNoise.next written out (once a sample)
@@ -213,18 +222,7 @@ class PlantEmulation:
             if self._sensor_dist is not None:
                 pos -= self._sensor_dist.value_m(k * self.ts_s)
             pos += e_pos
-        return SensorSample(
-            k,
-            k * self.ts_s,
-            pos,
-            spool + e_spool,
-            p_l + e_p,
-            echo,
-            x,
-            spool,
-            f,
-            self._saturated,
-        )
+        return (k, k * self.ts_s, pos, spool + e_spool, p_l + e_p, echo, x, spool, f, self._saturated)
 
     def frame_lost(self, direction: int) -> bool:
         """Seeded loss draw for this sample: direction 0 = sensor frames (probability

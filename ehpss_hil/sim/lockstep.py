@@ -13,6 +13,7 @@ seed → bit-identical arrays.
 
 from __future__ import annotations
 
+import gc
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
@@ -144,9 +145,15 @@ def run_scenario(
     y_m = reference_output(prm, ts, x_d)
     rows: list[tuple] = []
     set_truth = getattr(ctrl, "set_truth", None)
-    t0, c0 = time.perf_counter(), time.process_time()
-    _loop(emu, ctrl, tr, x_d.tolist(), scenario.transport_delay_samples, set_truth, rows)
-    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    collecting = gc.isenabled()
+    gc.disable()  # the loop makes no reference cycles: a collection would only rescan the rows
+    try:
+        t0, c0 = time.perf_counter(), time.process_time()
+        _loop(emu, ctrl, tr, x_d.tolist(), scenario.transport_delay_samples, set_truth, rows)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    finally:
+        if collecting:
+            gc.enable()
     res = _result(scenario, mode, ts, x_d, y_m, rows, ctrl.index_slots, wall, tr.counts())
     res.cpu_s = cpu
     return res
@@ -172,43 +179,23 @@ def _loop(
     drv = ControllerDriver(ctrl, x_d.__getitem__)
     queue: deque[float | None] = deque([0.0] * delay)
     held = 0.0
-    measure, losses, advance = emu.measure, emu.frame_losses, emu.advance
+    sample, losses, advance = emu.sample, emu.frame_losses, emu.advance
     sensor, command = tr.sensor, tr.command
     step = drv.step
     probe, index_values, push = ctrl.probe, ctrl.index_values, rows.append
     for k in range(len(x_d)):
-        s = measure()
+        # PlantEmulation.measure's values unpacked (no SensorSample built per sample)
+        _, _, pos, spool, pressure, coil, x_true, _, faults, saturated = sample()
         sensor_lost, command_lost = losses()  # both directions' draws (own streams)
-        fresh = sensor(
-            drv,
-            k,
-            s.position_m,
-            s.spool_m,
-            s.load_pressure_pa,
-            s.coil_current_a,
-            s.current_saturated,
-            sensor_lost,
-        )
+        fresh = sensor(drv, k, pos, spool, pressure, coil, saturated, sensor_lost)
         if set_truth is not None:
-            set_truth(s.faults)
+            set_truth(faults)
         current, enable = step()
         queue.append(command(current if enable else 0.0, k, command_lost))
         arrived = queue.popleft()
         if arrived is not None:
             held = arrived
-        push(
-            (
-                s.true_position_m,
-                s.position_m,
-                s.spool_m,
-                advance(held),
-                probe(),
-                s.faults,
-                fresh,
-                index_values(),
-                ctrl.nominal,
-            )
-        )
+        push((x_true, pos, spool, advance(held), probe(), faults, fresh, index_values(), ctrl.nominal))
 
 
 def _result(
