@@ -167,7 +167,9 @@ class ControllerDriver:
         self.k += 1
         self._fresh = False
         cur, lim = cmd.current_a, self.current_limit_a
-        if not math.isfinite(cur) or abs(cur) > lim:
+        # not finite, or beyond ±lim, tested without calls (every cycle): NaN fails the range,
+        # an infinite current leaves a NaN difference also when the limit is infinite
+        if not -lim <= cur <= lim or cur - cur != 0.0:
             self.saturations += 1
             cur = 0.0 if not math.isfinite(cur) else max(-lim, min(lim, cur))
         return cur, cmd.enable

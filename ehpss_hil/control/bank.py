@@ -32,6 +32,8 @@ class _IndexBase:
         self._a1 = tuning.index_a1
         self._a2 = tuning.index_a2
         self.inv_scale = 1.0 / scale
+        #: (e^{−λTs}, Ts, a1, a2, 1/S): what a sample's scoring reads, in one tuple (one unpack)
+        self._index_consts = (self._decay, ts_s, self._a1, self._a2, self.inv_scale)
         self.mem = [0.0] * n
         self.j = [0.0] * n
         self.w = 0.0
@@ -96,7 +98,7 @@ class ScalarBank(_IndexBase):
         Written out by hand (no per-model calls): this runs twice per cycle in ``mmac``.
         """
         th, mem, jj = self.theta, self.mem, self.j
-        d, ts, a1, a2, s = self._decay, self._ts, self._a1, self._a2, self.inv_scale
+        d, ts, a1, a2, s = self._index_consts
         ys, ps = y * s, phi * s
         i = 0
         for t in th:  # in place, one index counted by hand: faster than enumerate or new lists

@@ -237,7 +237,9 @@ class NonlinearPlant:
         locals only: the simulator's hot path (the valve does not depend on the cylinder, so
         stepping both in one loop is the same arithmetic as the valve's path first)."""
         (v0, v1, vb), (x0, x1, xb) = self._valve
-        k_loe, stop = self.faults.k_loe, self._spool_stop_m
+        stop = self._spool_stop_m
+        below = -stop
+        half_loe = 0.5 * self.faults.k_loe  # 0.5·k_LOE·(…) evaluates as (0.5·k_LOE)·(…): hoisted
         vv, xv = self._vv, self._xv
         kv, lam = self._kv, self._p_lam
         (h, hba, hbb, length, ps, pt, lap, cl2, leak0, aa, ab, ci, bv, fc, vs, ks, fext, stroke, th) = (
@@ -250,9 +252,9 @@ class NonlinearPlant:
         for _ in range(self.substeps):
             xs0 = xv  # the valve over this sub-step, and its mean actual spool xs
             vv, xv = v0 * vv + v1 * xv + vb * u, x0 * vv + x1 * xv + xb * u
-            if xv > stop or xv < -stop:
-                xv, vv = (stop if xv > 0.0 else -stop), 0.0
-            xs = 0.5 * k_loe * (xs0 + xv)
+            if xv > stop or xv < below:
+                xv, vv = (stop if xv > 0.0 else below), 0.0
+            xs = half_loe * (xs0 + xv)
             hea = hba / (length + x)  # h·β_e/V_A
             heb = hbb / (length - x)  # h·β_e/V_B
             tea, teb = 0.5 * hea, 0.5 * heb
