@@ -28,6 +28,26 @@ class MmacController(LoopBase):
     mode = "mmac"
     warmup_tracks_sensor = False
 
+    # the mode's own attributes as slots too (LoopBase); the evidence's bound questions
+    # (_position_guarded, …) shadow LoopBase's methods from the instance dict
+    __slots__ = (
+        "_flow_on",
+        "_inv_s_pos",
+        "_inv_s_spool",
+        "_pressure",
+        "_spool_hold",
+        "_stop_hold",
+        "_was_trusted",
+        "clock",
+        "est",
+        "evidence",
+        "index_slots",
+        "pos_bank",
+        "pos_sup",
+        "spool_bank",
+        "spool_sup",
+    )
+
     def _build(self) -> None:
         t, ts = self.tuning, self.ts_s
         g = per_sample_gain(t.nlms_gain_per_ms, ts)
