@@ -42,6 +42,23 @@ SetpointAdmit = Callable[[bool, float, float], bool]
 class ControllerDriver:
     """Runs one controller one cycle at a time; ``reference(k)`` gives x_d at sample k (m)."""
 
+    __slots__ = (
+        "_counter",
+        "_fresh",
+        "_held",
+        "_observe",
+        "_samples",
+        "_scratch",
+        "caught_up",
+        "controller",
+        "current_limit_a",
+        "k",
+        "meas",
+        "override_m",
+        "reference",
+        "saturations",
+    )
+
     def __init__(
         self, controller: Controller, reference: Callable[[int], float], current_limit_a: float = 1.0
     ) -> None:

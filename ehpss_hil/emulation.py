@@ -52,6 +52,14 @@ SampleValues = tuple[int, float, float, float, float, float, float, float, Fault
 class _Stream:
     """Seeded random numbers drawn in blocks (cheap per sample, reproducible for any length)."""
 
+    __slots__ = (
+        "_buf",
+        "_i",
+        "_kind",
+        "_n",
+        "_rng",
+    )
+
     def __init__(self, seed: int, stream: int, kind: str) -> None:
         self._rng = np.random.default_rng([seed, stream])
         self._kind = kind
@@ -78,6 +86,14 @@ class _SensorNoise:
     normal streams scaled by their standard deviations, one tuple per sample. The streams are
     drawn and scaled a block at a time (the same products as scaling each draw alone)."""
 
+    __slots__ = (
+        "_buf",
+        "_i",
+        "_n",
+        "_sigmas",
+        "_streams",
+    )
+
     def __init__(self, seed: int, sigmas: tuple[float, float, float]) -> None:
         self._streams = [_Stream(seed, i, "normal") for i in range(3)]
         self._sigmas = sigmas
@@ -103,6 +119,28 @@ class PlantEmulation:
     ``plant_params``, the emulator's params.yaml plant (default: ``params.plant``); ``params``
     also gives the PI gains that scale a disturbance entering at the valve.
     """
+
+    __slots__ = (
+        "_due_k",
+        "_loss",
+        "_next_event",
+        "_noise",
+        "_override",
+        "_saturated",
+        "_scheduled",
+        "_sensor_dist",
+        "_sigmas",
+        "_stuck_value_m",
+        "_timeline",
+        "_valve_dist",
+        "_valve_dist_gain_a_per_m",
+        "k",
+        "loss",
+        "params",
+        "plant",
+        "scenario",
+        "ts_s",
+    )
 
     def __init__(self, params: Params, scenario: Scenario, plant_params: PlantParams | None = None) -> None:
         self.params = params

@@ -68,6 +68,21 @@ _new_advance = tuple.__new__
 class SampleClock:
     """Valve model, x̂ and (optionally) the pressure model, advanced once per sensor sample."""
 
+    __slots__ = (
+        "_bridge_margin",
+        "_dead",
+        "_match_a",
+        "_observed",
+        "_wire",
+        "echo",
+        "pressure",
+        "seed",
+        "span",
+        "valve",
+        "xhat",
+        "y_seen",
+    )
+
     def __init__(
         self,
         valve: ValvePredictor,

@@ -141,6 +141,27 @@ class NonlinearPlant:
     stops at the spool stroke), k_Q the orifice coefficient K_v, ``current_limit_a`` the current.
     """
 
+    __slots__ = (
+        "_consts",
+        "_h",
+        "_kv",
+        "_p_lam",
+        "_pa",
+        "_pb",
+        "_spool_stop_m",
+        "_u",
+        "_v",
+        "_valve",
+        "_vv",
+        "_x",
+        "_xv",
+        "faults",
+        "hp",
+        "modelled_faults",
+        "substeps",
+        "ts_s",
+    )
+
     def __init__(self, hp: HydraulicParams, plant: PlantParams, ts_s: float) -> None:
         self.hp = hp
         self.ts_s = ts_s

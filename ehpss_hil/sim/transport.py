@@ -88,6 +88,14 @@ class QuantizeTransport:
     the frames transport's).
     """
 
+    __slots__ = (
+        "_ko",
+        "_ks",
+        "_press",
+        "_press_int",
+        "_sensor_scales",
+    )
+
     def __init__(self, codec: FrameCodec) -> None:
         lin = [
             _linear_scale(codec, "SENSOR_POS", "Position"),
