@@ -226,6 +226,18 @@ class MmacController(LoopBase):
             self.k_dft_hat,
         )
 
+    def sample_record(self) -> tuple[float, ...]:
+        """:meth:`probe` then :meth:`index_values` in one tuple, built at once (every sample of
+        a simulation)."""
+        return (
+            SPOOL_SLOT0 + self.spool_sup.active,
+            POSITION_SLOT0 + self.pos_sup.active,
+            self.k_loe_hat,
+            self.k_dft_hat,
+            *self.spool_bank.j,
+            *self.pos_bank.j,
+        )
+
     def switch_count(self) -> int:
         """Switches of both channels."""
         return self.spool_sup.switches + self.pos_sup.switches

@@ -173,8 +173,8 @@ def _loop(
     the decoded sensor frames: sample k's frames carry the E2E counter k mod 16, a lost sample
     is a cycle without data.
 
-    One row per sample: (x_true, y_s, spool, applied current, probe, faults, fresh, J list,
-    nominal fallback).
+    One row per sample: (x_true, y_s, spool, applied current, faults, fresh, nominal fallback,
+    the controller's record: its probe then its J values).
     """
     drv = ControllerDriver(ctrl, x_d.__getitem__)
     queue: deque[float | None] = deque([0.0] * delay)
@@ -182,7 +182,7 @@ def _loop(
     sample, losses, advance = emu.sample, emu.frame_losses, emu.advance
     sensor, command = tr.sensor, tr.command
     step = drv.step
-    probe, index_values, push = ctrl.probe, ctrl.index_values, rows.append
+    record, push = ctrl.sample_record, rows.append
     for k in range(len(x_d)):
         # PlantEmulation.measure's values unpacked (no SensorSample built per sample)
         _, _, pos, spool, pressure, coil, x_true, _, faults, saturated = sample()
@@ -195,7 +195,7 @@ def _loop(
         arrived = queue.popleft()
         if arrived is not None:
             held = arrived
-        push((x_true, pos, spool, advance(held), probe(), faults, fresh, index_values(), ctrl.nominal))
+        push((x_true, pos, spool, advance(held), faults, fresh, ctrl.nominal, record()))
 
 
 def _result(
@@ -210,11 +210,12 @@ def _result(
     counts: dict[str, int],
 ) -> SimResult:
     n = len(x_d)
-    x, ys, sp, cur, probes, faults, fresh, jrows, nominal = zip(*rows, strict=True)
+    x, ys, sp, cur, faults, fresh, nominal, records = zip(*rows, strict=True)
+    rec = _flat(records, n, 4 + len(slots))  # the probe's 4 columns, then J per slot
     index = np.full((n, N_SLOTS), np.nan)
     if slots:
-        index[:, list(slots)] = _flat(jrows, n, len(slots))
-    pr = _flat(probes, n, 4)
+        index[:, list(slots)] = rec[:, 4:]
+    pr = rec[:, :4]
     tf = _flat(_true_faults(faults), n, 3)
     f = np.asarray
     return SimResult(
