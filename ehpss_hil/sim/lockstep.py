@@ -1,8 +1,9 @@
 """The lockstep simulator: plant emulation, frame layer and controller stepped sample by sample.
 
-Per sample k (Ts): ``emu.measure()`` → sensor frames (quantized, or real bytes with E2E; lost with
-the scenario's sensor-direction probability, drawn by :meth:`PlantEmulation.frame_lost` as in the
-emulator process: then the controller gets ``Measurement(fresh=False)`` with the last values) →
+Per sample k (Ts): ``emu.sample()`` (``measure()``'s values as a tuple) → sensor frames
+(quantized, or real bytes with E2E; lost with the scenario's sensor-direction probability,
+drawn by :meth:`PlantEmulation.frame_losses` as in the emulator process: then the controller
+gets ``Measurement(fresh=False)`` with the last values) →
 ``controller.step`` → VALVE_CMD (quantized the same way; lost with the command-direction
 probability, which makes the plant hold the last command it received) → transport delay d: the
 command computed from y[k] is applied over [k+d, k+d+1) (the first d intervals get 0 A) →
