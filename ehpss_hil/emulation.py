@@ -240,7 +240,9 @@ class PlantEmulation:
 
     def sample(self) -> SampleValues:
         """:meth:`measure`'s values as a plain tuple, in :class:`SensorSample`'s field order
-        (the lockstep simulator unpacks it every sample: no object built, no attribute read).
+        (the lockstep simulator unpacks it every sample: no object built, no attribute read). A
+        subclass that rewrites :meth:`measure` (firmware-sim's miswired emulation) rewrites
+        only what :meth:`measure` returns.
 
         The plant's outputs are read in one call (this runs every sample of every simulation)."""
         noise = self._noise  # _SensorNoise.next written out (once a sample)
