@@ -117,7 +117,7 @@ class MmacController(LoopBase):
             td = est.theta_d  # _bridge_gain(): θ̂_D when the sensor may place x̂, else None
             trusted = not ps.guarded and td >= failed_below and not self.sensor_held_off
             seeding = clock.seed
-            gap, resync, v, xh = clock.sample(meas, tl_prev, td if trusted and not pt.flow_fault else None)
+            gap, resync, v, xh = clock.tick(meas, tl_prev, td if trusted and not pt.flow_fault else None)
             if seeding:
                 est.seed(meas.position_m)
             if gap:
