@@ -42,6 +42,23 @@ SetpointAdmit = Callable[[bool, float, float], bool]
 class ControllerDriver:
     """Runs one controller one cycle at a time; ``reference(k)`` gives x_d at sample k (m)."""
 
+    __slots__ = (
+        "_counter",
+        "_fresh",
+        "_held",
+        "_observe",
+        "_samples",
+        "_scratch",
+        "caught_up",
+        "controller",
+        "current_limit_a",
+        "k",
+        "meas",
+        "override_m",
+        "reference",
+        "saturations",
+    )
+
     def __init__(
         self, controller: Controller, reference: Callable[[int], float], current_limit_a: float = 1.0
     ) -> None:
@@ -167,7 +184,9 @@ class ControllerDriver:
         self.k += 1
         self._fresh = False
         cur, lim = cmd.current_a, self.current_limit_a
-        if not math.isfinite(cur) or abs(cur) > lim:
+        # not finite, or beyond ±lim, tested without calls (every cycle): NaN fails the range,
+        # an infinite current leaves a NaN difference also when the limit is infinite
+        if not -lim <= cur <= lim or cur - cur != 0.0:
             self.saturations += 1
             cur = 0.0 if not math.isfinite(cur) else max(-lim, min(lim, cur))
         return cur, cmd.enable

@@ -45,8 +45,20 @@ class SensorSample:
     current_saturated: bool
 
 
+#: :class:`SensorSample`'s fields as a tuple, in its order (:meth:`PlantEmulation.sample`)
+SampleValues = tuple[int, float, float, float, float, float, float, float, FaultState, bool]
+
+
 class _Stream:
     """Seeded random numbers drawn in blocks (cheap per sample, reproducible for any length)."""
+
+    __slots__ = (
+        "_buf",
+        "_i",
+        "_kind",
+        "_n",
+        "_rng",
+    )
 
     def __init__(self, seed: int, stream: int, kind: str) -> None:
         self._rng = np.random.default_rng([seed, stream])
@@ -74,6 +86,14 @@ class _SensorNoise:
     normal streams scaled by their standard deviations, one tuple per sample. The streams are
     drawn and scaled a block at a time (the same products as scaling each draw alone)."""
 
+    __slots__ = (
+        "_buf",
+        "_i",
+        "_n",
+        "_sigmas",
+        "_streams",
+    )
+
     def __init__(self, seed: int, sigmas: tuple[float, float, float]) -> None:
         self._streams = [_Stream(seed, i, "normal") for i in range(3)]
         self._sigmas = sigmas
@@ -99,6 +119,28 @@ class PlantEmulation:
     ``plant_params``, the emulator's params.yaml plant (default: ``params.plant``); ``params``
     also gives the PI gains that scale a disturbance entering at the valve.
     """
+
+    __slots__ = (
+        "_due_k",
+        "_loss",
+        "_next_event",
+        "_noise",
+        "_override",
+        "_saturated",
+        "_scheduled",
+        "_sensor_dist",
+        "_sigmas",
+        "_stuck_value_m",
+        "_timeline",
+        "_valve_dist",
+        "_valve_dist_gain_a_per_m",
+        "k",
+        "loss",
+        "params",
+        "plant",
+        "scenario",
+        "ts_s",
+    )
 
     def __init__(self, params: Params, scenario: Scenario, plant_params: PlantParams | None = None) -> None:
         self.params = params
@@ -193,7 +235,14 @@ class PlantEmulation:
         return y
 
     def measure(self) -> SensorSample:
-        """The sensor sample y[k] (draws this sample's noise; call exactly once per sample).
+        """The sensor sample y[k] (draws this sample's noise; call exactly once per sample)."""
+        return SensorSample(*self.sample())
+
+    def sample(self) -> SampleValues:
+        """:meth:`measure`'s values as a plain tuple, in :class:`SensorSample`'s field order
+        (the lockstep simulator unpacks it every sample: no object built, no attribute read). A
+        subclass that rewrites :meth:`measure` (firmware-sim's miswired emulation) rewrites
+        only what :meth:`measure` returns.
 
         The plant's outputs are read in one call (this runs every sample of every simulation)."""
         noise = self._noise  # _SensorNoise.next written out (once a sample)
@@ -213,18 +262,7 @@ class PlantEmulation:
             if self._sensor_dist is not None:
                 pos -= self._sensor_dist.value_m(k * self.ts_s)
             pos += e_pos
-        return SensorSample(
-            k,
-            k * self.ts_s,
-            pos,
-            spool + e_spool,
-            p_l + e_p,
-            echo,
-            x,
-            spool,
-            f,
-            self._saturated,
-        )
+        return (k, k * self.ts_s, pos, spool + e_spool, p_l + e_p, echo, x, spool, f, self._saturated)
 
     def frame_lost(self, direction: int) -> bool:
         """Seeded loss draw for this sample: direction 0 = sensor frames (probability

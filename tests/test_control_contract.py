@@ -38,6 +38,21 @@ def test_every_registered_mode_is_a_controller_and_runs(mode: str) -> None:
     assert ctrl.step(meas).current_a == pytest.approx(cmd.current_a, rel=1e-12)  # reset: as new
 
 
+@pytest.mark.parametrize("mode", MODES)
+def test_the_sample_record_is_the_probe_then_the_index(mode: str) -> None:
+    """What the simulator records per sample (``sample_record``, mmac builds its own) is the
+    probe then J of every slot, as the two probes give them, also after the models moved."""
+    ctrl = make_controller(mode, PARAMS, TS_S)
+    for k in range(300):
+        x = 2e-4 * (1.0 - 0.99**k)
+        ctrl.step(Measurement(position_m=x, spool_m=1e-5 * 0.99**k, reference_m=5e-4, samples=1))
+    rec = ctrl.sample_record()
+    assert rec == (*ctrl.probe(), *ctrl.index_values())
+    assert len(rec) == 4 + len(ctrl.index_slots)
+    if mode == "mmac":  # the mode that builds it itself: every model scored
+        assert all(v > 0.0 for v in rec[4:])
+
+
 def test_an_unknown_mode_is_one_model_error() -> None:
     with pytest.raises(ModelError, match="unknown controller mode 'pid'; choose one of nrc, smac"):
         make_controller("pid", PARAMS, TS_S)

@@ -28,6 +28,26 @@ class MmacController(LoopBase):
     mode = "mmac"
     warmup_tracks_sensor = False
 
+    # the mode's own attributes as slots too (LoopBase); the evidence's bound questions
+    # (_position_guarded, …) shadow LoopBase's methods from the instance dict
+    __slots__ = (
+        "_flow_on",
+        "_inv_s_pos",
+        "_inv_s_spool",
+        "_pressure",
+        "_spool_hold",
+        "_stop_hold",
+        "_was_trusted",
+        "clock",
+        "est",
+        "evidence",
+        "index_slots",
+        "pos_bank",
+        "pos_sup",
+        "spool_bank",
+        "spool_sup",
+    )
+
     def _build(self) -> None:
         t, ts = self.tuning, self.ts_s
         g = per_sample_gain(t.nlms_gain_per_ms, ts)
@@ -97,7 +117,7 @@ class MmacController(LoopBase):
             td = est.theta_d  # _bridge_gain(): θ̂_D when the sensor may place x̂, else None
             trusted = not ps.guarded and td >= failed_below and not self.sensor_held_off
             seeding = clock.seed
-            gap, resync, v, xh = clock.sample(meas, tl_prev, td if trusted and not pt.flow_fault else None)
+            gap, resync, v, xh = clock.tick(meas, tl_prev, td if trusted and not pt.flow_fault else None)
             if seeding:
                 est.seed(meas.position_m)
             if gap:
@@ -209,6 +229,18 @@ class MmacController(LoopBase):
             POSITION_SLOT0 + self.pos_sup.active,
             self.k_loe_hat,
             self.k_dft_hat,
+        )
+
+    def sample_record(self) -> tuple[float, ...]:
+        """:meth:`probe` then :meth:`index_values` in one tuple, built at once (every sample of
+        a simulation)."""
+        return (
+            SPOOL_SLOT0 + self.spool_sup.active,
+            POSITION_SLOT0 + self.pos_sup.active,
+            self.k_loe_hat,
+            self.k_dft_hat,
+            *self.spool_bank.j,
+            *self.pos_bank.j,
         )
 
     def switch_count(self) -> int:

@@ -22,6 +22,22 @@ from .tuning import ControlTuning
 class _IndexBase:
     """Shared index state: per-model I_k and J_k lists, the window weight w."""
 
+    __slots__ = (
+        "_a1",
+        "_a2",
+        "_decay",
+        "_index_consts",
+        "_ts",
+        "fra",
+        "inv_scale",
+        "j",
+        "mem",
+        "n",
+        "n_fixed",
+        "ria",
+        "w",
+    )
+
     def __init__(self, n: int, n_fixed: int, tuning: ControlTuning, ts_s: float, scale: float) -> None:
         self.n = n
         self.n_fixed = n_fixed
@@ -32,6 +48,8 @@ class _IndexBase:
         self._a1 = tuning.index_a1
         self._a2 = tuning.index_a2
         self.inv_scale = 1.0 / scale
+        #: (e^{−λTs}, Ts, a1, a2, 1/S): what a sample's scoring reads, in one tuple (one unpack)
+        self._index_consts = (self._decay, ts_s, self._a1, self._a2, self.inv_scale)
         self.mem = [0.0] * n
         self.j = [0.0] * n
         self.w = 0.0
@@ -59,6 +77,15 @@ class _IndexBase:
 
 class ScalarBank(_IndexBase):
     """One channel ``y = θ·φ``: fixed θ values, then FRA, then RIA (NLMS from the nominal 1.0)."""
+
+    __slots__ = (
+        "_adapt_floor",
+        "_nlms",
+        "fixed",
+        "fra_est",
+        "ria_est",
+        "theta",
+    )
 
     def __init__(
         self,
@@ -96,7 +123,7 @@ class ScalarBank(_IndexBase):
         Written out by hand (no per-model calls): this runs twice per cycle in ``mmac``.
         """
         th, mem, jj = self.theta, self.mem, self.j
-        d, ts, a1, a2, s = self._decay, self._ts, self._a1, self._a2, self.inv_scale
+        d, ts, a1, a2, s = self._index_consts
         ys, ps = y * s, phi * s
         i = 0
         for t in th:  # in place, one index counted by hand: faster than enumerate or new lists
@@ -148,6 +175,14 @@ class JointBank(_IndexBase):
     The adaptive models adapt the actuator factor θ_L (NLMS on the regressor θ_D·φ) with their
     θ_D held: 1 for the FRA, the θ_D of the fixed model the RIA was last reinitialized to.
     """
+
+    __slots__ = (
+        "_ria_d",
+        "fixed",
+        "fra_est",
+        "pairs",
+        "ria_est",
+    )
 
     def __init__(
         self,

@@ -176,6 +176,11 @@ class Controller(ABC):
         """θ of every model in :attr:`index_slots` order. Default: none."""
         return []
 
+    def sample_record(self) -> tuple[float, ...]:
+        """:meth:`probe` then :meth:`index_values`, flat in one tuple: what the lockstep
+        simulator records every sample (a mode may build it in one step)."""
+        return (*self.probe(), *self.index_values())
+
     def switch_count(self) -> int:
         """Total model switches since reset. Default: 0."""
         return 0

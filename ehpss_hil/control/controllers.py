@@ -52,6 +52,50 @@ class LoopBase(Controller):
     #: ``mmac`` seeds x̂ once and identifies the sensor gain from the start instead
     warmup_tracks_sensor = True
 
+    # every attribute a slot: the cycle reads them all the time, and an instance dict of more
+    # than 30 keys is not shared (its reads take the interpreter's slower path). A mode adds
+    # its own in its __slots__; anything else (the ABC has none) lands in the instance dict.
+    __slots__ = (
+        "_applied_dft",
+        "_applied_loe",
+        "_blend",
+        "_blend_step",
+        "_cmd",
+        "_echo",
+        "_echo_short_a",
+        "_failed_below",
+        "_held_offset",
+        "_ramp_d",
+        "_ramp_l",
+        "_ramp_n",
+        "_return_gap_m",
+        "_sent",
+        "_sent_prev",
+        "_stop_level_m",
+        "_warm_left",
+        "_warm_samples",
+        "_y_s",
+        "k_dft_hat",
+        "k_f",
+        "k_loe_hat",
+        "k_q_hat",
+        "min_theta_l",
+        "nominal",
+        "params",
+        "pi",
+        "position_nominal",
+        "reference",
+        "scale_pos_m",
+        "scale_spool_m",
+        "sensor_held_off",
+        "sensor_trusted",
+        "stroke_m",
+        "ts_s",
+        "tuning",
+        "valve",
+        "xhat",
+    )
+
     def __init__(self, tuning: ControlTuning, reference: NominalMotion | None) -> None:
         self.tuning = tuning
         self.reference: NominalMotion = reference if reference is not None else PaperMotion()

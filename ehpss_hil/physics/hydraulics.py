@@ -141,6 +141,27 @@ class NonlinearPlant:
     stops at the spool stroke), k_Q the orifice coefficient K_v, ``current_limit_a`` the current.
     """
 
+    __slots__ = (
+        "_consts",
+        "_h",
+        "_kv",
+        "_p_lam",
+        "_pa",
+        "_pb",
+        "_spool_stop_m",
+        "_u",
+        "_v",
+        "_valve",
+        "_vv",
+        "_x",
+        "_xv",
+        "faults",
+        "hp",
+        "modelled_faults",
+        "substeps",
+        "ts_s",
+    )
+
     def __init__(self, hp: HydraulicParams, plant: PlantParams, ts_s: float) -> None:
         self.hp = hp
         self.ts_s = ts_s
@@ -237,7 +258,9 @@ class NonlinearPlant:
         locals only: the simulator's hot path (the valve does not depend on the cylinder, so
         stepping both in one loop is the same arithmetic as the valve's path first)."""
         (v0, v1, vb), (x0, x1, xb) = self._valve
-        k_loe, stop = self.faults.k_loe, self._spool_stop_m
+        stop = self._spool_stop_m
+        below = -stop
+        half_loe = 0.5 * self.faults.k_loe  # 0.5·k_LOE·(…) evaluates as (0.5·k_LOE)·(…): hoisted
         vv, xv = self._vv, self._xv
         kv, lam = self._kv, self._p_lam
         (h, hba, hbb, length, ps, pt, lap, cl2, leak0, aa, ab, ci, bv, fc, vs, ks, fext, stroke, th) = (
@@ -250,9 +273,9 @@ class NonlinearPlant:
         for _ in range(self.substeps):
             xs0 = xv  # the valve over this sub-step, and its mean actual spool xs
             vv, xv = v0 * vv + v1 * xv + vb * u, x0 * vv + x1 * xv + xb * u
-            if xv > stop or xv < -stop:
-                xv, vv = (stop if xv > 0.0 else -stop), 0.0
-            xs = 0.5 * k_loe * (xs0 + xv)
+            if xv > stop or xv < below:
+                xv, vv = (stop if xv > 0.0 else below), 0.0
+            xs = half_loe * (xs0 + xv)
             hea = hba / (length + x)  # h·β_e/V_A
             heb = hbb / (length - x)  # h·β_e/V_B
             tea, teb = 0.5 * hea, 0.5 * heb

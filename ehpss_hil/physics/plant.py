@@ -82,6 +82,23 @@ class LinearPlant:
     out on Python floats (about half the cost of a numpy matvec of this size).
     """
 
+    __slots__ = (
+        "_c",
+        "_key",
+        "_p_per_acc",
+        "_rows_stop",
+        "_s",
+        "_stop_m",
+        "_stroke_m",
+        "_u",
+        "_zoh",
+        "_zoh_stop",
+        "faults",
+        "modelled_faults",
+        "plant_params",
+        "ts_s",
+    )
+
     def __init__(self, plant: PlantParams, ts_s: float) -> None:
         self.plant_params = plant
         self.ts_s = ts_s

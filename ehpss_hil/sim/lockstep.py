@@ -1,8 +1,9 @@
 """The lockstep simulator: plant emulation, frame layer and controller stepped sample by sample.
 
-Per sample k (Ts): ``emu.measure()`` → sensor frames (quantized, or real bytes with E2E; lost with
-the scenario's sensor-direction probability, drawn by :meth:`PlantEmulation.frame_lost` as in the
-emulator process: then the controller gets ``Measurement(fresh=False)`` with the last values) →
+Per sample k (Ts): ``emu.sample()`` (``measure()``'s values as a tuple) → sensor frames
+(quantized, or real bytes with E2E; lost with the scenario's sensor-direction probability,
+drawn by :meth:`PlantEmulation.frame_losses` as in the emulator process: then the controller
+gets ``Measurement(fresh=False)`` with the last values) →
 ``controller.step`` → VALVE_CMD (quantized the same way; lost with the command-direction
 probability, which makes the plant hold the last command it received) → transport delay d: the
 command computed from y[k] is applied over [k+d, k+d+1) (the first d intervals get 0 A) →
@@ -13,6 +14,7 @@ seed → bit-identical arrays.
 
 from __future__ import annotations
 
+import gc
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
@@ -144,9 +146,15 @@ def run_scenario(
     y_m = reference_output(prm, ts, x_d)
     rows: list[tuple] = []
     set_truth = getattr(ctrl, "set_truth", None)
-    t0, c0 = time.perf_counter(), time.process_time()
-    _loop(emu, ctrl, tr, x_d.tolist(), scenario.transport_delay_samples, set_truth, rows)
-    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    collecting = gc.isenabled()
+    gc.disable()  # the loop makes no reference cycles: a collection would only rescan the rows
+    try:
+        t0, c0 = time.perf_counter(), time.process_time()
+        _loop(emu, ctrl, tr, x_d.tolist(), scenario.transport_delay_samples, set_truth, rows)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    finally:
+        if collecting:
+            gc.enable()
     res = _result(scenario, mode, ts, x_d, y_m, rows, ctrl.index_slots, wall, tr.counts())
     res.cpu_s = cpu
     return res
@@ -166,49 +174,29 @@ def _loop(
     the decoded sensor frames: sample k's frames carry the E2E counter k mod 16, a lost sample
     is a cycle without data.
 
-    One row per sample: (x_true, y_s, spool, applied current, probe, faults, fresh, J list,
-    nominal fallback).
+    One row per sample: (x_true, y_s, spool, applied current, faults, fresh, nominal fallback,
+    the controller's record: its probe then its J values).
     """
     drv = ControllerDriver(ctrl, x_d.__getitem__)
     queue: deque[float | None] = deque([0.0] * delay)
     held = 0.0
-    measure, losses, advance = emu.measure, emu.frame_losses, emu.advance
+    sample, losses, advance = emu.sample, emu.frame_losses, emu.advance
     sensor, command = tr.sensor, tr.command
     step = drv.step
-    probe, index_values, push = ctrl.probe, ctrl.index_values, rows.append
+    record, push = ctrl.sample_record, rows.append
     for k in range(len(x_d)):
-        s = measure()
+        # PlantEmulation.measure's values unpacked (no SensorSample built per sample)
+        _, _, pos, spool, pressure, coil, x_true, _, faults, saturated = sample()
         sensor_lost, command_lost = losses()  # both directions' draws (own streams)
-        fresh = sensor(
-            drv,
-            k,
-            s.position_m,
-            s.spool_m,
-            s.load_pressure_pa,
-            s.coil_current_a,
-            s.current_saturated,
-            sensor_lost,
-        )
+        fresh = sensor(drv, k, pos, spool, pressure, coil, saturated, sensor_lost)
         if set_truth is not None:
-            set_truth(s.faults)
+            set_truth(faults)
         current, enable = step()
         queue.append(command(current if enable else 0.0, k, command_lost))
         arrived = queue.popleft()
         if arrived is not None:
             held = arrived
-        push(
-            (
-                s.true_position_m,
-                s.position_m,
-                s.spool_m,
-                advance(held),
-                probe(),
-                s.faults,
-                fresh,
-                index_values(),
-                ctrl.nominal,
-            )
-        )
+        push((x_true, pos, spool, advance(held), faults, fresh, ctrl.nominal, record()))
 
 
 def _result(
@@ -223,11 +211,12 @@ def _result(
     counts: dict[str, int],
 ) -> SimResult:
     n = len(x_d)
-    x, ys, sp, cur, probes, faults, fresh, jrows, nominal = zip(*rows, strict=True)
+    x, ys, sp, cur, faults, fresh, nominal, records = zip(*rows, strict=True)
+    rec = _flat(records, n, 4 + len(slots))  # the probe's 4 columns, then J per slot
     index = np.full((n, N_SLOTS), np.nan)
     if slots:
-        index[:, list(slots)] = _flat(jrows, n, len(slots))
-    pr = _flat(probes, n, 4)
+        index[:, list(slots)] = rec[:, 4:]
+    pr = rec[:, :4]
     tf = _flat(_true_faults(faults), n, 3)
     f = np.asarray
     return SimResult(

@@ -88,6 +88,14 @@ class QuantizeTransport:
     the frames transport's).
     """
 
+    __slots__ = (
+        "_ko",
+        "_ks",
+        "_press",
+        "_press_int",
+        "_sensor_scales",
+    )
+
     def __init__(self, codec: FrameCodec) -> None:
         lin = [
             _linear_scale(codec, "SENSOR_POS", "Position"),
@@ -97,7 +105,9 @@ class QuantizeTransport:
         ]
         if any(x is None for x in lin):
             raise TypeError("position/spool/current signals must use a linear integer scaling")
-        (self._ps, self._po), (self._ss, self._so), (self._cs, self._co), (self._ks, self._ko) = lin  # type: ignore[misc]
+        (ps, po), (ss, so), (cs, co), (self._ks, self._ko) = lin  # type: ignore[misc]
+        #: the sensor signals' (scale, offset): position, spool, coil current (one unpack a sample)
+        self._sensor_scales = (ps, po, ss, so, cs, co)
         self._press = _quantizer(codec, "SENSOR_AUX", "LoadPressure")
         #: the load pressure's integer (scale, offset) when written out inline, else None
         self._press_int = _integer_scale(codec, "SENSOR_AUX", "LoadPressure")
@@ -120,7 +130,7 @@ class QuantizeTransport:
         pos = -0.5 if pos < -0.5 else 0.5 if pos > 0.5 else pos
         spool = -0.01 if spool < -0.01 else 0.01 if spool > 0.01 else spool
         coil = -1.0 if coil < -1.0 else 1.0 if coil > 1.0 else coil
-        ps, po, ss, so, cs, co = self._ps, self._po, self._ss, self._so, self._cs, self._co
+        ps, po, ss, so, cs, co = self._sensor_scales
         pressure = -4e7 if pressure < -4e7 else 4e7 if pressure > 4e7 else pressure
         if self._press_int is None:
             p_q = self._press(pressure)

@@ -86,6 +86,42 @@ class Attribution:
 class EvidenceLayer:
     """The pieces of evidence of one mmac controller, composed (see the module)."""
 
+    # one slot per attribute: read on every fresh sample (an instance dict of more than 30 keys
+    # is not shared, and its reads take the interpreter's slower path)
+    __slots__ = (
+        "_alive",
+        "_baseline_settle",
+        "_creep_on",
+        "_dead_evidence",
+        "_failed_below",
+        "_flow_hold",
+        "_flow_spool_model",
+        "_follows",
+        "_hyp",
+        "_in_flow",
+        "_lim_d_hi",
+        "_lim_l_lo",
+        "_moving_samples",
+        "_on",
+        "_ramp_n",
+        "_spool_age",
+        "_spool_age_model",
+        "_stop_hold",
+        "attribution",
+        "clock",
+        "dead",
+        "est",
+        "inc",
+        "monitor",
+        "pos_bank",
+        "pos_sup",
+        "pressure",
+        "record",
+        "spool_bank",
+        "spool_sup",
+        "still",
+    )
+
     def __init__(
         self,
         plant: PlantParams,
