@@ -59,23 +59,14 @@ def _rms_with_restart(sc: Scenario, restart_s: float | None) -> float:
     for k in range(len(x_d)):
         if k == k_reset:
             ctrl.reset()
-        s = emu.measure()
+        _, _, pos, spool, pressure, coil, x_true, _, _, saturated = emu.sample()
         lost_sensor, lost_command = emu.frame_losses()
-        tr.sensor(
-            drv,
-            k,
-            s.position_m,
-            s.spool_m,
-            s.load_pressure_pa,
-            s.coil_current_a,
-            s.current_saturated,
-            lost_sensor,
-        )
+        tr.sensor(drv, k, pos, spool, pressure, coil, saturated, lost_sensor)
         current, enable = drv.step()
         queue.append(tr.command(current if enable else 0.0, k, lost_command))
         arrived = queue.popleft()
         held = held if arrived is None else arrived
-        err.append(s.true_position_m - y_m[k])
+        err.append(x_true - y_m[k])
         emu.advance(held)
     return float(np.sqrt(np.mean(np.square(err))))
 
