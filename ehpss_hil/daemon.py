@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -63,6 +64,8 @@ class DaemonArgs:
     log_format: str | None = None
     duration_s: float | None = None
     lockstep: bool = False
+    #: lockstep: end after this long without frames (s; None: ``LoopOptions``' default)
+    lockstep_idle_s: float | None = None
     summary_json: Path | None = None
     controller_factory: str | None = None
     sensor_age_us: float | None = None
@@ -91,6 +94,8 @@ def resolve_config(a: DaemonArgs) -> ControllerConfig:
         raise ConfigError(src, "mode (--mode)", f"expected one of {', '.join(DAEMON_MODES)}")
     if a.duration_s is not None and a.duration_s <= 0.0:
         raise ConfigError(src, "--duration", "must be > 0 s")
+    if a.lockstep_idle_s is not None and not 0.0 < a.lockstep_idle_s < math.inf:
+        raise ConfigError(src, "--lockstep-idle", "must be a finite number of seconds > 0")
     return replace(cfg, bus=bus, rate_hz=rate, mode=mode, rt=rt)  # type: ignore[arg-type]
 
 
@@ -214,7 +219,10 @@ def run_daemon(a: DaemonArgs) -> int:
     try:
         if cfg.protocol == "cia408":
             session, master = _cia408_master(bus, codec, cfg)
-        loop = ControllerLoop(controller, io, cfg.reference, loop_options(cfg, a.sensor_age_us), master)
+        opts = loop_options(cfg, a.sensor_age_us)
+        if a.lockstep_idle_s is not None:
+            opts = replace(opts, lockstep_idle_s=a.lockstep_idle_s)
+        loop = ControllerLoop(controller, io, cfg.reference, opts, master)
     except BaseException:
         io.close()
         bus.shutdown()

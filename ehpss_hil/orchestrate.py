@@ -41,6 +41,11 @@ from .schema import load_yaml
 
 CONTROLLER_YAML = PROJECT_ROOT / "configs" / "controller.yaml"
 EMULATOR_YAML = PROJECT_ROOT / "configs" / "emulator.yaml"
+#: lockstep: how long each process waits for the other (s) — the emulator for a VALVE_CMD
+#: (``--lockstep-timeout``), the controller for the next sensor frames (``--lockstep-idle``). A
+#: loaded host (a TCG VM) can hold one of them back for seconds; the run itself stops the
+#: controller once the emulator has finished
+LOCKSTEP_PATIENCE_S = 60.0
 
 
 @dataclass(frozen=True)
@@ -216,7 +221,7 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
             str(out / "controller.log"),
             "--summary-json",
             str(out / "controller-summary.json"),
-            *(["--lockstep"] if plan.lockstep else []),
+            *(["--lockstep", "--lockstep-idle", f"{LOCKSTEP_PATIENCE_S:g}"] if plan.lockstep else []),
             *plan.extra_controller_args,
         ],
         "emulator": [
@@ -231,7 +236,7 @@ def _commands(plan: RunPlan, sc: Scenario, out: Path) -> dict[str, list[str]]:
             str(out / "emulator-summary.json"),
             "--duration",
             repr(sc.duration_s),
-            *(["--lockstep-timeout", "60"] if plan.lockstep else []),
+            *(["--lockstep-timeout", f"{LOCKSTEP_PATIENCE_S:g}"] if plan.lockstep else []),
             *plan.extra_emulator_args,
         ],
     }

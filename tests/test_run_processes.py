@@ -5,7 +5,11 @@ drift meets a bound that the unreconfigured loop misses by far. No timing is ass
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import signal
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -117,3 +121,56 @@ def test_a_run_stopped_before_the_scenario_ends_fails_naming_it(tmp_path: Path) 
     assert res.unfinished_after_s == 1.0
     with pytest.raises(ProcessFailedError, match="had not finished the scenario after 1 s"):
         check_exit_codes(res)
+
+
+def _pause_the_emulator(out: Path, seconds: float, done: threading.Event, paused: list[int]) -> None:
+    """SIGSTOP the run's emulator (found by its log path in /proc) once it has sent frames,
+    for ``seconds``, then SIGCONT it: a loaded host holding the process back. Its pid goes to
+    ``paused``."""
+    log = str(out / "emulator.log")
+    deadline = time.monotonic() + STARTUP_LIMIT_S
+    while time.monotonic() < deadline and not done.is_set():
+        for d in Path("/proc").iterdir():
+            try:
+                cmd = (d / "cmdline").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            started = (out / "emulator.log").exists() and (out / "emulator.log").stat().st_size > 0
+            if b"firmware_sim.cli" in cmd and log.encode() in cmd and started:
+                pid = int(d.name)
+                os.kill(pid, signal.SIGSTOP)
+                time.sleep(seconds)
+                os.kill(pid, signal.SIGCONT)
+                paused.append(pid)
+                return
+        time.sleep(0.01)
+
+
+def test_a_lockstep_run_survives_an_emulator_held_back_for_seconds(scenario: Path, tmp_path: Path) -> None:
+    """The emulator stopped for 3 s mid-run (SIGSTOP): the controller waits for its next sensor
+    frames as long as the emulator waits for a command (``LOCKSTEP_PATIENCE_S``). It used to end
+    after 2 s of silence (exit 0), and the emulator then gave up waiting for the command of its
+    next sample (exit 1: a CI run in two loaded VMs at once)."""
+    out = tmp_path / "held"
+    done = threading.Event()
+    paused: list[int] = []
+    pauser = threading.Thread(target=_pause_the_emulator, args=(out, 3.0, done, paused))
+    pauser.start()
+    try:
+        res = execute(
+            RunPlan(
+                scenario_path=scenario,
+                mode="nrc",
+                out_dir=out,
+                lockstep=True,
+                finish_timeout_s=STARTUP_LIMIT_S,
+                startup_timeout_s=STARTUP_LIMIT_S,
+            )
+        )
+    finally:
+        done.set()
+        pauser.join()
+    assert paused, "the emulator was never held back"
+    check_exit_codes(res)
+    sc = load_scenario(scenario)
+    assert len(load_log_run(out / "bus.log").commanded_current_a) >= sc.n_samples

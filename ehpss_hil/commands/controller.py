@@ -10,6 +10,7 @@ from pathlib import Path
 from ..canlog.formats import add_process_log_arguments
 from ..control.registry import DAEMON_MODES
 from ..daemon import DaemonArgs, run_daemon
+from ..runtime.loop_options import LoopOptions
 
 NAME = "controller"
 
@@ -30,6 +31,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--lockstep",
         action="store_true",
         help="answer each received sensor pair instead of running on a clock",
+    )
+    p.add_argument(
+        "--lockstep-idle",
+        type=float,
+        metavar="SECONDS",
+        help="lockstep: end after this long without frames once the peer has started "
+        f"(default {LoopOptions().lockstep_idle_s:g} s)",
     )
     p.add_argument(
         "--sensor-age-us",
@@ -62,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
             log_format=args.log_format,
             duration_s=args.duration,
             lockstep=args.lockstep,
+            lockstep_idle_s=args.lockstep_idle,
             summary_json=args.summary_json,
             controller_factory=args.controller_factory,
             sensor_age_us=args.sensor_age_us,

@@ -16,6 +16,10 @@ from .stats import peak_rss_bytes
 
 log = logging.getLogger("ehpss_hil.controller")
 
+#: lockstep: the longest single wait for a frame (s); a stop request (SIGTERM/SIGINT) ends the
+#: loop within it, however long the idle limit is
+LOCKSTEP_POLL_S = 0.1
+
 
 def run_realtime(loop: ControllerLoop, stop: StopFlag, n_cycles: int | None = None) -> None:
     """Cycles on the deadline grid until ``stop`` or ``n_cycles``; with ``wake_on_sensor`` a
@@ -60,9 +64,9 @@ def drain_backlog(loop: ControllerLoop, batch: int = 1000) -> None:
 
 
 def run_lockstep(loop: ControllerLoop, stop: StopFlag, n_cycles: int | None = None) -> None:
-    """One cycle per received sensor pair, until ``stop``, ``n_cycles`` or the bus is idle
-    for ``lockstep_idle_s`` after the first frame (before it, the loop waits for the peer
-    however long it takes to start).
+    """One cycle per received sensor pair, until ``stop`` (seen within ``LOCKSTEP_POLL_S``),
+    ``n_cycles`` or the bus is idle for ``lockstep_idle_s`` after the first frame (before it,
+    the loop waits for the peer however long it takes to start).
 
     A cycle follows each SENSOR_AUX after a SENSOR_POS that was not a REPEATED copy (a
     duplicate must not step the law or answer twice; a corrupted or out-of-sequence one is
@@ -72,15 +76,16 @@ def run_lockstep(loop: ControllerLoop, stop: StopFlag, n_cycles: int | None = No
     started = False
     loop.lockstep = True
     idle_s = loop.opts.lockstep_idle_s
+    last = 0.0  # when the last frame arrived (perf_counter s)
     while not stop and (n_cycles is None or loop.cycles < n_cycles):
-        msg = loop.io.recv(idle_s if started else 0.5)
+        msg = loop.io.recv(LOCKSTEP_POLL_S)
         if msg is None:
-            if not started:
-                continue
-            log.info("lockstep: bus idle for %.1f s; ending", idle_s)
-            return
+            if started and perf() - last >= idle_s:
+                log.info("lockstep: bus idle for %.1f s; ending", idle_s)
+                return
+            continue
         started = True
-        t0 = perf()
+        t0 = last = perf()
         verdict = loop.on_frame(msg)
         if msg.arbitration_id == loop.id_pos:
             pending = verdict is not Verdict.REPEATED
