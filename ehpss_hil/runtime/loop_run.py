@@ -73,18 +73,16 @@ def run_lockstep(loop: ControllerLoop, stop: StopFlag, n_cycles: int | None = No
     still answered, as a cycle without data, so that the emulator's period completes)."""
     perf = time.perf_counter
     pending = False
-    started = False
     loop.lockstep = True
     idle_s = loop.opts.lockstep_idle_s
-    last = 0.0  # when the last frame arrived (perf_counter s)
+    last = 0.0  # when the last frame arrived (perf_counter s; 0: none yet)
     while not stop and (n_cycles is None or loop.cycles < n_cycles):
         msg = loop.io.recv(LOCKSTEP_POLL_S)
         if msg is None:
-            if started and perf() - last >= idle_s:
+            if last and perf() - last >= idle_s:
                 log.info("lockstep: bus idle for %.1f s; ending", idle_s)
                 return
             continue
-        started = True
         t0 = last = perf()
         verdict = loop.on_frame(msg)
         if msg.arbitration_id == loop.id_pos:
