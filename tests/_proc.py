@@ -9,6 +9,9 @@ import subprocess
 import sys
 import threading
 from pathlib import Path
+from typing import Any
+
+from ehpss_hil.orchestrate import RunPlan
 
 ROOT = Path(__file__).resolve().parent.parent
 PY = sys.executable
@@ -20,6 +23,21 @@ ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
 #: how long ``ehpss-hil run`` may wait for each process to come up in a test (s): a hang guard
 #: only — in the vcan VM (Python ~10x slower) on a loaded host the controller took over 60 s
 STARTUP_LIMIT_S = 600.0
+
+
+def lockstep_plan(scenario: Path, out: Path, mode: str, **extra: Any) -> RunPlan:
+    """``ehpss-hil run --lockstep`` of ``scenario`` into ``out`` with the tests' hang guards
+    (``STARTUP_LIMIT_S`` to come up and to finish: a loaded VM takes its time); ``extra``:
+    more :class:`RunPlan` fields (the bus, …)."""
+    return RunPlan(
+        scenario_path=scenario,
+        mode=mode,
+        out_dir=out,
+        lockstep=True,
+        finish_timeout_s=STARTUP_LIMIT_S,
+        startup_timeout_s=STARTUP_LIMIT_S,
+        **extra,
+    )
 
 
 class Proc:

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _proc import STARTUP_LIMIT_S
+from _proc import lockstep_plan
 from _scenarios import short_scenario_yaml
 
 from ehpss_hil.bus.netns import netns_unavailable_reason
-from ehpss_hil.orchestrate import RunPlan, check_exit_codes, execute
+from ehpss_hil.orchestrate import check_exit_codes, execute
 from ehpss_hil.physics.plantspec import PlantSpec
 from ehpss_hil.report.logdata import load_log_run
 from ehpss_hil.scenario import load_scenario
@@ -31,15 +31,7 @@ def test_lockstep_run_with_the_scenarios_nonlinear_plant(tmp_path: Path) -> None
     sc = load_scenario(scenario)
     assert sc.plant.model == "nonlinear"
     out = tmp_path / "lockstep"
-    plan = RunPlan(
-        scenario_path=scenario,
-        mode="nrc",
-        out_dir=out,
-        lockstep=True,
-        finish_timeout_s=STARTUP_LIMIT_S,
-        startup_timeout_s=STARTUP_LIMIT_S,
-    )
-    check_exit_codes(execute(plan))
+    check_exit_codes(execute(lockstep_plan(scenario, out, "nrc")))
     sim = run_scenario(sc, "nrc")
     cmd = load_log_run(out / "bus.log").commanded_current_a
     n = len(sim.current_a) - 1

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _proc import STARTUP_LIMIT_S
+from _proc import STARTUP_LIMIT_S, lockstep_plan
 from _scenarios import short_scenario_yaml
 
 from ehpss_hil.bus.netns import netns_unavailable_reason
@@ -41,18 +41,7 @@ def scenario(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_lockstep_run_gives_the_simulation_commands_and_metrics(scenario: Path, tmp_path: Path) -> None:
     out = tmp_path / "lockstep"
-    check_exit_codes(
-        execute(
-            RunPlan(
-                scenario_path=scenario,
-                mode="mmac",
-                out_dir=out,
-                lockstep=True,
-                finish_timeout_s=STARTUP_LIMIT_S,  # a hang guard: a loaded VM takes its time
-                startup_timeout_s=STARTUP_LIMIT_S,
-            )
-        )
-    )
+    check_exit_codes(execute(lockstep_plan(scenario, out, "mmac")))
     row = metrics_from_run(out)
     sim = run_scenario(load_scenario(scenario), "mmac")
     logged = load_log_run(out / "bus.log")
@@ -157,16 +146,7 @@ def test_a_lockstep_run_survives_an_emulator_held_back_for_seconds(scenario: Pat
     pauser = threading.Thread(target=_pause_the_emulator, args=(out, 3.0, done, paused))
     pauser.start()
     try:
-        res = execute(
-            RunPlan(
-                scenario_path=scenario,
-                mode="nrc",
-                out_dir=out,
-                lockstep=True,
-                finish_timeout_s=STARTUP_LIMIT_S,
-                startup_timeout_s=STARTUP_LIMIT_S,
-            )
-        )
+        res = execute(lockstep_plan(scenario, out, "nrc"))
     finally:
         done.set()
         pauser.join()

@@ -12,14 +12,14 @@ from pathlib import Path
 
 import can
 import pytest
-from _proc import STARTUP_LIMIT_S
+from _proc import STARTUP_LIMIT_S, lockstep_plan
 from _scenarios import short_scenario_yaml
 from _vcan import vcan_reason
 
 from ehpss_hil.bus import open_bus
 from ehpss_hil.codec import FrameCodec, Verdict
 from ehpss_hil.config import BusConfig
-from ehpss_hil.orchestrate import RunPlan, check_exit_codes, execute
+from ehpss_hil.orchestrate import check_exit_codes, execute
 from ehpss_hil.run_metrics import metrics_from_run
 
 pytestmark = pytest.mark.socketcan
@@ -70,18 +70,7 @@ def test_controller_and_emulator_processes_on_vcan0(vcan0: str, tmp_path: Path) 
     sc = tmp_path / "short.yaml"
     sc.write_text(SHORT)
     out = tmp_path / "run"
-    res = execute(
-        RunPlan(
-            scenario_path=sc,
-            mode="mmac",
-            out_dir=out,
-            interface="socketcan",
-            channel=vcan0,
-            lockstep=True,
-            finish_timeout_s=STARTUP_LIMIT_S,  # a hang guard: a loaded VM takes its time
-            startup_timeout_s=STARTUP_LIMIT_S,
-        )
-    )
+    res = execute(lockstep_plan(sc, out, "mmac", interface="socketcan", channel=vcan0))
     check_exit_codes(res)
     row = metrics_from_run(out)
     assert row["unavailable"] == []
