@@ -115,6 +115,23 @@ def test_a_jump_the_settled_increments_refute_is_withdrawn_and_one_they_confirm_
         assert r.inc.theta_prod == pytest.approx(gain, abs=0.02)
 
 
+def test_the_gain_a_verified_jump_went_to_is_kept_and_an_offset_gives_none() -> None:
+    """The settled product that confirms a jump's gain change is kept as the gain the reading
+    now has about its zero (:attr:`SensorAttribution.verified_gain`, where the position
+    regression may pivot); a bias stepping in is refuted and gives none. The model is left at 1
+    (not switched): the verification is the increments' alone."""
+    for bias, gain in ((True, 1.0), (False, 0.8)):
+        r = Rig()
+        r.run(300, 1.0)
+        assert np.isnan(r.att.verified_gain)
+        b = -0.2 * r.x if bias else 0.0
+        r.run(200, 1.0, gain=gain, bias_m=b)
+        if bias:
+            assert np.isnan(r.att.verified_gain)
+        else:
+            assert r.att.verified_gain == pytest.approx(0.8, abs=0.02)
+
+
 def test_a_change_at_rest_is_verified_when_the_motion_resumes() -> None:
     """At rest a bias and a drift move the level model alike; when the piston moves again the
     increments tell them apart: the attribution made at rest is withdrawn for the bias."""

@@ -129,9 +129,10 @@ class MmacController(LoopBase):
             td = self.pos_bank.theta[ps.active]
             alive = td >= failed_below and not self.sensor_held_off and not ps.guarded
             est.set_channels(tl, td, alive, pt.k_base)
-            if est.y0 != 0.0 and alive and td == pt.k_base and not pt.flow_fault:
-                # the nominal model in use: once the increments confirm it, the sensor reads the
-                # piston, and the position regression goes through the sensor's zero
+            if est.y0 != 0.0 and alive and not pt.flow_fault and self._pivot_model(td):
+                # the nominal model in use, or the gain a verified jump of the reading went to:
+                # once the increments confirm it, the reading is θ̂_D times the piston, and the
+                # position regression goes through the sensor's zero
                 if self.evidence.inc.confirms(td):
                     est.pivot_to_zero(td)
             if self._flow_on:
@@ -153,6 +154,17 @@ class MmacController(LoopBase):
             self._was_trusted = self.sensor_trusted and not self.nominal
         clock.commanded(self._sent, meas.command_sent)  # _finish's current, as the loop sends it
         return cmd
+
+    def _pivot_model(self, theta_d: float) -> bool:
+        """The position model in use may carry the regression through the sensor's zero: it is
+        the nominal one (θ̂_D = k_base), or within ``flow_gain_min_deviation`` of the product a
+        jump of the reading was verified at (a gain change scales the reading about its zero).
+        Not on a model the pressure test alone attributed: on a single rod the increments
+        "confirm" a different gain in each direction of travel."""
+        ev = self.evidence
+        if theta_d == ev.pressure.k_base:
+            return True
+        return abs(theta_d - ev.attribution.verified_gain) < ev.pressure.min_deviation
 
     def _banks(self, meas: Measurement, v: float, xh: float, tl_prev: float, broken: bool) -> None:
         """Both banks on this sample (v: the commanded spool, xh: x̂, m). The spool bank takes

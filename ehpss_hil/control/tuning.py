@@ -255,6 +255,26 @@ class ControlTuning:
             0.0, 1.0, unit="1 (·K_c·x_v,max)", origin="a linear plant's far below; single-rod 5 of 33 mm/s"
         ),
     )
+    #: the joint fit Δy = θ·φ + c·τ judges the creep once its standard error is below this
+    #: share of the smallest creep modelled (``creep_min_share``)
+    creep_joint_se: float = field(
+        default=0.25,
+        metadata=rng(0.0, 10.0, unit="1 (·creep_min_share)", origin="docs/control.md §9.1: the joint fit"),
+    )
+    #: the joint fit judges nothing and rejects no outlier before this many increments
+    creep_joint_min: int = field(
+        default=10,
+        metadata=rng(
+            3, 100000, unit="increments (of M samples)", origin="docs/control.md §9.1: the joint fit"
+        ),
+    )
+    #: the joint fit is a start-up measure: it closes after this many increments unjudged
+    creep_joint_max: int = field(
+        default=40,
+        metadata=rng(
+            3, 100000, unit="increments (of M samples)", origin="docs/control.md §9.1: the joint fit"
+        ),
+    )
     # ---- the jump test (evidence/jump.py) and the attribution ----------------------------
     jump_sigmas: float = field(
         default=6.0,

@@ -71,6 +71,7 @@ class SensorAttribution:
         "jump_gain",
         "jumped_since_guard",
         "since_guard",
+        "verified_gain",
     )
 
     def __init__(
@@ -119,6 +120,10 @@ class SensorAttribution:
         #: kept until the position guard falls; NaN: none
         self.jump_gain = math.nan
         self._was_guarded = False
+        #: the product the last gain jump of the reading was verified at (the settled product
+        #: moved by the jump's ratio: a gain change, which scales the reading about its zero);
+        #: NaN: none since the reset or the last jump
+        self.verified_gain = math.nan
         #: the model in use is the gain a jump of the reading explained: the reading stepped, so
         #: its compensation applies at once (no ramp)
         self.by_jump = False
@@ -134,6 +139,8 @@ class SensorAttribution:
             if self._jump_decided:
                 self._pt.withdraw_sensor()
             self._gain = self.jump_gain = math.nan
+        elif to == to:
+            self.verified_gain = theta_prod
         self._prod_jumped = math.nan
         self._jump_decided = False
         self._prod_before = theta_prod
@@ -182,6 +189,7 @@ class SensorAttribution:
             position_m, fl.spool_integral_m + fl.creep_integral_m, fl.theta_prod, fl.product_settled
         ):
             fl.note_jump()
+            self.verified_gain = math.nan
             self.jumped_since_guard = guarded
             if trusted and math.isfinite(j.ratio):  # a ratio to a gain the loop trusted
                 self._left = self._hold

@@ -52,6 +52,7 @@ class Increments:
         "_p1_v",
         "_p1_y",
         "_pend",
+        "_pend_j",
         "_prev",
         "_since_jump",
         "_snr",
@@ -106,6 +107,7 @@ class Increments:
         self._i = self._n = 0
         self.creep.reset()
         self._pend: tuple[float, float, float, float] | None = None  # the last increment
+        self._pend_j: tuple[float, float, float] | None = None  # the last increment of the joint fit
         self._since_jump = self._m + 1  # samples since the reading last jumped
         #: samples since the reading last moved by more than the excitation gate over an
         #: increment (a stuck or failed sensor never does)
@@ -136,8 +138,10 @@ class Increments:
         return self._m
 
     def note_jump(self) -> None:
-        """The reading jumped on the last sample: the increments spanning it teach no creep."""
+        """The reading jumped on the last sample: the increments spanning it teach no creep, and
+        the joint fit closes."""
         self._since_jump = 0
+        self.creep.close_joint()
 
     def confirms(self, theta: float) -> bool:
         """θ_prod is settled within ``flow_gain_min_deviation``/2 of ``theta``: the increments
@@ -192,6 +196,11 @@ class Increments:
             self._pend = (y, phi, tau, tp)
         else:
             self._pend = None
+        if creep.joint_open:  # the joint fit, on every M-th increment (they do not overlap)
+            pj = self._pend_j
+            if pj is not None and since > m:
+                creep.joint(pj[0], pj[1], pj[2], nv)
+            self._pend_j = (y, phi, tau) if n > m and excited and n % m == 0 else None
         y -= creep.rate_m_s * tau  # the creep's share of the increment is no gain
         floor = self._snr * math.sqrt(nv)
         if not floor > gate:  # max(gate, floor), written out

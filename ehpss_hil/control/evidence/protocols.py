@@ -15,7 +15,8 @@ from .monitor import FallbackReason
 
 
 class CreepEvidence(Protocol):
-    """The piston's velocity with the spool at null (m/s), learned from near-null increments."""
+    """The piston's velocity with the spool at null (m/s): near-null increments, or at start-up a
+    joint fit with the gain."""
 
     rate_m_s: float
 
@@ -109,6 +110,7 @@ class JumpEvidence(Protocol):
     jump_gain: float
     jumped_since_guard: bool
     since_guard: int
+    verified_gain: float
 
     def reset(self) -> None: ...
 
