@@ -20,7 +20,13 @@ from _campaign import LIMIT_S, cli, digest, tiny, wait_lines
 from _proc import EHPSS_HIL, ENV, ROOT
 from distributed import Client, LocalCluster
 
-from ehpss_hil.campaign.cluster import DaskExecutor
+from ehpss_hil.campaign.cluster import (
+    HEARTBEAT_LOST,
+    SYNC_MODULE_TAIL,
+    DaskExecutor,
+    SchedulerGoneFilter,
+    SyncCancelFilter,
+)
 from ehpss_hil.campaign.journal import JOURNAL_NAME
 from ehpss_hil.campaign.runs import RunTask
 from ehpss_hil.campaign.sampling import plan_runs
@@ -177,6 +183,54 @@ def test_ctrl_c_stops_a_local_cluster_campaign_without_a_traceback(tmp_path: Pat
     assert proc.returncode == 130, stderr
     assert b"Traceback" not in stderr and b"KeyboardInterrupt" not in stderr, stderr.decode()[-2000:]
     assert b"--resume" in stderr
+
+
+def test_the_scheduler_gone_heartbeat_is_filtered_and_distributed_still_words_it_so() -> None:
+    """A worker whose heartbeat finds the closing cluster's scheduler gone logs HEARTBEAT_LOST
+    with a traceback (one Ctrl-C in ten printed it); the filter drops that record and no other.
+    The text is distributed's: this fails when its Worker.heartbeat words it otherwise."""
+    import inspect
+
+    import distributed.worker
+
+    assert HEARTBEAT_LOST in inspect.getsource(distributed.worker.Worker.heartbeat)
+    f = SchedulerGoneFilter()
+
+    def rec(msg: str) -> logging.LogRecord:
+        return logging.LogRecord("distributed.worker", logging.ERROR, __file__, 1, msg, None, None)
+
+    assert not f.filter(rec(HEARTBEAT_LOST + "."))
+    assert f.filter(rec("Unexpected exception during heartbeat. Closing worker."))
+    assert f.filter(rec("Compute Failed"))
+
+
+def test_the_sync_cancel_name_error_is_filtered_while_distributed_has_it() -> None:
+    """A Ctrl-C inside ``distributed.utils.sync`` before its coroutine bound ``future`` made
+    tornado log a NameError from ``sync``'s ``cancel`` (one Ctrl-C in about thirty here). The
+    filter drops that record and no other. This fails when distributed's ``sync`` changes (the
+    filter may then be needed no more)."""
+    import inspect
+
+    import distributed.utils
+
+    src = inspect.getsource(distributed.utils.sync)
+    assert "def cancel() -> None:\n        if future is not None:" in src
+    assert inspect.getsourcefile(distributed.utils.sync).endswith(SYNC_MODULE_TAIL)  # type: ignore[union-attr]
+
+    def record_of(code: str, filename: str) -> logging.LogRecord:
+        space: dict[str, object] = {}
+        exec(compile(code, filename, "exec"), space)  # a cancel() compiled at that path
+        try:
+            space["cancel"]()  # type: ignore[operator]
+        except Exception as exc:
+            info = (type(exc), exc, exc.__traceback__)
+        return logging.LogRecord("tornado.application", logging.ERROR, __file__, 1, "cb", None, info)
+
+    f = SyncCancelFilter()
+    unbound = "def cancel():\n    return future\n"
+    assert not f.filter(record_of(unbound, "/x/" + SYNC_MODULE_TAIL))
+    assert f.filter(record_of(unbound, "/x/elsewhere.py"))
+    assert f.filter(record_of("def cancel():\n    raise ValueError('x')\n", "/x/" + SYNC_MODULE_TAIL))
 
 
 def test_a_failing_run_is_retried_then_its_own_error_is_raised(

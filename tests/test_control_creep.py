@@ -66,16 +66,20 @@ def _run(path: str, mode: str) -> RunMetrics:
     return compute_metrics(run_scenario(sc, mode, load_params()))
 
 
+def _no_harm(path: str) -> tuple[RunMetrics, RunMetrics]:
+    """mmac's and nrc's metrics on ``path``, mmac held to nrc as the envelope is: RMS ≤
+    1.1·nrc + 1 µm, worst |x − y_m| ≤ nrc's + 10 µm."""
+    mm, nrc = _run(path, "mmac"), _run(path, "nrc")
+    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
+    assert mm.max_error_m <= nrc.max_error_m + 10 * UM
+    return mm, nrc
+
+
 def test_a_load_that_pushes_through_the_leakage_does_no_harm() -> None:
     """500 N of load and 100 N of Coulomb friction on the nonlinear plant: the piston creeps at
     1.6 mm/s with the spool at null. Read as a gain, x̂ walked away and the loop followed it
     (4964 µm RMS against nrc's 4.2)."""
-    mm, nrc = (
-        _run("plant/nonlinear-friction-load.yaml", "mmac"),
-        _run("plant/nonlinear-friction-load.yaml", "nrc"),
-    )
-    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
-    assert mm.max_error_m <= nrc.max_error_m + 10 * UM
+    _no_harm("plant/nonlinear-friction-load.yaml")
 
 
 def test_a_single_rod_cylinder_is_no_longer_left_to_x_hat() -> None:
@@ -130,16 +134,18 @@ def test_the_joint_fit_needs_its_minimum_of_increments() -> None:
     assert not est.judged
 
 
-def test_a_sensor_that_stops_is_left_out_of_the_joint_fit() -> None:
-    """A reading that freezes after the fit has its minimum: its increments are outliers, and the
-    creep the fit gives stays the plant's."""
+def test_a_sensor_that_stops_closes_the_joint_fit() -> None:
+    """A reading that freezes after the fit has its minimum: its first increment is an outlier,
+    left out, and the fit closes — a stuck reading's increments near a reversal fit a line with a
+    creep (campaign qualification run 176: a creep of −1 mm/s read into a stuck sensor, 211 →
+    1443 µm)."""
     est = CreepEstimator(FULL_FLOW, ControlTuning(creep_joint_se=1e-6))  # never judged: keeps fitting
     phis = _first_stroke(30)
     _joint(est, 0.0, 1.0, phis[:20])
     before = est.joint_fit
-    for phi in phis[20:]:
-        est.joint(0.0, phi, TAU, (1.4e-6) ** 2)
-    assert est.joint_fit == before
+    assert est.joint_open
+    est.joint(0.0, phis[20], TAU, (1.4e-6) ** 2)
+    assert est.joint_fit == before and not est.joint_open and not est.judged
 
 
 def test_a_jump_closes_the_joint_fit() -> None:
@@ -153,22 +159,14 @@ def test_a_single_rod_with_area_ratio_08_does_no_harm() -> None:
     the first stroke's product read 2.1–2.5 until the creep was judged at the sine's peak; the
     pressure test then took it for a sensor gain of 2.5 (43.8 µm RMS, 622 µm worst, against
     nrc's 3.6 / 11.8). The joint fit judges the creep on the first stroke."""
-    mm, nrc = (
-        _run("mismatch/nl-single-rod-08.yaml", "mmac"),
-        _run("mismatch/nl-single-rod-08.yaml", "nrc"),
-    )
-    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
-    assert mm.max_error_m <= nrc.max_error_m + 10 * UM
+    _no_harm("mismatch/nl-single-rod-08.yaml")
 
 
 def test_a_drift_on_a_single_rod_is_compensated_without_harm() -> None:
     """Area ratio 0.9 (a 1 mm/s creep), drift 0.7 at 1 s, which jumps the reading at x = −1 mm:
     the regression's pivot stayed there, and a level model read about it walked from 0.7 to
-    0.35 while the increments said 0.75 (554 µm worst, nrc 435). The settled product verifies
-    the jump's gain, and the regression goes through the sensor's zero from then on."""
-    mm, nrc = (
-        _run("plant/nonlinear-ar09-drift07.yaml", "mmac"),
-        _run("plant/nonlinear-ar09-drift07.yaml", "nrc"),
-    )
+    0.35 while the increments said 0.75 (518.9 µm worst, nrc 434.7). The settled product
+    verifies the jump's gain, and the regression goes through the sensor's zero from then on:
+    no harm, and compensated (at most half nrc's RMS)."""
+    mm, nrc = _no_harm("plant/nonlinear-ar09-drift07.yaml")
     assert mm.rms_error_m <= 0.5 * nrc.rms_error_m
-    assert mm.max_error_m <= nrc.max_error_m + 10 * UM

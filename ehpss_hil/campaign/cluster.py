@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import importlib.util
 import logging
+import os
 import signal
 import threading
 import warnings
@@ -39,20 +40,64 @@ DASHBOARD_ADDRESS = ":8787"
 EVENT_TOPIC = "all"
 #: a run's task key: the run hash, so a key names the same run on every cluster
 KEY_PREFIX = "campaign-run-"
+#: how a Dask worker logs a heartbeat that found the scheduler gone (``Worker.heartbeat``;
+#: tests/test_campaign_dask.py fails when distributed words it otherwise)
+HEARTBEAT_LOST = "Failed to communicate with scheduler during heartbeat"
+#: where distributed's ``sync`` lives (the tail of its file name; :class:`SyncCancelFilter`)
+SYNC_MODULE_TAIL = os.path.join("distributed", "utils.py")
+
+
+class SchedulerGoneFilter(logging.Filter):
+    """Drops a local worker's "Failed to communicate with scheduler during heartbeat" record
+    (with its traceback). A LocalCluster's scheduler lives in the campaign's own process: a
+    worker loses it only while the campaign closes the cluster (a Ctrl-C: one heartbeat in
+    flight as the scheduler went printed a traceback about one time in ten), and a campaign
+    whose scheduler failed says so itself."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        """False for the heartbeat record, True for every other."""
+        return not (isinstance(record.msg, str) and record.msg.startswith(HEARTBEAT_LOST))
+
+
+class SyncCancelFilter(logging.Filter):
+    """Drops tornado's record of distributed's ``sync`` cancel callback failing with a
+    NameError. A Ctrl-C that lands in ``distributed.utils.sync`` before its coroutine has bound
+    ``future`` schedules ``cancel``, which reads the unbound name (distributed 2026.8.0): tornado
+    logs that with a traceback, about one Ctrl-C in thirty here, while the campaign stops on the
+    interrupt all the same. tests/test_campaign_dask.py fails when ``sync`` changes."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        """False for that record, True for every other."""
+        exc = record.exc_info[1] if record.exc_info else None
+        if not isinstance(exc, NameError):
+            return True
+        tb = exc.__traceback__
+        while tb is not None and tb.tb_next is not None:
+            tb = tb.tb_next
+        if tb is None:
+            return True
+        code = tb.tb_frame.f_code
+        return not (code.co_name == "cancel" and code.co_filename.endswith(SYNC_MODULE_TAIL))
 
 
 class IgnoreInterrupt(WorkerPlugin):
     """Makes a LocalCluster's worker ignore SIGINT: a Ctrl-C in the terminal reaches the whole
     process group, and the campaign, not each worker (with a KeyboardInterrupt traceback), stops
     the cluster. The workers started with the cluster inherit it (:func:`_interrupts_ignored`);
-    registered with the client, this plugin gives it to a worker the nanny restarts."""
+    registered with the client, this plugin gives it to a worker the nanny restarts. It also
+    keeps the worker's heartbeat quiet when the closing cluster's scheduler goes first
+    (:class:`SchedulerGoneFilter`)."""
 
     name = "ehpss-ignore-interrupt"
 
     def setup(self, worker: Any) -> None:
-        """Ignore SIGINT in this worker process (its event loop runs in the main thread)."""
+        """Ignore SIGINT in this worker process (its event loop runs in the main thread), and
+        filter its scheduler-gone heartbeat record."""
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGINT, signal.SIG_IGN)
+        log = logging.getLogger("distributed.worker")
+        if not any(isinstance(f, SchedulerGoneFilter) for f in log.filters):
+            log.addFilter(SchedulerGoneFilter())
 
 
 @contextmanager
@@ -114,6 +159,9 @@ class DaskExecutor:
         self.dashboard = ""
 
     def __enter__(self) -> DaskExecutor:
+        log = logging.getLogger("tornado.application")
+        if not any(isinstance(f, SyncCancelFilter) for f in log.filters):
+            log.addFilter(SyncCancelFilter())
         try:
             self._connect()
         except BaseException:

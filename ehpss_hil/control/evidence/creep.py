@@ -80,7 +80,7 @@ class CreepEstimator:
         self._jn = 0
         self._jfit = (0.0, 0.0, -1.0)  # the joint fit's θ, c (m/s) and residual variance (m²; <0: none)
         self._joint_judged = False
-        self._jclosed = False  # the reading jumped: what the fit holds may span two gains
+        self._jclosed = False  # the reading jumped, or an increment did not fit: closed
         #: the mean of the near-null velocities (m/s)
         self.mean_m_s = 0.0
         #: the creep in use: the mean once it is worth modelling, else 0 (m/s)
@@ -111,13 +111,15 @@ class CreepEstimator:
         is open (:attr:`joint_open`); ``noise_var_m2``: the reading's increment noise variance
         (m², the floor of the fit's residual variance). From ``creep_joint_min`` increments on,
         an increment further than ``creep_outlier_sigmas`` residual spreads from the fit (a
-        sensor that jumped or failed) is left out, and once the fit's creep is known within
-        ``creep_joint_se`` of the smallest creep modelled it is judged: a creep above that
-        smallest one is used (:attr:`rate_m_s`, kept until below half of it)."""
+        sensor that jumped, failed or stuck) is left out and closes the fit (the increments
+        after it, a stuck reading's near a reversal among them, may fit it again). Once the
+        fit's creep is known within ``creep_joint_se`` of the smallest creep modelled it is
+        judged and closes: a creep above that smallest one is used (:attr:`rate_m_s`)."""
         theta, c, s2 = self._jfit
         if s2 >= 0.0:
             r = dy_m - theta * phi_m - c * tau_s
-            if r * r > self._out2 * s2:
+            if r * r > self._out2 * s2:  # what follows may not be the plant either: closed
+                self._jclosed = True
                 return
         j = self._j
         j[0] += phi_m * phi_m
@@ -150,7 +152,8 @@ class CreepEstimator:
     @property
     def joint_open(self) -> bool:
         """The joint fit still takes increments: neither it nor the near-null mean has judged,
-        the reading has not jumped, and it has not run for ``creep_joint_max`` increments."""
+        the reading has not jumped, no increment was an outlier, and it has not run for
+        ``creep_joint_max`` increments."""
         return not (self._joint_judged or self._jclosed) and self._jn < self._jmax and self._n < self._min_n
 
     def close_joint(self) -> None:
