@@ -80,6 +80,14 @@ class SyncCancelFilter(logging.Filter):
         return not (code.co_name == "cancel" and code.co_filename.endswith(SYNC_MODULE_TAIL))
 
 
+def _filter_once(logger: str, kind: type[logging.Filter]) -> None:
+    """Give the logger named ``logger`` a ``kind`` filter unless it has one (a plugin set up
+    again, a second executor in one process)."""
+    log = logging.getLogger(logger)
+    if not any(isinstance(f, kind) for f in log.filters):
+        log.addFilter(kind())
+
+
 class IgnoreInterrupt(WorkerPlugin):
     """Makes a LocalCluster's worker ignore SIGINT: a Ctrl-C in the terminal reaches the whole
     process group, and the campaign, not each worker (with a KeyboardInterrupt traceback), stops
@@ -95,9 +103,7 @@ class IgnoreInterrupt(WorkerPlugin):
         filter its scheduler-gone heartbeat record."""
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGINT, signal.SIG_IGN)
-        log = logging.getLogger("distributed.worker")
-        if not any(isinstance(f, SchedulerGoneFilter) for f in log.filters):
-            log.addFilter(SchedulerGoneFilter())
+        _filter_once("distributed.worker", SchedulerGoneFilter)
 
 
 @contextmanager
@@ -159,9 +165,7 @@ class DaskExecutor:
         self.dashboard = ""
 
     def __enter__(self) -> DaskExecutor:
-        log = logging.getLogger("tornado.application")
-        if not any(isinstance(f, SyncCancelFilter) for f in log.filters):
-            log.addFilter(SyncCancelFilter())
+        _filter_once("tornado.application", SyncCancelFilter)
         try:
             self._connect()
         except BaseException:
