@@ -1,7 +1,8 @@
 """Whose is a position-model change (control/evidence/attribution.py): the sensor's only on independent
-evidence: a change made with the piston at rest from a model that agreed with the increments,
-or a jump of the reading whose gain ratio the new model matches. Driven through the real
-increment regression (:class:`Increments`) with synthetic readings; samples are counted."""
+evidence: a change made with the piston at rest from a model that agreed with the increments
+and shown by the reading, or a jump of the reading whose gain ratio the new model matches.
+Driven through the real increment regression (:class:`Increments`) with synthetic readings;
+samples are counted."""
 
 from __future__ import annotations
 
@@ -64,13 +65,37 @@ def test_nothing_is_attributed_while_the_model_and_the_increments_agree_on_1() -
     assert not r.pt.sensor_decided
 
 
+def _drift_at_rest(r: Rig, start: float, end: float, n: int = 200) -> list[bool]:
+    """The reading's gain ramps from ``start`` to ``end`` over ``n`` samples with the spool at
+    null (too slow a ramp for a jump); the model in use moves to ``end`` halfway."""
+    out = []
+    for k in range(1, n + 1):
+        g = start + (end - start) * k / n
+        out += r.run(1, end if k > n // 2 else start, gain=g, spool_m=0.0)
+    return out
+
+
 def test_a_model_change_at_rest_from_agreement_is_the_sensors() -> None:
+    """A drift at rest: the reading moves while nothing else does, and the model follows it:
+    attributed once the reading has shown it for ``increment_window`` samples."""
+    m = ControlTuning().increment_window
     r = Rig()
     r.run(300, 1.0)
     r.run(50, 1.0, spool_m=0.0)  # at rest: θ_prod goes stale
     assert not r.inc.product_fresh
-    assert r.run(1, 0.8, spool_m=0.0) == [True]
-    assert r.pt.sensor_decided
+    out = _drift_at_rest(r, 1.0, 0.8)
+    assert not any(out[: 100 + m - 1])  # the model at 1, then the reading shown for M samples
+    assert out[100 + m - 1] and r.pt.sensor_decided
+
+
+def test_a_model_change_at_rest_the_reading_does_not_show_is_not_the_sensors() -> None:
+    """The model moves to 0.8 at rest while the reading stays where the travel put it (a level
+    model catching up with an offset of x̂): no sensor gain."""
+    r = Rig()
+    r.run(300, 1.0)
+    r.run(50, 1.0, spool_m=0.0)
+    assert r.run(100, 0.8, spool_m=0.0) == [False] * 100
+    assert not r.pt.sensor_decided
 
 
 def test_a_model_still_adapting_when_the_motion_stops_is_not_attributed_at_rest() -> None:
@@ -152,7 +177,7 @@ def test_a_change_at_rest_from_a_failed_sensors_model_is_no_ratio_to_verify() ->
     r.run(300, 0.0, gain=0.0)
     r.run(50, 0.0, gain=0.0, spool_m=0.0)
     assert r.inc.theta_prod < ControlTuning().sensor_failed_below
-    assert r.run(1, 0.8, gain=0.0, spool_m=0.0) == [True]  # a change at rest, as before
+    assert _drift_at_rest(r, 0.0, 0.8)[-1]  # a change at rest, as before
 
 
 def test_a_jump_inside_the_pressure_tests_band_is_compensated_while_the_model_stays() -> None:

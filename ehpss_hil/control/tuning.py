@@ -301,6 +301,13 @@ class ControlTuning:
     jump_min_change: float = field(
         default=0.01, metadata=rng(0.0, 1.0, unit="1", origin="below the pressure test's band; §5.1")
     )
+    #: a model change at rest is the sensor's only once the reading moved this many σ̂ (its
+    #: one-sample noise) beyond the model's travel since the motion stopped, ``increment_window``
+    #: samples in a row
+    rest_reading_snr: float = field(
+        default=3.0,
+        metadata=rng(0.0, 1e3, unit="σ̂", origin="§5.1: campaign draws under 17–19 µm of noise"),
+    )
     #: a re-base of x̂ larger than this many reference amplitudes at once is no sensor gain change
     rebase_limit: float = field(
         default=2.0,

@@ -11,8 +11,9 @@ The evidence, each enough on its own:
   :attr:`.PressureTest.sensor_favoured`; an increment gain θ_prod above 1 is no evidence on
   its own: a flow gain may be above the model's);
 * the model changed while the piston was at rest (θ_prod stale: no excited increment) from one
-  that agreed with θ_prod when the motion stopped: a flow gain moves nothing without flow, a
-  sensor gain moves the reading at once;
+  that agreed with θ_prod when the motion stopped, and the reading moved since beyond the
+  model's travel (:meth:`SensorAttribution._moved_at_rest`): a flow gain moves nothing without
+  flow, a sensor gain moves the reading at once;
 * the reading jumped (:class:`.LevelJump`) by a gain ratio ρ, and within ``jump_hold_s``
   the model moved to ρ times the gain in use before the jump (a model change the jump does not
   explain, a flow-gain loss beside it, is left to the pressure test). A model so attributed
@@ -62,6 +63,9 @@ class SensorAttribution:
         "_prod_from",
         "_prod_jumped",
         "_pt",
+        "_rest_from",
+        "_rest_moved",
+        "_rest_snr",
         "_theta_before",
         "_to",
         "_unexplained",
@@ -91,6 +95,7 @@ class SensorAttribution:
         self._min_dev = pressure.min_deviation
         self._failed_below = failed_below
         self._hold = max(1, round(t.jump_hold_s / ts_s))
+        self._rest_snr = t.rest_reading_snr
         self._min_change = t.jump_min_change
         self.jump = LevelJump(inc.increment_window, t)
         self.reset()
@@ -99,6 +104,9 @@ class SensorAttribution:
         """Nothing attributed, no jump seen."""
         self.jump.reset()
         self._level_ref = 1.0  # θ̂_D of the model in use when θ_prod was last fresh
+        #: the reading and the model's travel (spool + creep integral) then (m)
+        self._rest_from = (0.0, 0.0)
+        self._rest_moved = 0  # samples in a row the reading has shown the change since
         self._left = 0  # samples left in which a model change the jump explains is the sensor's
         self._to = 1.0  # the gain such a model moves to
         self._kd_before = 1.0  # θ̂_D in use before the last jump
@@ -153,6 +161,26 @@ class SensorAttribution:
         kd, prod = self._kd_before, self._prod_before
         return kd if abs(kd - prod) < self._min_dev else prod
 
+    def _moved_at_rest(self, position_m: float, travel_m: float, theta_d: float) -> bool:
+        """A model change with the piston at rest that the reading shows: θ̂_D moved off
+        ``level_ref`` (the model when the motion stopped) by more than ``min_deviation``, and the
+        reading moved since beyond what the model's travel explains (θ_prod times it) by
+        ``rest_reading_snr`` σ̂ of its noise, ``increment_window`` samples in a row. A gain change
+        at rest moves the reading by Δk·x with nothing else moving; a stuck reading departs from
+        the travel the loop commands; a level model catching up with an offset of x̂ (read as a
+        gain near x = 0) moves neither. ``position_m``: the reading (m); ``travel_m``: the
+        spool + creep integral (m of piston travel at the nominal flow gain)."""
+        fl = self._inc
+        ref = self._level_ref
+        changed = fl.at_rest and abs(theta_d - ref) > self._min_dev and theta_d >= self._failed_below
+        y0, s0 = self._rest_from
+        moved = abs(position_m - y0 - fl.theta_prod * (travel_m - s0))
+        if changed and moved >= self._rest_snr * fl.reading_noise_m:
+            self._rest_moved += 1
+        else:
+            self._rest_moved = 0
+        return self._rest_moved >= fl.increment_window
+
     def update(
         self, position_m: float, theta_d: float, model: int, guarded: bool, broken: bool, trusted: bool
     ) -> bool:
@@ -171,11 +199,14 @@ class SensorAttribution:
         elif fl.product_updated:
             self.since_guard += 1
         self._was_guarded = guarded
+        travel = fl.spool_integral_m + fl.creep_integral_m
         if fl.product_fresh:
             # the level model agreed with the increments when the motion stopped: a change at
             # rest is then the reading's; one that does not agree may still be adapting
             self._level_ref = theta_d if abs(theta_d - fl.theta_prod) < self._min_dev else math.nan
-        elif fl.at_rest and abs(theta_d - self._level_ref) > self._min_dev and theta_d >= self._failed_below:
+            self._rest_from = (position_m, travel)
+            self._rest_moved = 0
+        elif self._moved_at_rest(position_m, travel, theta_d):
             # a model change with the piston at rest (False while NaN): verified like a jump
             if not pt.sensor_decided and self._level_ref >= self._failed_below:
                 self._prod_from = self._prod_before

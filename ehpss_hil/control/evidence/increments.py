@@ -94,6 +94,12 @@ class Increments:
         self._null_m_s = self.creep.null_m_s
         self.reset()
 
+    @property
+    def reading_noise_m(self) -> float:
+        """The position reading's one-sample noise σ̂ (m), from its one-sample increments the
+        product does not explain (their variance is 2σ̂²)."""
+        return math.sqrt(0.5 * self._noise_var)
+
     def reset(self) -> None:
         """θ_prod = 1, empty window, no creep."""
         self.theta_prod = 1.0
