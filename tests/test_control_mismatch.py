@@ -136,3 +136,16 @@ def test_a_model_change_at_rest_the_reading_does_not_show_is_no_sensor_gain(name
     mm, nrc = _run(name, "mmac"), _run(name, "nrc")
     assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
     assert mm.max_error_m <= nrc.max_error_m + 10 * UM
+
+
+def test_a_deviation_at_power_on_inside_the_uncertainty_is_not_decided_a_sensor_gain() -> None:
+    """A nonlinear plant with a flow gain 16 % low (campaign draw): at 0.15 s the pressure test
+    decided H_D on the plant's own product (0.80) and the loop read the sensor through it,
+    86.8 µm against nrc's 9.7. The load pressure cannot tell a sensor gain from a plant whose
+    stiffness is off the model; before the plant has shown its flow gain, a deviation within
+    the velocity-gain uncertainty is not decided H_D (evidence/pressure.py ``_fault_possible``),
+    and the LOE at 0.78 s is compensated: within 5 µm of the oracle."""
+    mm, nrc = _run("nl-kc086-loe063", "mmac"), _run("nl-kc086-loe063", "nrc")
+    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
+    assert mm.max_error_m <= nrc.max_error_m + 10 * UM
+    assert mm.rms_error_m <= _run("nl-kc086-loe063", "oracle").rms_error_m + 5 * UM
