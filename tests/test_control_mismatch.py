@@ -16,7 +16,7 @@ import pytest
 
 from ehpss_hil import PROJECT_ROOT
 from ehpss_hil.physics.load import load_params
-from ehpss_hil.report.metrics import RunMetrics, compute_metrics
+from ehpss_hil.report.metrics import RunMetrics, compute_metrics, does_harm, harm_limits
 from ehpss_hil.scenario import load_scenario
 from ehpss_hil.sim import run_scenario
 
@@ -36,8 +36,7 @@ def _run(name: str, mode: str) -> RunMetrics:
 )
 def test_a_flow_gain_off_the_model_is_no_fault_of_the_sensor(name: str) -> None:
     mm, nrc = _run(name, "mmac"), _run(name, "nrc")
-    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
-    assert mm.max_error_m <= nrc.max_error_m + 10 * UM
+    assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
 
 
 def test_a_flow_gain_increase_is_compensated_as_one() -> None:
@@ -64,8 +63,7 @@ def test_two_faults_at_one_instant_are_never_worse_than_the_plain_loop() -> None
     live sensor (a full window of settled increments since the guard) is now read through the
     gain its jump went to instead: no worse than nrc."""
     mm, nrc = _run("nominal-kq06-drift13", "mmac"), _run("nominal-kq06-drift13", "nrc")
-    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
-    assert mm.max_error_m <= nrc.max_error_m + 10 * UM
+    assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
 
 
 def test_a_noisy_reading_held_still_is_no_evidence_of_a_gain() -> None:
@@ -87,8 +85,7 @@ def test_a_plant_inside_the_uncertainty_set_is_no_sensor_fault(name: str) -> Non
     (290 µm against 5.6). The pressure test now judges each hypothesis within the plant's
     pressure-gain uncertainty and with the product averaged over M increments."""
     mm, nrc = _run(name, "mmac"), _run(name, "nrc")
-    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
-    assert mm.max_error_m <= nrc.max_error_m + 10 * UM
+    assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
 
 
 def test_a_jump_whose_increments_keep_their_gain_is_no_sensor_gain() -> None:
@@ -134,8 +131,7 @@ def test_a_model_change_at_rest_the_reading_does_not_show_is_no_sensor_gain(name
     now the sensor's only once the reading moved beyond the model's travel since the motion
     stopped (evidence/attribution.py ``_moved_at_rest``)."""
     mm, nrc = _run(name, "mmac"), _run(name, "nrc")
-    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
-    assert mm.max_error_m <= nrc.max_error_m + 10 * UM
+    assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
 
 
 def test_a_deviation_at_power_on_inside_the_uncertainty_is_not_decided_a_sensor_gain() -> None:
@@ -146,6 +142,5 @@ def test_a_deviation_at_power_on_inside_the_uncertainty_is_not_decided_a_sensor_
     the velocity-gain uncertainty is not decided H_D (evidence/pressure.py ``_fault_possible``),
     and the LOE at 0.78 s is compensated: within 5 µm of the oracle."""
     mm, nrc = _run("nl-kc086-loe063", "mmac"), _run("nl-kc086-loe063", "nrc")
-    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
-    assert mm.max_error_m <= nrc.max_error_m + 10 * UM
+    assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
     assert mm.rms_error_m <= _run("nl-kc086-loe063", "oracle").rms_error_m + 5 * UM

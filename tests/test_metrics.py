@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from ehpss_hil.report.metrics import compute_metrics, recovery_time_s
+from ehpss_hil.report.metrics import compute_metrics, does_harm, harm_limits, recovery_time_s
 from ehpss_hil.report.result import N_SLOTS, SimResult
 
 TS = 1e-3
@@ -100,3 +100,19 @@ def test_switches_total_and_per_event_and_active_model() -> None:
     joint[700:] = 12
     mj = compute_metrics(_result(np.zeros(n), (0.5,), joint, joint.copy()))
     assert mj.switches == 1 and mj.events[0].active_model == {"joint": 12}
+
+
+def test_no_harm_is_rms_within_1_1_nrc_plus_1_um_and_worst_within_nrc_plus_10_um() -> None:
+    """The issue's criterion, in one home for bench, family and tests: RMS ≤ 1.1·nrc + 1 µm and
+    worst ≤ nrc + 10 µm; either beyond is harm."""
+    err = np.full(100, 20e-6)
+    err[50] = 50e-6
+    nrc = compute_metrics(_result(err, ()))
+    rms, worst = harm_limits(nrc)
+    assert rms == pytest.approx(1.1 * nrc.rms_error_m + 1e-6) and worst == pytest.approx(60e-6)
+    assert not does_harm(nrc, nrc)
+    over = err.copy()
+    over[50] = 61e-6  # RMS still within, the worst beyond
+    assert does_harm(compute_metrics(_result(over, ())), nrc)
+    louder = err * 1.2  # the worst within (60 µm), RMS beyond
+    assert does_harm(compute_metrics(_result(louder, ())), nrc)

@@ -14,7 +14,7 @@ from pathlib import Path
 from .. import PROJECT_ROOT
 from ..control.registry import MODES
 from ..control.tuning import ControlTuning
-from ..report.metrics import COMPENSATED_RMS_M, NO_HARM_RATIO, NO_HARM_RMS_M, RunMetrics
+from ..report.metrics import COMPENSATED_RMS_M, RunMetrics, does_harm, harm_limits
 from ..scenario import _FAULT_KEYS, load_scenario
 from ..sim.jobs import Job, default_jobs, run_jobs, scenario_paths
 from .common import Scorecard, write_json
@@ -36,8 +36,6 @@ KQ = "kq-loss"
 #: holding still, a current limit, a quiet run (the "do no harm" family)
 ENVELOPE_DIR = "envelope"
 QUIET = "quiet-20s"
-#: no harm: mmac RMS ≤ NO_HARM_RATIO·nrc + NO_HARM_RMS_M, worst |x − y_m| ≤ nrc's + NO_HARM_PEAK_M
-NO_HARM_PEAK_M = 10e-6
 #: fault-free envelope runs: mmac RMS within this of nrc (m); power-on faults: ≤ oracle + this
 FAULT_FREE_RMS_M = 1e-6
 POWER_ON_RMS_M = COMPENSATED_RMS_M
@@ -205,8 +203,7 @@ def _no_harm(t: Table) -> list[Verdict]:
         if (sc, "mmac") not in t or (sc, "nrc") not in t:
             continue
         mm, nrc = t[sc, "mmac"], t[sc, "nrc"]
-        lim = NO_HARM_RATIO * nrc.rms_error_m + NO_HARM_RMS_M
-        plim = nrc.max_error_m + NO_HARM_PEAK_M
+        lim, plim = harm_limits(nrc)
         out.append(
             Verdict(
                 f"no harm: {sc} mmac RMS / worst",
@@ -314,12 +311,7 @@ def _mismatch(t: Table, family: dict[str, bool]) -> list[Verdict]:
     runs = [sc for sc in sorted(family) if (sc, "mmac") in t and (sc, "nrc") in t]
     if not runs:
         return []
-    harmed = [
-        sc
-        for sc in runs
-        if t[sc, "mmac"].rms_error_m > NO_HARM_RATIO * t[sc, "nrc"].rms_error_m + NO_HARM_RMS_M
-        or t[sc, "mmac"].max_error_m > t[sc, "nrc"].max_error_m + NO_HARM_PEAK_M
-    ]
+    harmed = [sc for sc in runs if does_harm(t[sc, "mmac"], t[sc, "nrc"])]
     faulty = [sc for sc in runs if family[sc] and (sc, "oracle") in t]
     comp = [
         sc

@@ -22,7 +22,7 @@ from .. import PROJECT_ROOT
 from ..blas import limit_blas_threads
 from ..physics.load import load_params
 from ..physics.params import Params
-from ..report.metrics import COMPENSATED_RMS_M, NO_HARM_RATIO, NO_HARM_RMS_M, RunMetrics, compute_metrics
+from ..report.metrics import COMPENSATED_RMS_M, RunMetrics, compute_metrics, harm_limits
 from ..scenario import Event, Scenario, load_scenario
 from .common import Scorecard, write_json
 
@@ -47,8 +47,6 @@ JUDGED = {
 #: the faults run per plant, at 1 s of a 3 s run: name → event values
 FAULTS: dict[str, dict[str, float]] = {"loe": {"k_loe": 0.5}, "drift": {"k_dft": 0.7}}
 FAULT_AT_S, RUN_S = 1.0, 3.0
-#: worst |x − y_m| of mmac may exceed nrc's by this on the fault-free run (m; bench control's rule)
-NO_HARM_PEAK_M = 10e-6
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -127,7 +125,7 @@ def _control(name: str, card: Scorecard, ident: Params, nominal: Params) -> list
     for case, m in _runs(sc, ident, nominal):
         nrc, mm, orc = m["nrc"], m["mmac"], m["oracle"]
         if case == "fault-free":
-            lim, plim = NO_HARM_RATIO * nrc.rms_error_m + NO_HARM_RMS_M, nrc.max_error_m + NO_HARM_PEAK_M
+            lim, plim = harm_limits(nrc)
             ok = mm.rms_error_m <= lim and mm.max_error_m <= plim
             target = f"no harm: ≤ {_um(lim)} RMS, ≤ {_um(plim)} worst"
         else:

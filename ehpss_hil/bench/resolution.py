@@ -7,7 +7,7 @@ through ``dbc-map``), over the paper's cases 1–3 and the fault-free run, for e
 nrc, mmac and the oracle. A swept LSB is *fine* when, in every run:
 
 * no harm: mmac RMS ≤ NO_HARM_RATIO · nrc RMS + NO_HARM_RMS_M and mmac's worst error ≤ nrc's
-  + NO_HARM_PEAK_M (report/metrics.py, bench/control.py);
+  + NO_HARM_PEAK_M (report/metrics.py :func:`does_harm`);
 * compensated (cases 1–3): mmac RMS ≤ oracle RMS + COMPENSATED_RMS_M at the same LSB;
 * cheap (fault-free): mmac RMS ≤ its RMS with every signal at the native LSB + QUALITY_RMS_M.
 
@@ -33,12 +33,11 @@ from pathlib import Path
 
 from .. import PROJECT_ROOT
 from ..protocol.logical import LOGICAL_SIGNALS
-from ..report.metrics import COMPENSATED_RMS_M, NO_HARM_RATIO, NO_HARM_RMS_M, RunMetrics
+from ..report.metrics import COMPENSATED_RMS_M, RunMetrics, does_harm
 from ..scenario import load_scenario
 from ..sim.jobs import Job, default_jobs, run_jobs
 from ..sim.rescale import native_lsb, rescaled_dbc
 from .common import Scorecard, write_json
-from .control import NO_HARM_PEAK_M
 
 NAME = "resolution"
 HELP = "sweep of field resolutions (position, spool, pressure, currents) × cases 1–3: check-config's limits"
@@ -104,10 +103,7 @@ class Cell:
         the native LSBs); empty when the cell is fine."""
         out = []
         mm, nrc = self.mmac, self.nrc
-        if (
-            mm.rms_error_m > NO_HARM_RATIO * nrc.rms_error_m + NO_HARM_RMS_M
-            or mm.max_error_m > nrc.max_error_m + NO_HARM_PEAK_M
-        ):
+        if does_harm(mm, nrc):
             out.append("harm")
         if self.scenario in FAULT_SCENARIOS and mm.rms_error_m > self.oracle.rms_error_m + COMPENSATED_RMS_M:
             out.append("uncompensated")

@@ -33,6 +33,9 @@ PEAK_WINDOW_S = 0.3
 #: a campaign run beyond it counts as harm
 NO_HARM_RATIO = 1.1
 NO_HARM_RMS_M = 1e-6
+#: … and, where a run's worst error is judged too (bench, tests), mmac's worst |x − y_m| ≤
+#: nrc's + NO_HARM_PEAK_M (m)
+NO_HARM_PEAK_M = 10e-6
 #: a fault counts as compensated when mmac RMS ≤ oracle RMS + COMPENSATED_RMS_M (m)
 COMPENSATED_RMS_M = 5e-6
 
@@ -86,6 +89,18 @@ class RunMetrics:
             "switches": self.switches,
             "events": [e.to_json() for e in self.events],
         }
+
+
+def harm_limits(nrc: RunMetrics) -> tuple[float, float]:
+    """The RMS and worst |x − y_m| (m) mmac may reach without doing harm on the run where the
+    plain loop reached ``nrc``'s."""
+    return NO_HARM_RATIO * nrc.rms_error_m + NO_HARM_RMS_M, nrc.max_error_m + NO_HARM_PEAK_M
+
+
+def does_harm(mmac: RunMetrics, nrc: RunMetrics) -> bool:
+    """mmac's RMS or worst error beyond :func:`harm_limits` of the plain loop's on the same run."""
+    lim, plim = harm_limits(nrc)
+    return mmac.rms_error_m > lim or mmac.max_error_m > plim
 
 
 def _changes(a: np.ndarray) -> np.ndarray:
