@@ -27,11 +27,11 @@ The statistic is the log-likelihood ratio over an exponentially weighted window,
 ``σ̂² = min(E_D, E_Q)/Σw``; H_Q (|θ_pos − 1| ≥ ``min_deviation``) is entered
 when ``Λ > Λ_on`` and left when ``Λ < −Λ_on``; H_D is decided when ``Λ < −Λ_D`` with the larger
 ``Λ_D`` (``flow_gain_sensor_threshold``): a flow loss compensated as a drift costs more than a
-drift left to the plain loop; and before the plant has shown its own flow gain, only for a
-deviation beyond ``velocity_gain_uncertainty`` (:meth:`PressureTest._fault_possible`: within it a
-plant stiffer or softer than the model reads like a sensor gain, whatever the pressure says).
-A decision ends only when neither θ_pos nor the position bank's
-level model deviates (control/attribution.py uses it).
+drift left to the plain loop; and, while the pressure gain is uncertain, before the plant has
+shown its own flow gain only for a deviation beyond ``velocity_gain_uncertainty``
+(:meth:`PressureTest._fault_possible`: within it a plant stiffer or softer than the model reads
+like a sensor gain, whatever the pressure says). A decision ends only when neither θ_pos nor the
+position bank's level model deviates (control/attribution.py uses it).
 The compensation always uses θ_pos; only its split between the sensor and the flow gain comes
 from the pressure, so the pressure noise never enters the loop directly.
 """
@@ -320,11 +320,12 @@ class PressureTest:
         """Whether H_D may be decided for a product at ``theta``: the load pressure tells a
         sensor gain from a flow gain, but not from a plant whose velocity gain is off the model
         through its stiffness (ω_h², which moves the product and leaves the pressure's high
-        band alone). So before the plant has shown its own flow gain (:attr:`plant_seen`, a
-        pressure baseline learned, or its own adopted: :attr:`k_base`), a deviation within
-        ``velocity_gain_uncertainty`` of 1 is left undecided (and adopted as the plant's when it
-        stays so); one beyond it is a fault."""
-        if self.plant_seen or self.pressure_gain_learned or self.k_base != 1.0:
+        band alone). So while the plant's pressure gain is uncertain
+        (``pressure_gain_uncertainty`` > 0, the uncertainty ω_h is in) and before the plant has
+        shown its own flow gain (:attr:`plant_seen`, a pressure baseline learned, or its own
+        adopted: :attr:`k_base`), a deviation within ``velocity_gain_uncertainty`` of 1 is left
+        undecided (and adopted as the plant's when it stays so); one beyond it is a fault."""
+        if self._band == 0.0 or self.plant_seen or self.pressure_gain_learned or self.k_base != 1.0:
             return True
         return abs(theta - 1.0) > self._vband
 
