@@ -8,6 +8,8 @@ limits only; nothing is timed.
 
 from __future__ import annotations
 
+import csv
+import io
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -44,14 +46,16 @@ MIN_CHECKED_ROWS = 100
 CAPTURE_ATTEMPTS = 3
 
 
+def _csv_rows(csv_text: str) -> list[dict[str, str]]:
+    """An exported CSV's rows, by column name."""
+    return list(csv.DictReader(io.StringIO(csv_text)))
+
+
 def _rows_past_lag(csv_text: str) -> int:
     """Rows of an exported CSV at least :data:`ROW_LAG_S` after the first row with a commanded
     current: no more than :func:`_csv_matches_log` will check (the controller logged its first
     command no later than the monitor received it)."""
-    import csv as csvmod
-    import io
-
-    rows = list(csvmod.DictReader(io.StringIO(csv_text)))
+    rows = _csv_rows(csv_text)
     first = next((float(r["t_s"]) for r in rows if r["i_cmd_a"] != ""), None)
     return 0 if first is None else sum(float(r["t_s"]) >= first + ROW_LAG_S for r in rows)
 
@@ -62,12 +66,9 @@ def _csv_matches_log(csv_text: str, ctl_log: Path, emu_log: Path) -> tuple[int, 
     emulator) logged them, in the same order (a row holds the newest value: it may repeat one),
     each sent before the monitor received it and at most :data:`ROW_LAG_S` earlier. Rows from
     before the controller started logging are not checked."""
-    import csv as csvmod
-    import io
-
     frames = {"VALVE_CMD": decode_log(ctl_log, FrameCodec())["VALVE_CMD"]}
     frames["SENSOR_POS"] = decode_log(emu_log, FrameCodec())["SENSOR_POS"]
-    rows = list(csvmod.DictReader(io.StringIO(csv_text)))
+    rows = _csv_rows(csv_text)
     log_from = float(frames["VALVE_CMD"]["t_s"][0]) + ROW_LAG_S
     bad: list[str] = []
     checked = 0

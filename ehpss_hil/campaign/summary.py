@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..report.metrics import COMPENSATED_RMS_M, NO_HARM_RATIO, NO_HARM_RMS_M
+from ..report.metrics import COMPENSATED_RMS_M, NO_HARM_RATIO, NO_HARM_RMS_M, harm_rms_limit_m
 from .sampling import RunPlan
 from .scenario_file import write_scenario
 
@@ -89,7 +89,7 @@ def is_compensated(mmac_m: float, oracle_m: float) -> bool:
 
 def is_harm(mmac_m: float, nrc_m: float) -> bool:
     """mmac RMS beyond the do-no-harm bound of nrc's (m)."""
-    return mmac_m > NO_HARM_RATIO * nrc_m + NO_HARM_RMS_M
+    return mmac_m > harm_rms_limit_m(nrc_m)
 
 
 def summarize(rows: Sequence[dict[str, Any]], modes: Sequence[str]) -> list[ClassSummary]:

@@ -91,10 +91,16 @@ class RunMetrics:
         }
 
 
+def harm_rms_limit_m(nrc_rms_m: float) -> float:
+    """The RMS (m) mmac may reach without doing harm where the plain loop reached ``nrc_rms_m``
+    (the campaigns judge this alone)."""
+    return NO_HARM_RATIO * nrc_rms_m + NO_HARM_RMS_M
+
+
 def harm_limits(nrc: RunMetrics) -> tuple[float, float]:
     """The RMS and worst |x − y_m| (m) mmac may reach without doing harm on the run where the
     plain loop reached ``nrc``'s."""
-    return NO_HARM_RATIO * nrc.rms_error_m + NO_HARM_RMS_M, nrc.max_error_m + NO_HARM_PEAK_M
+    return harm_rms_limit_m(nrc.rms_error_m), nrc.max_error_m + NO_HARM_PEAK_M
 
 
 def does_harm(mmac: RunMetrics, nrc: RunMetrics) -> bool:

@@ -171,14 +171,13 @@ class SensorAttribution:
         gain near x = 0) moves neither. ``position_m``: the reading (m); ``travel_m``: the
         spool + creep integral (m of piston travel at the nominal flow gain)."""
         fl = self._inc
-        ref = self._level_ref
-        changed = fl.at_rest and abs(theta_d - ref) > self._min_dev and theta_d >= self._failed_below
+        changed = abs(theta_d - self._level_ref) > self._min_dev and theta_d >= self._failed_below
+        if not (fl.at_rest and changed):
+            self._rest_moved = 0
+            return False
         y0, s0 = self._rest_from
         moved = abs(position_m - y0 - fl.theta_prod * (travel_m - s0))
-        if changed and moved >= self._rest_snr * fl.reading_noise_m:
-            self._rest_moved += 1
-        else:
-            self._rest_moved = 0
+        self._rest_moved = self._rest_moved + 1 if moved >= self._rest_snr * fl.reading_noise_m else 0
         return self._rest_moved >= fl.increment_window
 
     def update(
