@@ -46,12 +46,15 @@ class Rig:
         spool_m: float = SPOOL_M,
         model: int = 0,
         bias_m: float = 0.0,
+        flow: float = 1.0,
+        noise_m: float = 5e-7,
     ) -> list[bool]:
         out = []
         for _ in range(n):
-            self.x += K_C * 0.5 * (spool_m + self.spool) * TS  # the spool integral, trapezoidal
+            # the spool integral, trapezoidal, at ``flow`` times the model's flow gain
+            self.x += flow * K_C * 0.5 * (spool_m + self.spool) * TS
             self.spool = spool_m
-            y = gain * self.x + bias_m + 5e-7 * self.rng.standard_normal()
+            y = gain * self.x + bias_m + noise_m * self.rng.standard_normal()
             self.inc.product(y, spool_m)
             # no pressure evidence
             self.pt.update(0.0, 0.0, 1.0, self.inc.theta_prod, theta_d, fresh=self.inc.product_fresh)
@@ -122,6 +125,51 @@ def test_a_jump_attributes_the_model_change_it_explains_and_only_that() -> None:
     r.run(3, 1.0, gain=0.8)
     assert r.run(hold, 0.6, gain=0.8) == [False] * hold  # a change the jump does not explain
     assert not r.pt.sensor_decided
+
+
+def test_a_jump_scales_the_gain_the_reading_had_not_a_flow_loss_beside_it() -> None:
+    """A flow loss of 0.7 nothing has attributed (the increments and the model both read 0.7,
+    the pressure test undecided): a drift of 0.9 then jumps the reading and the model moves to
+    0.63. The jump explains the reading's change from 1 to 0.9, not the model's 0.63 (campaign
+    run 441: the loop read the sensor through k_Q times the drift and tracked 0.65·x_d), so
+    nothing is attributed; a model that moves to 0.9 is."""
+    hold = round(ControlTuning().jump_hold_s / TS)
+    for model_after, attributed in ((0.63, False), (0.9, True)):
+        r = Rig()
+        r.run(300, 0.7, flow=0.7)
+        assert r.inc.theta_prod == pytest.approx(0.7, abs=0.02) and not r.pt.attributed
+        r.run(3, 0.7, gain=0.9, flow=0.7)
+        out = r.run(hold, model_after, gain=0.9, flow=0.7)
+        assert out[0] is attributed and r.pt.sensor_decided is attributed
+
+
+def test_the_jumps_before_count_in_the_gain_the_reading_had() -> None:
+    """A drift in two steps of 0.9 whose first the model did not follow within the hold: the
+    second's model, 0.81, is the two jumps' gain and is attributed."""
+    hold = round(ControlTuning().jump_hold_s / TS)
+    r = Rig()
+    r.run(300, 1.0)
+    assert r.run(hold + 20, 1.0, gain=0.9) == [False] * (hold + 20)  # the model stays at 1
+    r.run(3, 1.0, gain=0.81)
+    assert r.run(1, 0.81, gain=0.81) == [True]
+
+
+def test_a_jump_under_noise_is_verified_as_soon_as_the_increments_tell_the_gains_apart() -> None:
+    """Under 10 µm of noise θ_prod wanders by more than ``min_deviation``/2 between excited
+    increments and never settles; the least-squares gain of the increments since the jump
+    (:attr:`.Increments.since_jump_fit`) still decides: a bias is withdrawn, a drift stands,
+    each within 0.3 s."""
+    for bias, gain, stands in ((True, 1.0, False), (False, 0.8, True)):
+        r = Rig()
+        r.run(300, 1.0, noise_m=1e-5)
+        b = -0.2 * r.x if bias else 0.0
+        r.run(3, 1.0, gain=gain, bias_m=b, noise_m=1e-5)
+        assert r.run(1, 0.8, gain=gain, bias_m=b, noise_m=1e-5) == [True]
+        assert not r.inc.product_settled
+        later = r.run(300, 0.8, gain=gain, bias_m=b, noise_m=1e-5)
+        assert later[-1] is stands and r.pt.sensor_decided is stands
+        ratio, se = r.inc.since_jump_fit
+        assert abs(ratio - gain) <= 4 * se < 0.05
 
 
 def test_a_jump_the_settled_increments_refute_is_withdrawn_and_one_they_confirm_stands() -> None:

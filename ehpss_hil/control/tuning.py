@@ -301,6 +301,12 @@ class ControlTuning:
     jump_min_change: float = field(
         default=0.01, metadata=rng(0.0, 1.0, unit="1", origin="below the pressure test's band; §5.1")
     )
+    #: a jump's attribution is verified (or withdrawn) once the increments' gain since the jump
+    #: lies this many standard errors off the midpoint of the gain before and after it
+    verify_significance: float = field(
+        default=3.0,
+        metadata=rng(0.0, 100.0, unit="1 (· standard error)", origin="§5.1: biases under 5–10 µm of noise"),
+    )
     #: a model change at rest is the sensor's only once the reading moved this many σ̂ (its
     #: one-sample noise) beyond the model's travel since the motion stopped, ``increment_window``
     #: samples in a row

@@ -48,12 +48,15 @@ class SensorAttribution:
     """Per fresh sample (:meth:`update`): may the position model in use be compensated?"""
 
     __slots__ = (
+        "_attributed",
+        "_chain",
         "_failed_below",
         "_gain",
         "_hold",
         "_inc",
         "_jump_decided",
         "_kd_before",
+        "_last_ratio",
         "_left",
         "_level_ref",
         "_min_change",
@@ -69,6 +72,7 @@ class SensorAttribution:
         "_theta_before",
         "_to",
         "_unexplained",
+        "_verify_z",
         "_was_guarded",
         "by_jump",
         "jump",
@@ -96,6 +100,7 @@ class SensorAttribution:
         self._failed_below = failed_below
         self._hold = max(1, round(t.jump_hold_s / ts_s))
         self._rest_snr = t.rest_reading_snr
+        self._verify_z = t.verify_significance
         self._min_change = t.jump_min_change
         self.jump = LevelJump(inc.increment_window, t)
         self.reset()
@@ -110,6 +115,11 @@ class SensorAttribution:
         self._left = 0  # samples left in which a model change the jump explains is the sensor's
         self._to = 1.0  # the gain such a model moves to
         self._kd_before = 1.0  # θ̂_D in use before the last jump
+        self._attributed = False  # the last update attributed the model in use to the sensor
+        #: the sensor gain the reading's jumps since the reset account for, the product of their
+        #: ratios (NaN: a jump whose ratio was unknown, near x = 0)
+        self._chain = 1.0
+        self._last_ratio = 1.0  # the ratio of the jump being verified
         self._gain = math.nan  # the model a jump explained, while it is in use
         self._prod_before = 1.0  # θ_prod when last settled with no jump to verify
         #: the product a gain jump predicts (θ_prod before it × its ratio) until the settled
@@ -144,6 +154,7 @@ class SensorAttribution:
         to = self._prod_jumped
         if to == to and abs(theta_prod - self._prod_from) < abs(theta_prod - to):
             self._left = 0
+            self._chain /= self._last_ratio  # an offset: no part of the sensor's gain
             if self._jump_decided:
                 self._pt.withdraw_sensor()
             self._gain = self.jump_gain = math.nan
@@ -152,6 +163,18 @@ class SensorAttribution:
         self._prod_jumped = math.nan
         self._jump_decided = False
         self._prod_before = theta_prod
+
+    def _verifiable(self) -> bool:
+        """A jump (or a change at rest) awaits verification and the increments since tell its
+        two readings apart: the least-squares gain since it (:attr:`.Increments.since_jump_fit`)
+        lies ``verify_significance`` standard errors off the midpoint between the gain before
+        and the gain the jump predicts. Under noise the product may never settle; this decides
+        as soon as the evidence does."""
+        to = self._prod_jumped
+        if not to == to:
+            return False
+        r, se = self._inc.since_jump_fit
+        return abs(r - 0.5 * (to + self._prod_from)) > self._verify_z * se  # False while NaN
 
     def _verified_from(self) -> float:
         """The gain before a jump that its verification compares the settled product with: the
@@ -209,8 +232,11 @@ class SensorAttribution:
             # a model change with the piston at rest (False while NaN): verified like a jump
             if not pt.sensor_decided and self._level_ref >= self._failed_below:
                 self._prod_from = self._prod_before
-                self._prod_jumped = self._prod_before * theta_d / self._level_ref
+                self._last_ratio = theta_d / self._level_ref
+                self._chain *= self._last_ratio
+                self._prod_jumped = self._prod_before * self._last_ratio
                 self._jump_decided = True
+                fl.restart_fit()
             pt.decide_sensor(fl.theta_prod)
         j = self.jump
         if broken:  # the spool integral does not span the samples missed
@@ -223,17 +249,29 @@ class SensorAttribution:
             self.jumped_since_guard = guarded
             if trusted and math.isfinite(j.ratio):  # a ratio to a gain the loop trusted
                 self._left = self._hold
-                self._to = self.jump_gain = self._kd_before * j.ratio
+                # the jump scales the gain the reading had: the model in use when it was the
+                # sensor's; else the plant's own product times what the jumps so far account for
+                # (a deviation no jump made, a flow loss or a plant off the model, is no part
+                # of the sensor's gain)
+                chain = self._chain
+                before = self._kd_before if self._attributed or chain != chain else self._pt.k_base * chain
+                self._to = self.jump_gain = before * j.ratio
                 self._prod_from = self._verified_from()
                 self._prod_jumped = self._prod_from * j.ratio
                 self._jump_decided = False
+            self._chain *= j.ratio
+            self._last_ratio = j.ratio
+        elif self._verifiable():
+            self._settled_product(fl.since_jump_fit[0])
         elif fl.product_settled and fl.product_updated:
             self._settled_product(fl.theta_prod)
         if self._left > 0:
             self._left -= 1
             moved = abs(theta_d - self._kd_before) > self._min_change
             if moved and abs(theta_d - self._to) < self._min_dev and theta_d >= self._failed_below:
-                pt.decide_sensor(fl.theta_prod)
+                # the product the jump predicts: θ_prod takes no increment for M samples after it
+                to = self._prod_jumped
+                pt.decide_sensor(to if to == to else fl.theta_prod)
                 self._jump_decided = True
                 self._gain = theta_d
                 self._left = 0
@@ -250,4 +288,5 @@ class SensorAttribution:
         self._theta_before = theta_d
         if pt.sensor_current or near or not pt.sensor_decided:
             self._unexplained = False
-        return (pt.sensor_favoured or near) and not self._unexplained
+        self._attributed = (pt.sensor_favoured or near) and not self._unexplained
+        return self._attributed

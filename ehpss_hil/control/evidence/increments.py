@@ -42,6 +42,10 @@ class Increments:
         "_half_dev",
         "_hi",
         "_i",
+        "_jphi",
+        "_jxb",
+        "_jxx",
+        "_jxy",
         "_lo",
         "_m",
         "_n",
@@ -49,6 +53,7 @@ class Increments:
         "_noise_w",
         "_nsettled",
         "_null_m_s",
+        "_nv_before",
         "_p1_v",
         "_p1_y",
         "_pend",
@@ -58,6 +63,7 @@ class Increments:
         "_snr",
         "_stale",
         "_t",
+        "_tp_before",
         "_ts",
         "_ts_ring",
         "_vs",
@@ -108,13 +114,17 @@ class Increments:
         self._ts_ring = [0.0] * self._m
         self._p1_y, self._p1_v = math.nan, 0.0  # the last call's position and spool integral (m)
         #: the variance of one sample's position increment about what the spool explains (m²)
-        self._noise_var = 0.0
+        self._noise_var = self._nv_before = 0.0
+        self._tp_before = 1.0  # θ_prod before the last call
         self._t = 0.0  # time the product has spanned (s)
         self._i = self._n = 0
         self.creep.reset()
         self._pend: tuple[float, float, float, float] | None = None  # the last increment
         self._pend_j: tuple[float, float, float] | None = None  # the last increment of the joint fit
         self._since_jump = self._m + 1  # samples since the reading last jumped
+        #: Σφ², Σy·φ and Σφ·φ_next (consecutive ones) over the excited, non-overlapping
+        #: increments since the last jump (m²), and the φ of the last one taken (0: none)
+        self._jxx = self._jxy = self._jxb = self._jphi = 0.0
         #: samples since the reading last moved by more than the excitation gate over an
         #: increment (a stuck or failed sensor never does)
         self.still_samples = 0
@@ -144,10 +154,38 @@ class Increments:
         return self._m
 
     def note_jump(self) -> None:
-        """The reading jumped on the last sample: the increments spanning it teach no creep, and
-        the joint fit closes."""
+        """The reading jumped on the last sample: its increment is no noise and the increments
+        spanning it are no gain (the noise estimate and θ_prod are taken back to before it, the
+        next M − 1 increments do not move θ_prod, and θ_prod is stale until they do and settles
+        afresh), they teach no creep, the joint fit closes and the fit since the jump starts."""
         self._since_jump = 0
+        self._noise_var = self._nv_before  # a jump is no noise
+        self.theta_prod = self._tp_before  # nor is an increment spanning it a gain
+        self._anchor, self._nsettled = math.inf, 0  # what settled before it is no verdict after
+        self.product_settled = False
+        # and the product before it is no evidence of the reading after it
+        self._stale = self._m + 1
+        self.product_fresh = self.product_updated = False
+        self.restart_fit()
         self.creep.close_joint()
+
+    def restart_fit(self) -> None:
+        """Start :attr:`since_jump_fit` afresh from this sample (a jump, a change seen at rest)."""
+        self._jxx = self._jxy = self._jxb = self._jphi = 0.0
+
+    @property
+    def since_jump_fit(self) -> tuple[float, float]:
+        """The gain the reading has shown since its last jump (or :meth:`restart_fit`): the
+        least-squares ratio r = Σy·φ/Σφ² of the excited, non-overlapping M-sample increments
+        taken since, none spanning the jump, and its standard error under the reading's noise
+        (1). Consecutive increments share an endpoint, so their noises are correlated
+        (covariance −σ²; each has variance 2σ²): var r = 2σ²·(Σφ² − Σφ_i·φ_i+1)/(Σφ²)², which
+        on a steady motion falls as 1/N² — the noise of the two ends of the whole travel.
+        (NaN, inf) before the first such increment."""
+        a = self._jxx
+        if a <= 0.0:
+            return math.nan, math.inf
+        return self._jxy / a, math.sqrt(self._noise_var * max(a - self._jxb, 0.0)) / a
 
     def confirms(self, theta: float) -> bool:
         """θ_prod is settled within ``flow_gain_min_deviation``/2 of ``theta``: the increments
@@ -169,7 +207,7 @@ class Increments:
         self._t = t_now
         creep = self.creep
         rate = creep.rate_m_s
-        tp = self.theta_prod
+        tp = self._tp_before = self.theta_prod
         if rate and tp >= self._failed_below:
             self.creep_integral_m += dt * rate / tp
         self._prev = spool_m
@@ -177,6 +215,7 @@ class Increments:
         nv = self._noise_var
         if samples == 1 and y1 == y1:  # one sample's increment: the reading's noise
             r = position_m - y1 - tp * (si - self._p1_v) - rate * dt
+            self._nv_before = nv
             nv += self._noise_w * (r * r - nv)
             self._noise_var = nv
         self._p1_y, self._p1_v = position_m, si
@@ -211,7 +250,12 @@ class Increments:
         floor = self._snr * math.sqrt(nv)
         if not floor > gate:  # max(gate, floor), written out
             floor = gate
-        if n > m and abs(phi) > floor and excited:
+        if n > m and abs(phi) > floor and excited and since > m:  # none spans a jump
+            if n % m == 0:
+                self._jxx += phi * phi
+                self._jxy += y * phi
+                self._jxb += phi * self._jphi
+                self._jphi = phi
             stale = 0
             t = tp
             t += self._g * (y - t * phi) * phi / (self._c2 + phi * phi)
@@ -227,6 +271,8 @@ class Increments:
             else:  # moved off: a new run of updates starts here
                 self._anchor, self._nsettled = t, 0
                 self.product_settled = False
+        if n % m == 0 and stale:  # this M-th increment was not taken: the next is no neighbour
+            self._jphi = 0.0
         self._stale = stale
         self.product_fresh = stale <= m
         self.product_updated = stale == 0
