@@ -119,7 +119,7 @@ class SensorAttribution:
         #: the sensor gain the reading's jumps since the reset account for, the product of their
         #: ratios (NaN: a jump whose ratio was unknown, near x = 0)
         self._chain = 1.0
-        self._last_ratio = 1.0  # the ratio of the jump being verified
+        self._last_ratio = 1.0  # the ratio of the jump (or change at rest) being verified
         self._gain = math.nan  # the model a jump explained, while it is in use
         self._prod_before = 1.0  # θ_prod when last settled with no jump to verify
         #: the product a gain jump predicts (θ_prod before it × its ratio) until the settled
@@ -258,9 +258,9 @@ class SensorAttribution:
                 self._to = self.jump_gain = before * j.ratio
                 self._prod_from = self._verified_from()
                 self._prod_jumped = self._prod_from * j.ratio
+                self._last_ratio = j.ratio
                 self._jump_decided = False
-            self._chain *= j.ratio
-            self._last_ratio = j.ratio
+            self._chain *= j.ratio  # NaN near x = 0: the reading's gain is no longer known
         elif self._verifiable():
             self._settled_product(fl.since_jump_fit[0])
         elif fl.product_settled and fl.product_updated:
