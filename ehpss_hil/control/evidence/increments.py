@@ -122,9 +122,7 @@ class Increments:
         self._pend: tuple[float, float, float, float] | None = None  # the last increment
         self._pend_j: tuple[float, float, float] | None = None  # the last increment of the joint fit
         self._since_jump = self._m + 1  # samples since the reading last jumped
-        #: Σφ², Σy·φ and Σφ·φ_next (consecutive ones) over the excited, non-overlapping
-        #: increments since the last jump (m²), and the φ of the last one taken (0: none)
-        self._jxx = self._jxy = self._jxb = self._jphi = 0.0
+        self.restart_fit()
         #: samples since the reading last moved by more than the excitation gate over an
         #: increment (a stuck or failed sensor never does)
         self.still_samples = 0
@@ -171,6 +169,8 @@ class Increments:
 
     def restart_fit(self) -> None:
         """Start :attr:`since_jump_fit` afresh from this sample (a jump, a change seen at rest)."""
+        #: Σφ², Σy·φ and Σφ·φ_next (consecutive ones) over the excited, non-overlapping
+        #: increments since the last jump (m²), and the φ of the last one taken (0: none)
         self._jxx = self._jxy = self._jxb = self._jphi = 0.0
 
     @property
