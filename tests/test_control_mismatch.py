@@ -95,10 +95,7 @@ def test_a_jump_whose_increments_keep_their_gain_is_no_sensor_gain() -> None:
     loop). The product of the increments, settled after the jump, stayed at its value before it
     (an offset moves no increment): the jump's attribution is withdrawn."""
     mm, nrc = _run("me-kc083-bias", "mmac"), _run("me-kc083-bias", "nrc")
-    assert mm.rms_error_m <= 1.1 * nrc.rms_error_m + 1 * UM
-    # the ~30 ms the product takes to settle, the bias compensated as a gain: its worst peak
-    # (233 µm against nrc's 191; the family's no-harm row counts it, docs/control.md §5.1)
-    assert mm.max_error_m <= nrc.max_error_m + 50 * UM
+    assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
 
 
 def test_a_sensor_found_dead_under_h_q_keeps_the_plants_flow_gain() -> None:
@@ -160,11 +157,12 @@ def test_a_bias_on_a_plant_off_the_model_is_not_its_product_read_as_a_sensor_gai
     47 µm: its jump moved the model by the bias's ratio, and the jump's ratio times the model,
     the plant's own product, was attributed to the sensor (217.5 µm against nrc's 46.7). Now
     the jump scales the sensor's gain, 1: nothing is attributed and the RMS is nrc's. The jump
-    still raises the position guard and x̂, which integrates at the model's flow gain, carries
-    the loop for ~5 ms: a worst peak of 106 µm against nrc's 56 (docs/control.md §9.2)."""
+    raises the position guard; x̂, which integrates at the model's flow gain, stood 117 µm above
+    the reading and carried the loop from its own level for ~7 ms, then the loop blended back
+    from there: a worst peak of 106 µm against nrc's 56. Under a guard a jump raised, x̂ carries
+    the loop from the last trusted reading (docs/control.md §3.5)."""
     mm, nrc = _run("nl-kc080-bias", "mmac"), _run("nl-kc080-bias", "nrc")
-    assert mm.rms_error_m <= harm_limits(nrc)[0], (mm, harm_limits(nrc))
-    assert mm.max_error_m <= nrc.max_error_m + 60 * UM
+    assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
 
 
 def test_a_bias_under_noise_is_withdrawn_without_a_settled_product() -> None:

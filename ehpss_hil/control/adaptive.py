@@ -78,6 +78,7 @@ class MmacController(LoopBase):
         ev = self.evidence
         self._position_guarded = ev.position_guarded  # type: ignore[method-assign]
         self._guarded_gain = ev.guarded_gain  # type: ignore[method-assign]
+        self._jumped_under_guard = ev.jumped_under_guard  # type: ignore[method-assign]
         self._sensor_live = ev.sensor_live  # type: ignore[method-assign]
         self._sensor_dead = ev.sensor_dead  # type: ignore[method-assign]
         self._sensor_follows_spool = ev.sensor_follows_spool  # type: ignore[method-assign]

@@ -59,12 +59,15 @@ class LoopBase(Controller):
         "_applied_dft",
         "_applied_loe",
         "_blend",
+        "_blend_from",
         "_blend_step",
         "_cmd",
         "_echo",
         "_echo_short_a",
         "_failed_below",
         "_held_offset",
+        "_offset_kept",
+        "_offset_share",
         "_ramp_d",
         "_ramp_l",
         "_ramp_n",
@@ -72,6 +75,7 @@ class LoopBase(Controller):
         "_sent",
         "_sent_prev",
         "_stop_level_m",
+        "_trusted_offset",
         "_warm_left",
         "_warm_samples",
         "_y_s",
@@ -128,6 +132,7 @@ class LoopBase(Controller):
         self._return_gap_m = self.tuning.sensor_return_gap * self.scale_pos_m
         tb = self.tuning.feedback_blend_s
         self._blend_step = 1.0 if tb <= ts_s else ts_s / tb
+        self._offset_share = self.tuning.velocity_gain_uncertainty
         self._blend = 1.0
         self._echo = 0.0
         self._y_s = 0.0
@@ -160,6 +165,9 @@ class LoopBase(Controller):
         self._applied_loe = self._applied_dft = 1.0
         self._blend = 1.0
         self._held_offset = 0.0  # fed-back position − k̂_Q·x̂ at the last trusted sample (m)
+        self._trusted_offset = 0.0  # the same at the last sample the models trusted the sensor (m)
+        self._blend_from = 0.0  # the offset from x̂ the blend back to the sensor starts at (m)
+        self._offset_kept = False  # x̂ has carried the loop from _trusted_offset since the reading jumped
         self._warm_left = self._warm_samples
         self._reset_mode()
 
@@ -232,9 +240,13 @@ class LoopBase(Controller):
     def _close(self, meas: Measurement) -> ValveCommand:
         """Common tail: trust decision, anchoring, feedback, PI, compensation.
 
-        While the sensor is trusted the fed-back position is ``x̂ + b·(y_s/θ̂_D − x̂)`` with the
-        blend b ramping to 1 over ``feedback_blend_s`` after a period of distrust (b = 1: exactly
-        ``y_s/θ̂_D``); untrusted: x̂ alone. This makes the return to the sensor bumpless.
+        While the sensor is trusted the fed-back position is ``x̂ + o + b·(y_s/θ̂_D − x̂ − o)``
+        with the blend b ramping to 1 over ``feedback_blend_s`` after a period of distrust (b = 1:
+        exactly ``y_s/θ̂_D``) and o the offset the distrust ended at; untrusted: x̂ alone (o = 0),
+        or, under a position guard the reading jumped in, x̂ plus the offset of the last reading
+        the models trusted, if a flow gain inside the uncertainty set explains that offset
+        (x̂'s own error on a plant off the model, not the reading's). This makes the switches
+        to and from the sensor bumpless.
         """
         td = self.k_dft_hat
         fresh = meas.fresh
@@ -271,12 +283,24 @@ class LoopBase(Controller):
             b = self._blend
             if b < 1.0:
                 b = self._blend = min(1.0, b + self._blend_step)
-                y = model_x + b * (y - model_x)
+                base = model_x + self._blend_from
+                y = base + b * (y - base)
             self._held_offset = y - model_x
+            self._offset_kept = False
+            if model_trusted:  # x̂'s own error, if a flow gain inside the uncertainty set explains it
+                off = self._held_offset
+                self._trusted_offset = off if abs(off) <= self._offset_share * abs(model_x) else 0.0
             return self._finish(meas, self.k_f * y)
         if meas.fresh:  # the sensor not trusted: x̂ itself
             self._blend = 0.0
-            self._held_offset = 0.0
+            if guarded and self._jumped_under_guard():
+                self._held_offset = self._trusted_offset
+                self._offset_kept = True
+            elif self._offset_kept:  # released with the sensor still out: into x̂ over the blend
+                self._held_offset *= 1.0 - self._blend_step
+            else:
+                self._held_offset = 0.0
+            self._blend_from = self._held_offset
         # a sample without data: x̂'s motion since the last fed-back position, which may stand
         # off x̂ (a raw sensor fed back while x̂ integrates at a flow gain that is not the plant's)
         return self._finish(meas, self.k_f * (model_x + self._held_offset))
@@ -298,6 +322,10 @@ class LoopBase(Controller):
         elif self.sensor_held_off and meas.fresh:
             gap = abs(meas.position_m / theta_d - self.k_q_hat * self.xhat.x)
             self.sensor_held_off = gap > self._return_gap_m and not self._sensor_follows_spool()
+
+    def _jumped_under_guard(self) -> bool:
+        """The reading jumped since the position guard rose; never in the base loop."""
+        return False
 
     def _guarded_gain(self) -> float | None:
         """Under the position guard: the gain to read a live sensor through instead of handing

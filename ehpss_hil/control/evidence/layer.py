@@ -325,6 +325,10 @@ class EvidenceLayer:
         """The position guard is up and the deviation is not the flow gain's."""
         return self.pos_sup.guarded and not self.pressure.flow_fault
 
+    def jumped_under_guard(self) -> bool:
+        """The reading jumped since the position guard rose."""
+        return self.attribution.jumped_since_guard
+
     def guarded_gain(self) -> float | None:
         """Under the guard, the gain to read a live sensor through (None: x̂ carries the loop).
         x̂ integrates the spool at the model's flow gain, so on a plant off the model it is the
