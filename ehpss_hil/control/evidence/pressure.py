@@ -76,6 +76,7 @@ class PressureTest:
         "_suu",
         "_tdev",
         "_theta_ref",
+        "_tl_ref",
         "_tprev",
         "_tq",
         "_tq_ref",
@@ -138,6 +139,7 @@ class PressureTest:
         self.flow_fault = False
         self.llr = 0.0
         self._theta_ref = self.k_base
+        self._tl_ref = math.nan  # the settled k̂_LOE a move is measured from (NaN: not settled yet)
         self._tq = 1.0  # θ_pos averaged over about M excited updates: H_Q's gain in the test
         self._tprev = 1.0
         self._tdev = 0.0  # the mean step of θ_pos between excited updates (its wander)
@@ -255,6 +257,18 @@ class PressureTest:
             return self.k_q
         if not fresh:  # θ_pos is stale (no excited increment): nothing to test
             return self.k_q
+        tl_ref = self._tl_ref
+        if tl_ref != tl_ref:  # NaN: k̂_LOE not yet settled since the reset (being identified)
+            if healthy:
+                self._tl_ref = theta_l
+        elif abs(theta_l - tl_ref) > self._min_dev * tl_ref:
+            # k̂_LOE moved off a value the spool channel had settled on: the LOE changed, and the
+            # window's samples from before the change are about another plant (its k̂_LOE-free
+            # sums would weigh them with the new k̂_LOE); a decision taken stands on the
+            # evidence gathered since
+            self._tl_ref = theta_l
+            if self.flow_fault or self.sensor_decided:
+                self.restart()
         kb = self.k_base
         if not self.flow_fault and abs(theta_pos - kb) < self._min_dev * kb:
             # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
