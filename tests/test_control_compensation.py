@@ -57,8 +57,11 @@ def test_switches_are_bumpless(name: str) -> None:
     for k in sw:
         normal[max(k - 3, 0) : k + 3] = False
     for k in sw:
-        # no jump in z, nor in the PI output, beyond the largest ordinary one-sample change
-        assert dz[k - 1] <= dz[normal].max()
-        assert du[k - 1] <= du[normal].max()
+        # no jump in z, nor in the PI output, beyond the largest ordinary one-sample change. An
+        # LOE switch follows the largest error of the run (the loop ran at half its gain until
+        # the switch), so its own integration step may be the largest: a margin of 1.5× (a
+        # reset of z, 29 µA at case 1's switch, would be 33× the largest ordinary step)
+        assert dz[k - 1] <= 1.5 * dz[normal].max()
+        assert du[k - 1] <= 1.5 * du[normal].max()
     # the current is exactly the PI output divided by the estimate in use (the compensation)
     np.testing.assert_allclose(d["i"] * np.maximum(d["kl"], 0.05), d["u"], rtol=1e-12, atol=1e-15)

@@ -84,10 +84,13 @@ def test_a_load_that_pushes_through_the_leakage_does_no_harm() -> None:
 def test_a_single_rod_cylinder_is_no_longer_left_to_x_hat() -> None:
     """Area ratio 0.6: a 5.3 mm/s creep from power-on. x̂ carried the loop away from a live
     sensor (13.4 mm RMS, the piston 23 mm off); now the sensor keeps the loop until the creep is
-    known (0.1 s), and x̂ integrates it after. Not yet harmless (nrc: 8.2 µm, mmac 0.14 mm): what
-    is left is the asymmetry of the two directions taken for a drift, 40 % where the uncertainty
-    set names 15 % (docs/control.md §9)."""
-    assert _run("plant/nonlinear-single-rod.yaml", "mmac").rms_error_m < 1000 * UM
+    known (0.1 s), and x̂ integrates it after. The pressure test then decided H_D at 0.13 s on a
+    product of 0.67 with the plant healthy, and the loop compensated a gain the reading's level
+    did not show (52.4 µm RMS); before the plant has shown the model's flow gain that decision
+    now ends there (docs/control.md §5). The RMS is nrc's; a worst peak of 63 µm against nrc's
+    23 is left (the no-harm row of bench control counts it)."""
+    mm, nrc = _run("plant/nonlinear-single-rod.yaml", "mmac"), _run("plant/nonlinear-single-rod.yaml", "nrc")
+    assert mm.rms_error_m <= harm_limits(nrc)[0], (mm, harm_limits(nrc))
 
 
 def _joint(est: CreepEstimator, creep: float, gain: float, phis: list[float], seed: int = 2) -> None:

@@ -78,14 +78,20 @@ def test_evidence_taken_before_k_loe_was_identified_counts_with_the_identified_v
     known = PressureTest(PARAMS.plant, TS)
     rng = np.random.default_rng(3)
     current = 0.0
+    llr_late, llr_known = [], []
     for k in range(60):
         p = plant.load_pressure_pa + 1e4 * rng.standard_normal()
-        late.update(current, p, theta_l=1.0 if k < 25 else 0.8, theta_pos=0.7)
-        known.update(current, p, theta_l=0.8, theta_pos=0.7)
+        # the position bank's model at the sensor's gain, as a drift of 0.7 makes it
+        late.update(current, p, theta_l=1.0 if k < 25 else 0.8, theta_pos=0.7, theta_level=0.7)
+        known.update(current, p, theta_l=0.8, theta_pos=0.7, theta_level=0.7)
+        llr_late.append(late.llr)
+        llr_known.append(known.llr)
         current = 1e-4 * rng.standard_normal()
         plant.step(current)
-    assert known.llr < -ControlTuning().flow_gain_threshold
-    assert late.llr == pytest.approx(known.llr, rel=1e-9)
+    assert min(llr_known) < -ControlTuning().flow_gain_threshold
+    # from the sample k̂_LOE is known on, the same Λ sample for sample (once H_D is decided the
+    # product sits at the sensor gain it stands at: nothing left to test, Λ = 0 in both)
+    assert llr_late[25:] == pytest.approx(llr_known[25:], rel=1e-9)
     assert not late.flow_fault and late.sensor_decided
 
 
@@ -263,3 +269,20 @@ def test_the_pressure_baseline_is_the_healthy_gain_once_learned_within_its_limit
         assert b.gain == pytest.approx(expect, abs=0.01)
         b.forget()
         assert not b.learned and b.gain == 1.0
+
+
+def test_h_q_is_judged_beside_the_sensor_gain_h_d_stands_at() -> None:
+    """The sensor gain a later flow-gain change is judged beside: the product H_D was decided at
+    while it stands, 1 once withdrawn, and 1 for a failed sensor's (no flow gain is judged
+    beside a reading of 0: a campaign draw with H_D decided on a product of 0 divided by it)."""
+    pt = PressureTest(PARAMS.plant, TS)
+    assert pt.sensor_gain == 1.0
+    pt.decide_sensor(1.3)
+    assert pt.sensor_gain == pytest.approx(1.3)
+    pt.withdraw_sensor()
+    assert pt.sensor_gain == 1.0
+    pt.decide_sensor(0.0)
+    assert pt.sensor_gain == 1.0
+    for _ in range(20):  # a failed sensor's product: no division by its gain
+        pt.update(0.0, 0.0, theta_l=1.0, theta_pos=0.0)
+    assert not pt.flow_fault

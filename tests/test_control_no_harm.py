@@ -293,3 +293,17 @@ def test_a_pressure_window_judged_with_a_loe_estimate_that_moved_is_no_evidence(
     oracle = _run("kq-ramp-loe-sine", "oracle", commissioned)[1]
     assert mm.rms_error_m <= oracle.rms_error_m + 5 * UM
     assert mm.max_error_m <= oracle.max_error_m + 10 * UM
+
+
+@pytest.mark.parametrize("commissioned", [False, True])
+def test_a_flow_gain_loss_beside_a_compensated_drift_is_judged_beside_it(commissioned: bool) -> None:
+    """A drift ramped to 1.49 and compensated, then a k_Q of 0.68 that brings the product back to
+    1.01 (qualification run 593). Judged against a healthy sensor nothing deviated: H_D stood at
+    the stale 1.49 while the position model, fitting the level on an x̂ that ran 1/0.68 too
+    fast, walked to 2.5 (298 µm RMS against nrc's 249, worst 742). Judged beside the sensor gain
+    H_D stood at, the flow loss is H_Q and the drift stays compensated."""
+    mm = _run("drift-ramp-kq-sine", "mmac", commissioned)[1]
+    nrc = _run("drift-ramp-kq-sine", "nrc", commissioned)[1]
+    assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
+    if commissioned:  # the plant is the model: the pressure decides at once
+        assert mm.rms_error_m <= 0.25 * nrc.rms_error_m

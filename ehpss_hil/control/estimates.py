@@ -121,13 +121,15 @@ class Estimates:
             self.xhat.x += x0 - self.x0
             self.x0 = x0
 
-    def enter_flow(self, position_m: float, prod: float, k_loe: float) -> None:
-        """Under H_Q (a flow-gain change): the sensor healthy (k̂_DFT = 1), k̂_Q the product, the
-        current divided by k̂_LOE·k̂_Q, and x̂ (in x/k̂_Q units) kept on the sensor so that
-        nothing jumps when the test returns to H_D."""
-        self.k_q = prod
-        self.k_loe = k_loe * prod
-        self.k_dft = 1.0
+    def enter_flow(self, position_m: float, prod: float, k_loe: float, sensor: float = 1.0) -> None:
+        """Under H_Q (a flow-gain change): the sensor at the gain H_D was last decided at
+        (``sensor``, 1: healthy), k̂_Q the product less it, the current divided by k̂_LOE·k̂_Q, and
+        x̂ (in x/k̂_Q units) kept on the sensor so that nothing jumps when the test returns to
+        H_D."""
+        kq = prod / sensor
+        self.k_q = kq
+        self.k_loe = k_loe * kq
+        self.k_dft = sensor
         self.xhat.x = position_m / prod
         self.x0 = self.y0 / prod if prod >= self._failed_below else self.x0
 

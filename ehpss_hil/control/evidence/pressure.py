@@ -57,6 +57,8 @@ class PressureTest:
     __slots__ = (
         "_band",
         "_baseline",
+        "_beside",
+        "_by_test",
         "_c",
         "_d",
         "_failed_below",
@@ -68,6 +70,7 @@ class PressureTest:
         "_on",
         "_on_d",
         "_pa",
+        "_s",
         "_seen",
         "_seen_n",
         "_spp",
@@ -145,6 +148,11 @@ class PressureTest:
         self._tdev = 0.0  # the mean step of θ_pos between excited updates (its wander)
         self._hold = 0
         self.sensor_decided = False
+        #: the sensor's gain (relative to the plant's, θ_prod/k_base) H_D was last decided at:
+        #: while H_D or H_Q stands a later change of the product is judged beside it
+        self._s = 1.0
+        self._by_test = False  # H_D was decided by this test (not by a jump of the reading)
+        self._beside = 1.0  # the sensor gain H_Q is judged beside on this sample
         #: H_D decided on this sample (Λ < −``flow_gain_sensor_threshold`` on enough evidence) or
         #: by :meth:`decide_sensor` since the last :meth:`update`
         self.sensor_current = False
@@ -162,6 +170,8 @@ class PressureTest:
         self.k_q = self.k_base
         self.llr = 0.0
         self._theta_ref = self.k_base
+        self._s = 1.0
+        self._by_test = False
         self.restart()
 
     def decide_sensor(self, theta_prod: float) -> None:
@@ -171,6 +181,8 @@ class PressureTest:
         if not self.flow_fault:
             if not self.sensor_decided:
                 self._theta_ref = theta_prod
+            self._s = theta_prod / self.k_base
+            self._by_test = False
             self.sensor_decided = self.sensor_current = True
 
     def withdraw_sensor(self) -> None:
@@ -178,6 +190,7 @@ class PressureTest:
         out to be no gain change: H_D no longer decided (the test may decide it again)."""
         if not self.flow_fault:
             self.sensor_decided = self.sensor_current = False
+            self._s = 1.0
 
     def restart(self) -> None:
         """Empty the evidence window (the hypotheses or the pressure model changed); the
@@ -270,14 +283,36 @@ class PressureTest:
             if self.flow_fault or self.sensor_decided:
                 self.restart()
         kb = self.k_base
-        if not self.flow_fault and abs(theta_pos - kb) < self._min_dev * kb:
-            # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
-            # episode is over (the window starts afresh when a deviation appears)
-            if healthy and abs(theta_level - kb) < self._min_dev * kb and not self.sensor_decided:
-                self._baseline.learn(theta_l * kb * self._pa * self.s[0], pressure_pa)
-            if abs(theta_level - kb) < self._min_dev * kb and (self._w > 0.0 or self.sensor_decided):
+        dev = self._min_dev * kb
+        if self.sensor_decided and abs(theta_level - self._tq) < dev:
+            # the averaged product and the bank's model, the reading's level, agree: that is
+            # the sensor's gain H_D stands at (it follows a drift that keeps moving)
+            self._s = self._tq / kb
+        sg = self.sensor_gain
+        # a change of the product off the sensor gain H_D or H_Q stands at is judged beside it
+        beside = self._beside = sg if sg != 1.0 and abs(theta_pos / sg - kb) >= dev else 1.0
+        if beside == 1.0 and sg != 1.0 and self.sensor_decided and self._by_test and not self.plant_seen:
+            if abs(theta_level - kb) < dev:
+                # the product sits at the gain the test decided and the bank's model, the
+                # reading's level, does not show it: before the plant has shown the model's flow
+                # gain that is the plant's own (a creep or unequal areas move the increments,
+                # not the level), no gain of the sensor; the episode is over
                 self._theta_ref = kb
                 self.sensor_decided = False
+                self._s = 1.0
+                self.restart()
+                self.llr = 0.0
+                self.k_q = kb
+                return kb
+        if not self.flow_fault and beside == 1.0 and abs(theta_pos - kb) < dev:
+            # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
+            # episode is over (the window starts afresh when a deviation appears)
+            if healthy and abs(theta_level - kb) < dev and not self.sensor_decided:
+                self._baseline.learn(theta_l * kb * self._pa * self.s[0], pressure_pa)
+            if abs(theta_level - kb) < dev and (self._w > 0.0 or self.sensor_decided):
+                self._theta_ref = kb
+                self.sensor_decided = False
+                self._s = 1.0
                 self.restart()
             self.llr = 0.0
             self.k_q = kb
@@ -306,10 +341,11 @@ class PressureTest:
         self._spp = d * self._spp + pressure_pa * pressure_pa
         self._w = d * self._w + 1.0
         g = self.pressure_gain * theta_l
-        self.llr = self._llr(g * kb, g * self._tq, self._spread * self._tdev * g)
+        # H_Q: the flow gain is the product less the sensor gain it is judged beside
+        self.llr = self._llr(g * kb, g * self._tq / beside, self._spread * self._tdev * g / beside)
         self._decide(theta_pos)
         self._adopt(theta_pos)
-        self.k_q = theta_pos if self.flow_fault else self.k_base
+        self.k_q = theta_pos / self.sensor_gain if self.flow_fault else self.k_base
         return self.k_q
 
     def _adopt(self, theta: float) -> None:
@@ -342,6 +378,14 @@ class PressureTest:
         if self._band == 0.0 or self.plant_seen or self.pressure_gain_learned or self.k_base != 1.0:
             return True
         return abs(theta - 1.0) > self._vband
+
+    @property
+    def sensor_gain(self) -> float:
+        """The sensor's gain H_Q is judged beside (relative to the plant's flow gain): the one H_D
+        was last decided at while H_D or H_Q stands, else 1 (also for a failed sensor's, below
+        ``sensor_failed_below``: no flow gain is judged beside it)."""
+        s = self._s
+        return s if (self.sensor_decided or self.flow_fault) and s >= self._failed_below else 1.0
 
     @property
     def pressure_gain_learned(self) -> bool:
@@ -400,10 +444,15 @@ class PressureTest:
         if self.flow_fault:
             self.flow_fault = self.llr > -self._on
         else:
-            self.flow_fault = self.llr > self._on and abs(theta - self.k_base) >= self._min_dev * self.k_base
+            kb, beside = self.k_base, self._beside
+            self.flow_fault = self.llr > self._on and abs(theta / beside - kb) >= self._min_dev * kb
+            if self.flow_fault:  # H_Q beside the sensor gain H_D stood at (1: the deviation's own)
+                self._s = beside
         if self.flow_fault:
             self.sensor_decided = False
         elif self.llr < -self._on_d and self._fault_possible(theta):
             self.sensor_decided = self.sensor_current = True
+            self._s = self._tq / self.k_base  # the averaged product: one θ_pos wanders
+            self._by_test = True
         if (self.flow_fault or self.sensor_decided) and not was:
             self._theta_ref = theta
