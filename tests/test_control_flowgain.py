@@ -272,17 +272,23 @@ def test_the_pressure_baseline_is_the_healthy_gain_once_learned_within_its_limit
 
 
 def test_h_q_is_judged_beside_the_sensor_gain_h_d_stands_at() -> None:
-    """The sensor gain a later flow-gain change is judged beside: the product H_D was decided at
-    while it stands, 1 once withdrawn, and 1 for a failed sensor's (no flow gain is judged
-    beside a reading of 0: a campaign draw with H_D decided on a product of 0 divided by it)."""
+    """The sensor gain a later flow-gain change is judged beside: the one H_D stands at once the
+    averaged product and the position bank's model (the reading's level) both show it, 1 before
+    (an H_D decided on a product still converging is no gain to judge beside), 1 once withdrawn,
+    and 1 for a failed sensor's (a campaign draw with H_D decided on a product of 0 divided by
+    it)."""
     pt = PressureTest(PARAMS.plant, TS)
     assert pt.sensor_gain == 1.0
     pt.decide_sensor(1.3)
-    assert pt.sensor_gain == pytest.approx(1.3)
+    assert pt.sensor_gain == 1.0  # not shown by the level yet
+    for _ in range(60):
+        pt.update(0.0, 0.0, theta_l=1.0, theta_pos=1.3, theta_level=1.3)
+    assert pt.sensor_decided
+    assert pt.sensor_gain == pytest.approx(1.3, abs=0.01)
     pt.withdraw_sensor()
     assert pt.sensor_gain == 1.0
     pt.decide_sensor(0.0)
+    for _ in range(60):  # a failed sensor's product: no division by its gain
+        pt.update(0.0, 0.0, theta_l=1.0, theta_pos=0.0, theta_level=0.0)
     assert pt.sensor_gain == 1.0
-    for _ in range(20):  # a failed sensor's product: no division by its gain
-        pt.update(0.0, 0.0, theta_l=1.0, theta_pos=0.0)
     assert not pt.flow_fault

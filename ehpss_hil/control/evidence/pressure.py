@@ -71,6 +71,7 @@ class PressureTest:
         "_on_d",
         "_pa",
         "_s",
+        "_s_held",
         "_seen",
         "_seen_n",
         "_spp",
@@ -148,9 +149,10 @@ class PressureTest:
         self._tdev = 0.0  # the mean step of θ_pos between excited updates (its wander)
         self._hold = 0
         self.sensor_decided = False
-        #: the sensor's gain (relative to the plant's, θ_prod/k_base) H_D was last decided at:
-        #: while H_D or H_Q stands a later change of the product is judged beside it
+        #: the sensor's gain (relative to the plant's, θ_prod/k_base) H_D stands at: once the
+        #: reading's level shows it, a later change of the product is judged beside it
         self._s = 1.0
+        self._s_held = False  # the averaged product has sat at s since it was set
         self._by_test = False  # H_D was decided by this test (not by a jump of the reading)
         self._beside = 1.0  # the sensor gain H_Q is judged beside on this sample
         #: H_D decided on this sample (Λ < −``flow_gain_sensor_threshold`` on enough evidence) or
@@ -182,6 +184,7 @@ class PressureTest:
             if not self.sensor_decided:
                 self._theta_ref = theta_prod
             self._s = theta_prod / self.k_base
+            self._s_held = False
             self._by_test = False
             self.sensor_decided = self.sensor_current = True
 
@@ -286,13 +289,16 @@ class PressureTest:
         dev = self._min_dev * kb
         if self.sensor_decided and abs(theta_level - self._tq) < dev:
             # the averaged product and the bank's model, the reading's level, agree: that is
-            # the sensor's gain H_D stands at (it follows a drift that keeps moving)
+            # the sensor's gain H_D stands at (it follows a drift that keeps moving), and a
+            # later move of the product off it is a new change
             self._s = self._tq / kb
+            self._s_held = True
         sg = self.sensor_gain
         # a change of the product off the sensor gain H_D or H_Q stands at is judged beside it
         beside = self._beside = sg if sg != 1.0 and abs(theta_pos / sg - kb) >= dev else 1.0
-        if beside == 1.0 and sg != 1.0 and self.sensor_decided and self._by_test and not self.plant_seen:
-            if abs(theta_level - kb) < dev:
+        sd = self._s  # the gain decided, shown by the level or not
+        if self.sensor_decided and self._by_test and not self.plant_seen and sd != 1.0:
+            if abs(theta_pos / sd - kb) < dev and abs(theta_level - kb) < dev:
                 # the product sits at the gain the test decided and the bank's model, the
                 # reading's level, does not show it: before the plant has shown the model's flow
                 # gain that is the plant's own (a creep or unequal areas move the increments,
@@ -381,11 +387,13 @@ class PressureTest:
 
     @property
     def sensor_gain(self) -> float:
-        """The sensor's gain H_Q is judged beside (relative to the plant's flow gain): the one H_D
-        was last decided at while H_D or H_Q stands, else 1 (also for a failed sensor's, below
-        ``sensor_failed_below``: no flow gain is judged beside it)."""
+        """The sensor's gain H_Q is judged beside (relative to the plant's flow gain): while H_D
+        stands, the averaged product once the bank's model shows it too; under H_Q, the gain it
+        was entered beside; else 1 (also for a failed sensor's, below ``sensor_failed_below``:
+        no flow gain is judged beside it)."""
         s = self._s
-        return s if (self.sensor_decided or self.flow_fault) and s >= self._failed_below else 1.0
+        stands = self.flow_fault or (self.sensor_decided and self._s_held)
+        return s if stands and s >= self._failed_below else 1.0
 
     @property
     def pressure_gain_learned(self) -> bool:
@@ -453,6 +461,7 @@ class PressureTest:
         elif self.llr < -self._on_d and self._fault_possible(theta):
             self.sensor_decided = self.sensor_current = True
             self._s = self._tq / self.k_base  # the averaged product: one θ_pos wanders
+            self._s_held = False
             self._by_test = True
         if (self.flow_fault or self.sensor_decided) and not was:
             self._theta_ref = theta
