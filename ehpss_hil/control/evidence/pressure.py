@@ -303,10 +303,7 @@ class PressureTest:
                 # reading's level, does not show it: before the plant has shown the model's flow
                 # gain that is the plant's own (a creep or unequal areas move the increments,
                 # not the level), no gain of the sensor; the episode is over
-                self._theta_ref = kb
-                self.sensor_decided = False
-                self._s = 1.0
-                self.restart()
+                self._end_episode()
                 self.llr = 0.0
                 self.k_q = kb
                 return kb
@@ -316,10 +313,7 @@ class PressureTest:
             if healthy and abs(theta_level - kb) < dev and not self.sensor_decided:
                 self._baseline.learn(theta_l * kb * self._pa * self.s[0], pressure_pa)
             if abs(theta_level - kb) < dev and (self._w > 0.0 or self.sensor_decided):
-                self._theta_ref = kb
-                self.sensor_decided = False
-                self._s = 1.0
-                self.restart()
+                self._end_episode()
             self.llr = 0.0
             self.k_q = kb
             return kb
@@ -353,6 +347,14 @@ class PressureTest:
         self._adopt(theta_pos)
         self.k_q = theta_pos / self.sensor_gain if self.flow_fault else self.k_base
         return self.k_q
+
+    def _end_episode(self) -> None:
+        """The deviation is over: H_D no longer decided, no sensor gain carried, the window
+        empty (it starts afresh when a deviation appears)."""
+        self._theta_ref = self.k_base
+        self.sensor_decided = False
+        self._s = 1.0
+        self.restart()
 
     def _adopt(self, theta: float) -> None:
         """A deviation the window held undecided for ``undecided_evidence`` while within the
