@@ -152,7 +152,7 @@ class PressureTest:
         #: the sensor's gain (relative to the plant's, θ_prod/k_base) H_D stands at: once the
         #: reading's level shows it, a later change of the product is judged beside it
         self._s = 1.0
-        self._s_held = False  # the averaged product has sat at s since it was set
+        self._s_held = False  # the bank's model has shown s (the averaged product) since H_D was decided
         self._by_test = False  # H_D was decided by this test (not by a jump of the reading)
         self._beside = 1.0  # the sensor gain H_Q is judged beside on this sample
         #: H_D decided on this sample (Λ < −``flow_gain_sensor_threshold`` on enough evidence) or
