@@ -8,6 +8,7 @@ import pytest
 
 from ehpss_hil.control.evidence.baseline import PressureBaseline
 from ehpss_hil.control.evidence.increments import Increments
+from ehpss_hil.control.evidence.likelihood import PressureWindow
 from ehpss_hil.control.evidence.pressure import PressureTest
 from ehpss_hil.control.tuning import ControlTuning
 from ehpss_hil.physics.faults import FaultState
@@ -118,14 +119,14 @@ def test_hold_off_takes_no_evidence_and_keeps_the_decision() -> None:
     rng = np.random.default_rng(3)
     for _ in range(50):  # a deviating product: the window fills
         mon.update(1e-4 * rng.standard_normal(), 1e4 * rng.standard_normal(), 1.0, 0.5)
-    w, llr, fault = mon._w, mon.llr, mon.flow_fault
+    w, llr, fault = mon.window.w, mon.llr, mon.flow_fault
     assert w > 0.0
     mon.hold_off(5)
     for _ in range(5):  # a wild prediction error would otherwise swing the statistic
         mon.update(1e-2, 5e6, 1.0, 0.5)
-        assert (mon._w, mon.llr, mon.flow_fault) == (w, llr, fault)
+        assert (mon.window.w, mon.llr, mon.flow_fault) == (w, llr, fault)
     mon.update(1e-4, 0.0, 1.0, 0.5)
-    assert mon._w != w
+    assert mon.window.w != w
 
 
 def test_pressure_test_and_product_take_their_constants_from_the_tuning() -> None:
@@ -141,7 +142,7 @@ def test_pressure_test_and_product_take_their_constants_from_the_tuning() -> Non
     )
     mon = Increments(PARAMS.plant, TS, scale_m=1.52e-3, tuning=tun)
     test = PressureTest(PARAMS.plant, TS, tuning=tun)
-    assert test._d == math.exp(-TS / 0.2)
+    assert test.window.decay == math.exp(-TS / 0.2)
     assert test.min_deviation == 0.07
     # a position moving three times as fast as the spool integral says: the product clips at 1.3
     x = 0.0
@@ -292,3 +293,25 @@ def test_h_q_is_judged_beside_the_sensor_gain_h_d_stands_at() -> None:
         pt.update(0.0, 0.0, theta_l=1.0, theta_pos=0.0, theta_level=0.0)
     assert pt.sensor_gain == 1.0
     assert not pt.flow_fault
+
+
+def test_pressure_window_fits_and_ratio_match_the_weighted_sums() -> None:
+    """The window's residual energy is Σw·(P_L − ĝ·u)² with the exponential weights, for the
+    best ĝ clipped to the band; Λ favours the gain the data were made with, and is 0 where
+    both bands hold the fitted gain."""
+    rng = np.random.default_rng(7)
+    n, d = 400, 0.99
+    u = 2e4 * rng.standard_normal(n)
+    p = 0.7 * u + 2e3 * rng.standard_normal(n)
+    win = PressureWindow(d)
+    for ui, pi in zip(u, p, strict=True):
+        win.add(float(ui), float(pi))
+    w = d ** np.arange(n - 1, -1, -1)
+    assert win.w == pytest.approx(w.sum(), rel=1e-12)
+    g_ls = float(np.sum(w * u * p) / np.sum(w * u * u))
+    assert g_ls == pytest.approx(0.7, abs=0.02)
+    for lo, hi, band, g in ((1.0, 1.0, 0.0, 1.0), (0.5, 0.6, 0.1, min(g_ls, 0.66)), (0.6, 0.8, 0.0, g_ls)):
+        assert win.fit(lo, hi, band) == pytest.approx(float(np.sum(w * (p - g * u) ** 2)), rel=1e-9)
+    assert win.llr(1.0, 0.7, 0.0, 0.0) > 50.0  # H_Q at 0.7 explains the data, H_D at 1 does not
+    assert win.llr(0.7, 1.0, 0.0, 0.0) < -50.0
+    assert win.llr(0.8, 0.6, 0.0, 0.2) == 0.0  # 0.7 lies within both bands: no evidence

@@ -73,7 +73,7 @@ class MmacController(LoopBase):
         )
         self._pressure = self.evidence.pressure
         if t.flow_gain_test:  # the sample clock steps the pressure model too
-            self.clock.pressure = self._pressure
+            self.clock.pressure = self._pressure.model
         # the loop's questions go straight to the evidence (no forwarding call per cycle)
         ev = self.evidence
         self._position_guarded = ev.position_guarded  # type: ignore[method-assign]

@@ -1,13 +1,14 @@
-"""Predictors that run beside the loop: the valve model and the model position x̂ (docs/design.md §5).
+"""Predictors that run beside the loop: the valve model, the model position x̂ (docs/design.md §5)
+and the unit-gain valve + cylinder model the pressure test predicts the load pressure with.
 
-Both are built once (exact ZOH for the valve) and step with plain Python floats: for 2-state
-models a hand-written update is several times faster than numpy's small matvec.
+Each is built once (exact ZOH) and steps with plain Python floats: for models of 2–4 states a
+hand-written update is several times faster than numpy's small matvec.
 """
 
 from __future__ import annotations
 
 from ..physics.discretize import zoh
-from ..physics.model import valve_matrices
+from ..physics.model import ACC, SPOOL, SPOOL_VEL, VEL, plant_matrices, valve_matrices
 from ..physics.params import PlantParams
 
 
@@ -118,3 +119,52 @@ class ModelPosition:
     def anchor(self, position_m: float) -> None:
         """Pull x̂ toward a trusted position estimate ``position_m`` = y_s/θ̂_D (m)."""
         self.x += self._anchor * (position_m - self.x)
+
+
+class UnitPlantPredictor:
+    """The valve + cylinder at unit gains (k_LOE = k_Q = 1), driven by the applied-current echo:
+    the states ``(ẍ₁, ẋ₁, ẋ_v, x_v)`` of the exact ZOH of the design model, piston position
+    left out (nothing depends on it). ``acceleration_m_s2`` ẍ₁ (m/s²) times ``m/A_h`` is the load
+    pressure a plant with unit gains gives (:class:`.PressureTest`)."""
+
+    __slots__ = ("_c", "_mark", "s")
+
+    def __init__(self, plant: PlantParams, ts_s: float) -> None:
+        a, b = plant_matrices(plant)
+        ad, bd = zoh(a, b, ts_s)
+        idx = (ACC, VEL, SPOOL_VEL, SPOOL)
+        # the rows [A_d row i, B_d row i] one after the other (propagate unpacks them at once)
+        self._c = tuple(c for i in idx for c in (*(float(ad[i, j]) for j in idx), float(bd[i, 0])))
+        self.reset()
+
+    def reset(self) -> None:
+        """At rest."""
+        self.s = (0.0, 0.0, 0.0, 0.0)
+        self._mark = self.s
+
+    @property
+    def acceleration_m_s2(self) -> float:
+        """ẍ₁, the piston acceleration at unit gains (m/s²)."""
+        return self.s[0]
+
+    def mark(self) -> None:
+        """Remember the state (to :meth:`rewind` to it)."""
+        self._mark = self.s
+
+    def rewind(self) -> None:
+        """Back to the state at the last :meth:`mark`."""
+        self.s = self._mark
+
+    def propagate(self, current_a: float) -> None:
+        """Advance with ``current_a`` (A) held over the last sample."""
+        s0, s1, s2, s3 = self.s
+        # the rows' coefficients unpacked at once (one unpack instead of 20 subscripts)
+        a00, a01, a02, a03, b0, a10, a11, a12, a13, b1, a20, a21, a22, a23, b2, a30, a31, a32, a33, b3 = (
+            self._c
+        )
+        self.s = (
+            a00 * s0 + a01 * s1 + a02 * s2 + a03 * s3 + b0 * current_a,
+            a10 * s0 + a11 * s1 + a12 * s2 + a13 * s3 + b1 * current_a,
+            a20 * s0 + a21 * s1 + a22 * s2 + a23 * s3 + b2 * current_a,
+            a30 * s0 + a31 * s1 + a32 * s2 + a33 * s3 + b3 * current_a,
+        )

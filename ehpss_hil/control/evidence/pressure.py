@@ -1,57 +1,38 @@
 """The pressure test: is a deviation of the product a sensor drift (H_D) or a flow-gain change (H_Q)?
 
 With the piston position and the spool LVDT alone only ``k_DFT·k_Q`` is identifiable: a flow-gain
-loss downstream of the spool (k_Q < 1, e.g. a supply-pressure drop) looks exactly like a
-position-sensor drift to the position channel, and compensating it as a drift makes the loop track
-``k_Q·x_d`` (docs/design.md §11's k_Q finding). The load pressure ``P_L = m·ẍ/A_h`` does not go through
-the position sensor: ``P_L = k_LOE·k_Q·(m/A_h)·ẍ₁`` where ẍ₁ is the piston acceleration of a
-unit-gain model driven by the applied-current echo (exact ZOH of valve + cylinder).
-
-The 2.3 kPa of the 1 mm, 5 rad/s sine alone would drown in the 10 kPa sensor noise, but in closed
-loop the noise-driven valve activity gives P_L ≈ 20 kPa RMS of broadband, model-predictable
-content, so a likelihood test decides within tens of milliseconds between
-
-* H_D (sensor): k_Q = 1, k_DFT = θ_pos, and
-* H_Q (flow gain, either sign: a loss, or a plant whose flow gain is above the model's):
-  k_Q = θ_pos, k_DFT = 1,
-
-where θ_pos is the (offset-free, accurate) estimate of the product. The window holds
-k̂_LOE-free sums of ``u = (m/A_h)·ẍ₁``: ``Σw·u²``, ``Σw·u·P_L``, ``Σw·P_L²``, so evidence taken before
-the spool channel identified k̂_LOE (a power-on LOE) counts with the value known when deciding.
-It is kept empty while θ_pos is within ``min_deviation`` of 1 (nothing to attribute); from the
-moment a deviation appears it is kept while θ_pos converges, and emptied only when the spool
-model changes (the pressure model changed) or when an attributed deviation moves by more than
-``min_deviation`` (a new fault; the attribution stands until the new evidence overturns it).
-The statistic is the log-likelihood ratio over an exponentially weighted window,
-``Λ = (E_D − E_Q)/(2σ̂²)``, ``E_h = Σ w·(P_L − g_h·u)²`` with g_D = k̂_LOE, g_Q = k̂_LOE·θ_pos and
-``σ̂² = min(E_D, E_Q)/Σw``; H_Q (|θ_pos − 1| ≥ ``min_deviation``) is entered
-when ``Λ > Λ_on`` and left when ``Λ < −Λ_on``; H_D is decided when ``Λ < −Λ_D`` with the larger
-``Λ_D`` (``flow_gain_sensor_threshold``): a flow loss compensated as a drift costs more than a
-drift left to the plain loop; and, while the pressure gain is uncertain, before the plant has
-shown its own flow gain only for a deviation beyond ``velocity_gain_uncertainty``
-(:meth:`PressureTest._fault_possible`: within it a plant stiffer or softer than the model reads
-like a sensor gain, whatever the pressure says). A decision ends only when neither θ_pos nor the
-position bank's level model deviates (control/attribution.py uses it).
-The compensation always uses θ_pos; only its split between the sensor and the flow gain comes
-from the pressure, so the pressure noise never enters the loop directly.
+loss looks exactly like a position-sensor drift to the position channel. The load pressure does
+not go through the position sensor: ``P_L = k_LOE·k_Q·(m/A_h)·ẍ₁``, ẍ₁ the acceleration of a
+unit-gain model driven by the applied-current echo (:class:`.UnitPlantPredictor`). In closed loop
+the noise-driven valve activity gives P_L enough model-predictable content that a likelihood
+ratio over an exponentially weighted window (:class:`.PressureWindow`) decides within tens of
+milliseconds between H_D (k_Q = k_base, k_DFT = θ_pos/k_base) and H_Q (k_Q = θ_pos, sensor at
+its gain; either sign). H_Q is entered at Λ > ``flow_gain_threshold`` and left at the opposite;
+H_D, whose error costs more, is decided only at Λ < −``flow_gain_sensor_threshold``, and before
+the plant has shown its own flow gain only beyond ``velocity_gain_uncertainty``
+(:meth:`PressureTest._fault_possible`). A decision ends only when neither θ_pos nor the position
+bank's level model deviates. The compensation always uses θ_pos; only its split between the
+sensor and the flow gain comes from the pressure, so the pressure noise never enters the loop.
+docs/control.md §5 gives the derivation, the window's rules and the figures.
 """
 
 from __future__ import annotations
 
 import math
 
-from ...physics.discretize import zoh
-from ...physics.model import ACC, SPOOL, SPOOL_VEL, VEL, plant_matrices
 from ...physics.params import PlantParams
+from ..predictors import UnitPlantPredictor
 from ..tuning import ControlTuning
 from .baseline import PressureBaseline
+from .likelihood import PressureWindow
 
 
 class PressureTest:
     """Decides H_D / H_Q each sample; :attr:`k_q` is 1.0 (H_D) or the estimated product (H_Q).
-    The product θ_pos comes from :class:`.Increments`; this class holds the P_L model (stepped by
-    the sample clock: :meth:`propagate`, :meth:`mark`, :meth:`rewind`), the evidence window,
-    the plant's flow gain and the decision; the healthy pressure baseline is a
+    The product θ_pos comes from :class:`.Increments`; this class holds the plant's flow gain,
+    the sensor gain a deviation is judged beside and the decision; the unit-gain P_L model is
+    :attr:`model` (a :class:`.UnitPlantPredictor`, stepped by the sample clock between updates),
+    the evidence :attr:`window` a :class:`.PressureWindow`, the healthy pressure baseline a
     :class:`.PressureBaseline`."""
 
     __slots__ = (
@@ -59,12 +40,9 @@ class PressureTest:
         "_baseline",
         "_beside",
         "_by_test",
-        "_c",
-        "_d",
         "_failed_below",
         "_hold",
         "_m",
-        "_mark",
         "_min_dev",
         "_min_evidence",
         "_on",
@@ -74,10 +52,7 @@ class PressureTest:
         "_s_held",
         "_seen",
         "_seen_n",
-        "_spp",
         "_spread",
-        "_sup",
-        "_suu",
         "_tdev",
         "_theta_ref",
         "_tl_ref",
@@ -86,25 +61,23 @@ class PressureTest:
         "_tq_ref",
         "_undecided",
         "_vband",
-        "_w",
         "flow_fault",
         "k_base",
         "k_q",
         "llr",
+        "model",
         "plant_seen",
-        "s",
         "sensor_current",
         "sensor_decided",
+        "window",
     )
 
     def __init__(self, plant: PlantParams, ts_s: float, tuning: ControlTuning | None = None) -> None:
         t = tuning if tuning is not None else ControlTuning()
-        a, b = plant_matrices(plant)
-        ad, bd = zoh(a, b, ts_s)
-        idx = (ACC, VEL, SPOOL_VEL, SPOOL)
-        # the rows [A_d row i, B_d row i] one after the other (propagate unpacks them at once)
-        self._c = tuple(c for i in idx for c in (*(float(ad[i, j]) for j in idx), float(bd[i, 0])))
-        self._d = math.exp(-ts_s / t.flow_gain_window_s)
+        #: the valve + cylinder at unit gains, stepped on the current echo by the sample clock
+        self.model = UnitPlantPredictor(plant, ts_s)
+        #: the evidence: P_L against the unit-gain prediction, over ``flow_gain_window_s``
+        self.window = PressureWindow(math.exp(-ts_s / t.flow_gain_window_s))
         self._on = t.flow_gain_threshold
         self._on_d = t.flow_gain_sensor_threshold
         self._min_dev = t.flow_gain_min_deviation
@@ -137,8 +110,7 @@ class PressureTest:
         """At rest, hypothesis H_D (k_Q = 1 · k_base), empty window; what is known of the plant
         (its flow gain, whether it was seen at the model's, the pressure baseline) is kept: a
         fail-safe recovery does not change the plant (:meth:`forget_plant` forgets it)."""
-        self.s = (0.0, 0.0, 0.0, 0.0)
-        self._mark = self.s
+        self.model.reset()
         self.k_q = self.k_base
         self.flow_fault = False
         self.llr = 0.0
@@ -198,7 +170,7 @@ class PressureTest:
     def restart(self) -> None:
         """Empty the evidence window (the hypotheses or the pressure model changed); the
         decision stands until new evidence overturns it."""
-        self._suu = self._sup = self._spp = self._w = 0.0
+        self.window.empty()
         self._tq_ref = 1.0  # the product the window's evidence is about (set by its first sample)
 
     def hold_off(self, samples: int) -> None:
@@ -207,28 +179,6 @@ class PressureTest:
         the valve and cylinder dynamics forget the error, and a prediction error favours the
         hypothesis with the smaller gain — a false H_Q."""
         self._hold = max(self._hold, samples)
-
-    def mark(self) -> None:
-        """Remember the model state (to :meth:`rewind` to it)."""
-        self._mark = self.s
-
-    def rewind(self) -> None:
-        """Back to the model state at the last :meth:`mark`."""
-        self.s = self._mark
-
-    def propagate(self, current_a: float) -> None:
-        """Advance the unit-gain valve + cylinder model with the current echo (A)."""
-        s0, s1, s2, s3 = self.s
-        # the rows' coefficients unpacked at once (one unpack instead of 20 subscripts)
-        a00, a01, a02, a03, b0, a10, a11, a12, a13, b1, a20, a21, a22, a23, b2, a30, a31, a32, a33, b3 = (
-            self._c
-        )
-        self.s = (
-            a00 * s0 + a01 * s1 + a02 * s2 + a03 * s3 + b0 * current_a,
-            a10 * s0 + a11 * s1 + a12 * s2 + a13 * s3 + b1 * current_a,
-            a20 * s0 + a21 * s1 + a22 * s2 + a23 * s3 + b2 * current_a,
-            a30 * s0 + a31 * s1 + a32 * s2 + a33 * s3 + b3 * current_a,
-        )
 
     def update(
         self,
@@ -250,19 +200,10 @@ class PressureTest:
         increment within the last M samples (:attr:`.Increments.product_fresh`); ``updated``: it
         had one on this sample, and ``increment_window`` (M) of them make the average θ_pos H_Q is judged
         with (one sample's θ_pos wanders with the position noise: a dip is no evidence)."""
-        self.propagate(current_a)
+        self.model.propagate(current_a)
         self.sensor_current = False
         if updated:
-            m = self._m
-            self._tq += (theta_pos - self._tq) / m
-            self._tdev += (abs(theta_pos - self._tprev) - self._tdev) / m
-            self._tprev = theta_pos
-            if abs(self._tq - 1.0) < self._min_dev:
-                self._seen += 1
-                if self._seen >= self._seen_n:
-                    self.plant_seen = True
-            else:
-                self._seen = 0
+            self._average(theta_pos)
         if self.flow_fault and theta_pos < self._failed_below:
             # a failed sensor is never a flow-gain loss, also while evidence is held off or
             # stale (k̂_Q = θ_pos ≈ 0 would divide the position by nothing)
@@ -273,80 +214,127 @@ class PressureTest:
             return self.k_q
         if not fresh:  # θ_pos is stale (no excited increment): nothing to test
             return self.k_q
+        self._follow_loe(theta_l, healthy)
+        beside = self._judged_beside(theta_pos, theta_level)
+        if self._unseen_gain_over(theta_pos, theta_level) or self._no_deviation(
+            theta_pos, theta_level, beside, theta_l, pressure_pa, healthy
+        ):
+            self.llr = 0.0
+            self.k_q = self.k_base
+            return self.k_q
+        self._gather(theta_pos, theta_l, pressure_pa, beside)
+        self._decide(theta_pos)
+        self._adopt(theta_pos)
+        self.k_q = theta_pos / self.sensor_gain if self.flow_fault else self.k_base
+        return self.k_q
+
+    def _average(self, theta_pos: float) -> None:
+        """An excited update of θ_pos: its average over about M of them (H_Q's gain in the test),
+        its mean step (its wander), and whether the average has stood at 1 for
+        ``plant_seen_s`` (:attr:`plant_seen`)."""
+        m = self._m
+        self._tq += (theta_pos - self._tq) / m
+        self._tdev += (abs(theta_pos - self._tprev) - self._tdev) / m
+        self._tprev = theta_pos
+        if abs(self._tq - 1.0) < self._min_dev:
+            self._seen += 1
+            if self._seen >= self._seen_n:
+                self.plant_seen = True
+        else:
+            self._seen = 0
+
+    def _follow_loe(self, theta_l: float, healthy: bool) -> None:
+        """The settled k̂_LOE moves are measured from: set once the spool channel is healthy;
+        a move beyond ``min_deviation`` off it is a change of the LOE, and the window's samples
+        from before it are about another plant (its k̂_LOE-free sums would weigh them with the
+        new k̂_LOE): a decision taken stands on the evidence gathered since."""
         tl_ref = self._tl_ref
         if tl_ref != tl_ref:  # NaN: k̂_LOE not yet settled since the reset (being identified)
             if healthy:
                 self._tl_ref = theta_l
         elif abs(theta_l - tl_ref) > self._min_dev * tl_ref:
-            # k̂_LOE moved off a value the spool channel had settled on: the LOE changed, and the
-            # window's samples from before the change are about another plant (its k̂_LOE-free
-            # sums would weigh them with the new k̂_LOE); a decision taken stands on the
-            # evidence gathered since
             self._tl_ref = theta_l
             if self.flow_fault or self.sensor_decided:
                 self.restart()
+
+    def _judged_beside(self, theta_pos: float, theta_level: float) -> float:
+        """The sensor gain a change of the product is judged beside on this sample (1: none).
+        While H_D stands and the averaged product and the bank's model, the reading's level,
+        agree, that is the sensor's gain (it follows a drift that keeps moving); a later move
+        of the product off it, or off the gain H_Q was entered beside, is a new change."""
         kb = self.k_base
         dev = self._min_dev * kb
         if self.sensor_decided and abs(theta_level - self._tq) < dev:
-            # the averaged product and the bank's model, the reading's level, agree: that is
-            # the sensor's gain H_D stands at (it follows a drift that keeps moving), and a
-            # later move of the product off it is a new change
             self._s = self._tq / kb
             self._s_held = True
         sg = self.sensor_gain
-        # a change of the product off the sensor gain H_D or H_Q stands at is judged beside it
         beside = self._beside = sg if sg != 1.0 and abs(theta_pos / sg - kb) >= dev else 1.0
-        sd = self._s  # the gain decided, shown by the level or not
-        if self.sensor_decided and self._by_test and not self.plant_seen and sd != 1.0:
-            if abs(theta_pos / sd - kb) < dev and abs(theta_level - kb) < dev:
-                # the product sits at the gain the test decided and the bank's model, the
-                # reading's level, does not show it: before the plant has shown the model's flow
-                # gain that is the plant's own (a creep or unequal areas move the increments,
-                # not the level), no gain of the sensor; the episode is over
-                self._end_episode()
-                self.llr = 0.0
-                self.k_q = kb
-                return kb
-        if not self.flow_fault and beside == 1.0 and abs(theta_pos - kb) < dev:
-            # no deviation to test: H_D whatever the evidence; when the bank's model agrees, the
-            # episode is over (the window starts afresh when a deviation appears)
-            if healthy and abs(theta_level - kb) < dev and not self.sensor_decided:
-                self._baseline.learn(theta_l * kb * self._pa * self.s[0], pressure_pa)
-            if abs(theta_level - kb) < dev and (self._w > 0.0 or self.sensor_decided):
-                self._end_episode()
-            self.llr = 0.0
-            self.k_q = kb
-            return kb
-        attributed = self.flow_fault or self.sensor_decided  # :attr:`attributed`, until _decide
-        if attributed and abs(theta_pos - self._theta_ref) > self._min_dev:
-            # an attributed deviation moved: gather evidence afresh (the attribution stands until
-            # the new evidence overturns it); while unattributed the product is still converging
-            # on the one deviation and the evidence is kept
-            self._theta_ref = theta_pos
-            self.restart()
-        if (
-            not attributed
-            and self._w >= self._undecided
-            and not abs(self._tq - self._tq_ref) <= self._min_dev
-        ):
+        return beside
+
+    def _unseen_gain_over(self, theta_pos: float, theta_level: float) -> bool:
+        """Before the plant has shown the model's flow gain, an H_D this test decided ends when
+        the product sits at the gain decided and the bank's model, the reading's level, does not
+        show it: that gain is the plant's own (a creep or unequal areas move the increments,
+        not the level), no gain of the sensor."""
+        sd, kb = self._s, self.k_base
+        if not (self.sensor_decided and self._by_test and not self.plant_seen and sd != 1.0):
+            return False
+        dev = self._min_dev * kb
+        if abs(theta_pos / sd - kb) < dev and abs(theta_level - kb) < dev:
+            self._end_episode()
+            return True
+        return False
+
+    def _no_deviation(
+        self,
+        theta_pos: float,
+        theta_level: float,
+        beside: float,
+        theta_l: float,
+        pressure_pa: float,
+        healthy: bool,
+    ) -> bool:
+        """Whether there is no deviation to test (H_D whatever the evidence). With the bank's
+        model at the plant's gain too the episode is over (the window starts afresh when a
+        deviation appears), and a healthy sample teaches the pressure baseline."""
+        kb = self.k_base
+        dev = self._min_dev * kb
+        if self.flow_fault or beside != 1.0 or abs(theta_pos - kb) >= dev:
+            return False
+        level_at_base = abs(theta_level - kb) < dev
+        if healthy and level_at_base and not self.sensor_decided:
+            self._baseline.learn(theta_l * kb * self._pa * self.model.acceleration_m_s2, pressure_pa)
+        if level_at_base and (self.window.w > 0.0 or self.sensor_decided):
+            self._end_episode()
+        return True
+
+    def _gather(self, theta_pos: float, theta_l: float, pressure_pa: float, beside: float) -> None:
+        """The sample into the window (emptied first when what it held is about another
+        deviation) and Λ of H_Q beside ``beside`` against H_D. Until the plant's own pressure
+        gain is learned each hypothesis' gain is known within ``pressure_gain_uncertainty``;
+        H_Q's only as well as the product: ± ``product_spread`` times its mean step between
+        excited increments (the wander the position noise gives it)."""
+        win = self.window
+        if self.flow_fault or self.sensor_decided:
+            if abs(theta_pos - self._theta_ref) > self._min_dev:
+                # an attributed deviation moved: gather evidence afresh (the attribution stands
+                # until the new evidence overturns it)
+                self._theta_ref = theta_pos
+                self.restart()
+        elif win.w >= self._undecided and not abs(self._tq - self._tq_ref) <= self._min_dev:
             # the product moved off a deviation the window held without deciding (a plant the
-            # uncertainty leaves ambiguous): that evidence is about the plant, not the new change
+            # uncertainty leaves ambiguous): that evidence is about the plant, not the new
+            # change; while unattributed and undecided the product is still converging on the
+            # one deviation and the evidence is kept
             self.restart()
-        if self._w == 0.0:
+        if win.w == 0.0:
             self._tq_ref = self._tq
-        u = self._pa * self.s[0]
-        d = self._d
-        self._suu = d * self._suu + u * u
-        self._sup = d * self._sup + u * pressure_pa
-        self._spp = d * self._spp + pressure_pa * pressure_pa
-        self._w = d * self._w + 1.0
+        win.add(self._pa * self.model.acceleration_m_s2, pressure_pa)
         g = self.pressure_gain * theta_l
+        band = 0.0 if self._baseline.learned else self._band
         # H_Q: the flow gain is the product less the sensor gain it is judged beside
-        self.llr = self._llr(g * kb, g * self._tq / beside, self._spread * self._tdev * g / beside)
-        self._decide(theta_pos)
-        self._adopt(theta_pos)
-        self.k_q = theta_pos / self.sensor_gain if self.flow_fault else self.k_base
-        return self.k_q
+        spread = self._spread * self._tdev * g / beside
+        self.llr = win.llr(g * self.k_base, g * self._tq / beside, spread, band)
 
     def _end_episode(self) -> None:
         """The deviation is over: H_D no longer decided, no sensor gain carried, the window
@@ -363,7 +351,7 @@ class PressureTest:
         while the plant has not been seen at the model's flow gain (:attr:`plant_seen`, or a
         pressure baseline learned): a plant that ran at it has shown its own, and a later
         deviation is a change."""
-        if self.flow_fault or self.sensor_decided or self._w < self._undecided or self.k_base != 1.0:
+        if self.flow_fault or self.sensor_decided or self.window.w < self._undecided or self.k_base != 1.0:
             return
         if self.plant_seen or self.pressure_gain_learned:
             return
@@ -420,27 +408,6 @@ class PressureTest:
         decided on enough evidence)."""
         return self.flow_fault or self.sensor_decided
 
-    def _llr(self, g_d: float, g_q: float, spread: float) -> float:
-        """Λ for P_L = g·u with g = g_d (H_D) against g = g_q (H_Q). Until the plant's own
-        pressure gain is learned each hypothesis' gain is known only within
-        ``pressure_gain_uncertainty``: each takes the gain within its band that fits best (a
-        generalized likelihood ratio; 0 where the fitted gain lies in both bands). H_Q's gain is
-        known only as well as the product: ± ``spread`` (``product_spread`` times its mean step
-        between excited increments, the wander the position noise gives it, in pressure-gain
-        units)."""
-        band = 0.0 if self._baseline.learned else self._band
-        e_d = self._fit(g_d, g_d, band)
-        e_q = self._fit(g_q - spread, g_q + spread, band)
-        var = min(e_d, e_q) / self._w
-        return (e_d - e_q) / (2.0 * var) if var > 0.0 else 0.0
-
-    def _fit(self, lo: float, hi: float, band: float) -> float:
-        """Σw·(P_L − ĝ·u)² for the ĝ within [lo·(1 − band), hi·(1 + band)] that fits best."""
-        g = lo
-        if (band > 0.0 or hi > lo) and self._suu > 0.0:
-            g = min(max(self._sup / self._suu, lo * (1.0 - band)), hi * (1.0 + band))
-        return self._spp - 2.0 * g * self._sup + g * g * self._suu
-
     def _decide(self, theta: float) -> None:
         """Enter H_Q on strong evidence and a real deviation; leave it on strong counter-evidence
         (or a product below ``sensor_failed_below``: a failed sensor is never a flow-gain
@@ -448,7 +415,7 @@ class PressureTest:
         if theta < self._failed_below:
             self.flow_fault = False
             return
-        if self._w < self._min_evidence:
+        if self.window.w < self._min_evidence:
             return
         was = self.flow_fault or self.sensor_decided
         if self.flow_fault:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
+from ..predictors import UnitPlantPredictor
 from .monitor import FallbackReason
 
 
@@ -63,8 +64,9 @@ class IncrementEvidence(Protocol):
 
 class PressureEvidence(Protocol):
     """H_D (sensor) against H_Q (flow gain) from the load pressure; the sample clock steps its
-    P_L model (``propagate``/``mark``/``rewind``)."""
+    P_L :attr:`model`."""
 
+    model: UnitPlantPredictor
     k_base: float
     plant_seen: bool
 
@@ -105,12 +107,6 @@ class PressureEvidence(Protocol):
         fresh: bool = True,
         updated: bool = True,
     ) -> float: ...
-
-    def propagate(self, current_a: float) -> None: ...
-
-    def mark(self) -> None: ...
-
-    def rewind(self) -> None: ...
 
 
 class JumpEvidence(Protocol):
