@@ -98,6 +98,18 @@ def test_a_jump_whose_increments_keep_their_gain_is_no_sensor_gain() -> None:
     assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
 
 
+def test_a_bias_at_rest_is_not_compensated_through_a_model_on_its_way() -> None:
+    """A bias of −61 µm stepping in while holding at −1.14 mm (a reading ratio of 1.05): the
+    position RIA overshot to 2.35 before settling, the change at rest was attributed on it and
+    the loop, reading the sensor through 2.35, kicked the piston 0.7 mm during the hold; a
+    second jump then replaced the verification the attribution awaited, and the offset stood
+    as a gain for the rest of the run (433.6 µm against nrc's 295.0). Now a change at rest is
+    the reading's only once the reading moved by the model's ratio, and the next motion's
+    increments withdraw it."""
+    mm, nrc = _run("me-kc115-loe053-bias-square", "mmac"), _run("me-kc115-loe053-bias-square", "nrc")
+    assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
+
+
 def test_a_sensor_found_dead_under_h_q_keeps_the_plants_flow_gain() -> None:
     """Sensor failure at 0.42 s on a plant whose velocity gain is 0.79 of the model's (H_Q from
     power-on): the still-sensor test did not run under H_Q, the raw failed reading held the loop

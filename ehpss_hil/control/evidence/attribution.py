@@ -12,8 +12,8 @@ The evidence, each enough on its own:
   its own: a flow gain may be above the model's);
 * the model changed while the piston was at rest (θ_prod stale: no excited increment) from one
   that agreed with θ_prod when the motion stopped, and the reading moved since beyond the
-  model's travel (:meth:`SensorAttribution._moved_at_rest`): a flow gain moves nothing without
-  flow, a sensor gain moves the reading at once;
+  model's travel, by the model's ratio (:meth:`SensorAttribution._moved_at_rest`): a flow gain
+  moves nothing without flow, a sensor gain moves the reading at once;
 * the reading jumped (:class:`.LevelJump`) by a gain ratio ρ, and within ``jump_hold_s``
   the model moved to ρ times the gain in use before the jump (a model change the jump does not
   explain, a flow-gain loss beside it, is left to the pressure test). A model so attributed
@@ -201,7 +201,18 @@ class SensorAttribution:
         y0, s0 = self._rest_from
         moved = abs(position_m - y0 - fl.theta_prod * (travel_m - s0))
         self._rest_moved = self._rest_moved + 1 if moved >= self._rest_snr * fl.reading_noise_m else 0
-        return self._rest_moved >= fl.increment_window
+        return self._rest_moved >= fl.increment_window and self._shows_ratio(position_m - y0, y0, theta_d)
+
+    def _shows_ratio(self, moved_m: float, y0_m: float, theta_d: float) -> bool:
+        """At rest the reading scales with the sensor's gain: a model at ``theta_d`` from
+        ``level_ref`` says the reading ``y0_m`` moved by y0·(θ̂_D/level_ref − 1). True when the
+        reading's move ``moved_m`` (m) is that within ``min_deviation`` of y0 — a model still on
+        its way (an RIA overshooting a level step) is not yet the reading's. No ratio to check
+        from a failed sensor's model (level_ref below ``sensor_failed_below``)."""
+        ref = self._level_ref
+        if not ref >= self._failed_below:
+            return True
+        return abs(y0_m * (theta_d / ref - 1.0) - moved_m) <= self._min_dev * abs(y0_m)
 
     def update(
         self, position_m: float, theta_d: float, model: int, guarded: bool, broken: bool, trusted: bool
@@ -248,6 +259,10 @@ class SensorAttribution:
             self.verified_gain = math.nan
             self.jumped_since_guard = guarded
             if trusted and math.isfinite(j.ratio):  # a ratio to a gain the loop trusted
+                # a decision an earlier jump or change at rest made, still unverified, is
+                # verified with this one: it is about the same reading, so this jump chains on
+                # the product that change predicts, from the gain before it
+                decided = self._jump_decided and self._prod_jumped == self._prod_jumped
                 self._left = self._hold
                 # the jump scales the gain the reading had: the model in use when it was the
                 # sensor's; else the plant's own product times what the jumps so far account for
@@ -256,10 +271,14 @@ class SensorAttribution:
                 chain = self._chain
                 before = self._kd_before if self._attributed or chain != chain else self._pt.k_base * chain
                 self._to = self.jump_gain = before * j.ratio
-                self._prod_from = self._verified_from()
-                self._prod_jumped = self._prod_from * j.ratio
-                self._last_ratio = j.ratio
-                self._jump_decided = False
+                if decided:
+                    self._prod_jumped *= j.ratio
+                    self._last_ratio *= j.ratio
+                else:
+                    self._prod_from = self._verified_from()
+                    self._prod_jumped = self._prod_from * j.ratio
+                    self._last_ratio = j.ratio
+                self._jump_decided = decided
             self._chain *= j.ratio  # NaN near x = 0: the reading's gain is no longer known
         elif self._verifiable():
             self._settled_product(fl.since_jump_fit[0])
