@@ -10,7 +10,7 @@ milliseconds between H_D (k_Q = k_base, k_DFT = θ_pos/k_base) and H_Q (k_Q = θ
 its gain; either sign). H_Q is entered at Λ > ``flow_gain_threshold`` and left at the opposite;
 H_D, whose error costs more, is decided only at Λ < −``flow_gain_sensor_threshold``, and before
 the plant has shown its own flow gain only beyond ``velocity_gain_uncertainty``
-(:meth:`PressureTest._fault_possible`). A decision ends only when neither θ_pos nor the position
+(:meth:`.PlantGain.fault_possible`). A decision ends only when neither θ_pos nor the position
 bank's level model deviates. The compensation always uses θ_pos; only its split between the
 sensor and the flow gain comes from the pressure, so the pressure noise never enters the loop.
 docs/control.md §5 gives the derivation, the window's rules and the figures.
@@ -23,8 +23,8 @@ import math
 from ...physics.params import PlantParams
 from ..predictors import UnitPlantPredictor
 from ..tuning import ControlTuning
-from .baseline import PressureBaseline
 from .likelihood import PressureWindow
+from .plantgain import PlantGain, ProductAverage
 
 
 class PressureTest:
@@ -32,17 +32,16 @@ class PressureTest:
     The product θ_pos comes from :class:`.Increments`; this class holds the plant's flow gain,
     the sensor gain a deviation is judged beside and the decision; the unit-gain P_L model is
     :attr:`model` (a :class:`.UnitPlantPredictor`, stepped by the sample clock between updates),
-    the evidence :attr:`window` a :class:`.PressureWindow`, the healthy pressure baseline a
-    :class:`.PressureBaseline`."""
+    the evidence :attr:`window` a :class:`.PressureWindow`, what is known of the plant's own
+    flow and pressure gains :attr:`plant` (a :class:`.PlantGain`)."""
 
     __slots__ = (
+        "_avg",
         "_band",
-        "_baseline",
         "_beside",
         "_by_test",
         "_failed_below",
         "_hold",
-        "_m",
         "_min_dev",
         "_min_evidence",
         "_on",
@@ -50,23 +49,16 @@ class PressureTest:
         "_pa",
         "_s",
         "_s_held",
-        "_seen",
-        "_seen_n",
         "_spread",
-        "_tdev",
         "_theta_ref",
         "_tl_ref",
-        "_tprev",
-        "_tq",
         "_tq_ref",
         "_undecided",
-        "_vband",
         "flow_fault",
-        "k_base",
         "k_q",
         "llr",
         "model",
-        "plant_seen",
+        "plant",
         "sensor_current",
         "sensor_decided",
         "window",
@@ -84,27 +76,28 @@ class PressureTest:
         self._min_evidence = t.flow_gain_min_evidence_s / ts_s
         self._failed_below = t.sensor_failed_below
         self._pa = plant.load_mass_kg / plant.piston_area_m2
-        self._baseline = PressureBaseline(ts_s, t)
+        #: the plant's own flow gain and pressure gain (kept across :meth:`reset`)
+        self.plant = PlantGain(ts_s, t)
         self._band = t.pressure_gain_uncertainty
-        self._vband = t.velocity_gain_uncertainty
         self._spread = t.product_spread
         self._undecided = t.undecided_evidence * self._min_evidence
-        self._seen_n = max(1, round(t.plant_seen_s / ts_s))
-        self._m = t.increment_window
-        self.forget_plant()
+        self._avg = ProductAverage(t.increment_window)
         self.reset()
 
     def forget_plant(self) -> None:
         """Nothing known of the plant (power-on): the model's flow gain, not seen yet, no
         pressure baseline."""
-        #: the plant's own flow gain (the product's healthy value, learned at power-on): the
-        #: nominal of both hypotheses; 1 until a deviation inside the uncertainty is adopted
-        self.k_base = 1.0
-        #: the averaged product stood at 1 for ``plant_seen_s``: the plant runs at the model's
-        #: flow gain, and no later deviation is adopted as its own
-        self.plant_seen = False
-        self._seen = 0  # excited updates in a row with the averaged product at 1
-        self._baseline.forget()
+        self.plant.forget()
+
+    @property
+    def k_base(self) -> float:
+        """The plant's own flow gain (:attr:`.PlantGain.k_base`): the nominal of both hypotheses."""
+        return self.plant.k_base
+
+    @property
+    def plant_seen(self) -> bool:
+        """The plant was seen at the model's flow gain (:attr:`.PlantGain.seen`)."""
+        return self.plant.seen
 
     def reset(self) -> None:
         """At rest, hypothesis H_D (k_Q = 1 · k_base), empty window; what is known of the plant
@@ -116,9 +109,7 @@ class PressureTest:
         self.llr = 0.0
         self._theta_ref = self.k_base
         self._tl_ref = math.nan  # the settled k̂_LOE a move is measured from (NaN: not settled yet)
-        self._tq = 1.0  # θ_pos averaged over about M excited updates: H_Q's gain in the test
-        self._tprev = 1.0
-        self._tdev = 0.0  # the mean step of θ_pos between excited updates (its wander)
+        self._avg.reset()  # θ_pos averaged over about M excited updates: H_Q's gain in the test
         self._hold = 0
         self.sensor_decided = False
         #: the sensor's gain (relative to the plant's, θ_prod/k_base) H_D stands at: once the
@@ -229,19 +220,11 @@ class PressureTest:
         return self.k_q
 
     def _average(self, theta_pos: float) -> None:
-        """An excited update of θ_pos: its average over about M of them (H_Q's gain in the test),
-        its mean step (its wander), and whether the average has stood at 1 for
-        ``plant_seen_s`` (:attr:`plant_seen`)."""
-        m = self._m
-        self._tq += (theta_pos - self._tq) / m
-        self._tdev += (abs(theta_pos - self._tprev) - self._tdev) / m
-        self._tprev = theta_pos
-        if abs(self._tq - 1.0) < self._min_dev:
-            self._seen += 1
-            if self._seen >= self._seen_n:
-                self.plant_seen = True
-        else:
-            self._seen = 0
+        """An excited update of θ_pos: its average over about M of them (H_Q's gain in the test)
+        and its wander, and whether the average has stood at 1 for ``plant_seen_s``
+        (:attr:`plant_seen`)."""
+        self._avg.add(theta_pos)
+        self.plant.observe(self._avg.mean)
 
     def _follow_loe(self, theta_l: float, healthy: bool) -> None:
         """The settled k̂_LOE moves are measured from: set once the spool channel is healthy;
@@ -264,8 +247,8 @@ class PressureTest:
         of the product off it, or off the gain H_Q was entered beside, is a new change."""
         kb = self.k_base
         dev = self._min_dev * kb
-        if self.sensor_decided and abs(theta_level - self._tq) < dev:
-            self._s = self._tq / kb
+        if self.sensor_decided and abs(theta_level - self._avg.mean) < dev:
+            self._s = self._avg.mean / kb
             self._s_held = True
         sg = self.sensor_gain
         beside = self._beside = sg if sg != 1.0 and abs(theta_pos / sg - kb) >= dev else 1.0
@@ -303,7 +286,7 @@ class PressureTest:
             return False
         level_at_base = abs(theta_level - kb) < dev
         if healthy and level_at_base and not self.sensor_decided:
-            self._baseline.learn(theta_l * kb * self._pa * self.model.acceleration_m_s2, pressure_pa)
+            self.plant.baseline.learn(theta_l * kb * self._pa * self.model.acceleration_m_s2, pressure_pa)
         if level_at_base and (self.window.w > 0.0 or self.sensor_decided):
             self._end_episode()
         return True
@@ -321,20 +304,20 @@ class PressureTest:
                 # until the new evidence overturns it)
                 self._theta_ref = theta_pos
                 self.restart()
-        elif win.w >= self._undecided and not abs(self._tq - self._tq_ref) <= self._min_dev:
+        elif win.w >= self._undecided and not abs(self._avg.mean - self._tq_ref) <= self._min_dev:
             # the product moved off a deviation the window held without deciding (a plant the
             # uncertainty leaves ambiguous): that evidence is about the plant, not the new
             # change; while unattributed and undecided the product is still converging on the
             # one deviation and the evidence is kept
             self.restart()
         if win.w == 0.0:
-            self._tq_ref = self._tq
+            self._tq_ref = self._avg.mean
         win.add(self._pa * self.model.acceleration_m_s2, pressure_pa)
         g = self.pressure_gain * theta_l
-        band = 0.0 if self._baseline.learned else self._band
+        band = 0.0 if self.plant.baseline.learned else self._band
         # H_Q: the flow gain is the product less the sensor gain it is judged beside
-        spread = self._spread * self._tdev * g / beside
-        self.llr = win.llr(g * self.k_base, g * self._tq / beside, spread, band)
+        spread = self._spread * self._avg.wander * g / beside
+        self.llr = win.llr(g * self.k_base, g * self._avg.mean / beside, spread, band)
 
     def _end_episode(self) -> None:
         """The deviation is over: H_D no longer decided, no sensor gain carried, the window
@@ -345,35 +328,14 @@ class PressureTest:
         self.restart()
 
     def _adopt(self, theta: float) -> None:
-        """A deviation the window held undecided for ``undecided_evidence`` while within the
-        plant's velocity-gain uncertainty (and beyond the product's own wander) is the plant's:
-        its flow gain becomes the nominal of both hypotheses; the window starts afresh. Only
-        while the plant has not been seen at the model's flow gain (:attr:`plant_seen`, or a
-        pressure baseline learned): a plant that ran at it has shown its own, and a later
-        deviation is a change."""
-        if self.flow_fault or self.sensor_decided or self.window.w < self._undecided or self.k_base != 1.0:
+        """A deviation the window held undecided for ``undecided_evidence`` becomes the plant's
+        flow gain when :meth:`.PlantGain.adopt` takes it (inside the velocity-gain uncertainty,
+        before the plant has shown its own); the window starts afresh."""
+        if self.flow_fault or self.sensor_decided or self.window.w < self._undecided:
             return
-        if self.plant_seen or self.pressure_gain_learned:
-            return
-        dev = abs(self._tq - 1.0)
-        inside = self._spread * self._tdev < dev <= self._vband and dev >= self._min_dev
-        if inside and theta >= self._failed_below:
-            self.k_base = self._tq
-            self._theta_ref = self._tq
+        if self.plant.adopt(self._avg, theta):
+            self._theta_ref = self.plant.k_base
             self.restart()
-
-    def _fault_possible(self, theta: float) -> bool:
-        """Whether H_D may be decided for a product at ``theta``: the load pressure tells a
-        sensor gain from a flow gain, but not from a plant whose velocity gain is off the model
-        through its stiffness (ω_h², which moves the product and leaves the pressure's high
-        band alone). So while the plant's pressure gain is uncertain
-        (``pressure_gain_uncertainty`` > 0, the uncertainty ω_h is in) and before the plant has
-        shown its own flow gain (:attr:`plant_seen`, a pressure baseline learned, or its own
-        adopted: :attr:`k_base`), a deviation within ``velocity_gain_uncertainty`` of 1 is left
-        undecided (and adopted as the plant's when it stays so); one beyond it is a fault."""
-        if self._band == 0.0 or self.plant_seen or self.pressure_gain_learned or self.k_base != 1.0:
-            return True
-        return abs(theta - 1.0) > self._vband
 
     @property
     def sensor_gain(self) -> float:
@@ -388,13 +350,13 @@ class PressureTest:
     @property
     def pressure_gain_learned(self) -> bool:
         """The plant's pressure gain was learned (``baseline_min_s`` of healthy operation)."""
-        return self._baseline.learned
+        return self.plant.baseline.learned
 
     @property
     def pressure_gain(self) -> float:
         """The plant's load pressure over the model's, learned while nothing deviated (both
         hypotheses predict with it; :class:`.PressureBaseline`)."""
-        return self._baseline.gain
+        return self.plant.baseline.gain
 
     @property
     def sensor_favoured(self) -> bool:
@@ -427,9 +389,9 @@ class PressureTest:
                 self._s = beside
         if self.flow_fault:
             self.sensor_decided = False
-        elif self.llr < -self._on_d and self._fault_possible(theta):
+        elif self.llr < -self._on_d and self.plant.fault_possible(theta):
             self.sensor_decided = self.sensor_current = True
-            self._s = self._tq / self.k_base  # the averaged product: one θ_pos wanders
+            self._s = self._avg.mean / self.k_base  # the averaged product: one θ_pos wanders
             self._s_held = False
             self._by_test = True
         if (self.flow_fault or self.sensor_decided) and not was:

@@ -67,13 +67,17 @@ class PressureEvidence(Protocol):
     P_L :attr:`model`."""
 
     model: UnitPlantPredictor
-    k_base: float
-    plant_seen: bool
 
     flow_fault: bool
     k_q: float
     sensor_decided: bool
     sensor_current: bool
+
+    @property
+    def k_base(self) -> float: ...
+
+    @property
+    def plant_seen(self) -> bool: ...
 
     @property
     def min_deviation(self) -> float: ...
