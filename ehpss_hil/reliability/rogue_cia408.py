@@ -63,13 +63,16 @@ SLOW_HOST: dict[str, Any] = {
 
 class RogueCase(NamedTuple):
     """What the rogue sends: ``data`` on ``can_id``, once or (``repeat``) at
-    :data:`ROGUE_RATE_HZ`; and the controller's fail-safe reason expected."""
+    :data:`ROGUE_RATE_HZ`; and the controller's fail-safe reason expected. ``own``: the
+    controller sends such frames itself (the SYNC), so its log cannot show when the rogue's
+    first one reached it."""
 
     what: str
     can_id: int
     data: bytes
     repeat: bool
     reason: str
+    own: bool = False
 
 
 CASES: dict[str, RogueCase] = {
@@ -83,7 +86,7 @@ CASES: dict[str, RogueCase] = {
     "nmt-stop": RogueCase(
         "one NMT Stop of the valve", cobid.NMT, bytes([NmtCommand.STOP, VALVE]), False, "ID_COLLISION"
     ),
-    "sync": RogueCase("a second SYNC producer", cobid.SYNC, b"", True, "ID_COLLISION"),
+    "sync": RogueCase("a second SYNC producer", cobid.SYNC, b"", True, "ID_COLLISION", own=True),
     "short-rpdo": RogueCase(
         "the valve's RPDO 1, 2 of 4 bytes", cobid.RPDO1 + VALVE, bytes.fromhex("0700"), True, "ID_COLLISION"
     ),
@@ -93,9 +96,10 @@ CASES: dict[str, RogueCase] = {
 }
 
 
-def send_rogue(case: str, seconds: float, bus_cfg: BusConfig) -> tuple[int, float]:
+def send_rogue(case: str, seconds: float, bus_cfg: BusConfig) -> tuple[int, float, float]:
     """The case's frames (once, or at :data:`ROGUE_RATE_HZ` for ``seconds`` on an
-    absolute-deadline grid); returns (frames sent, wall-clock time of the first, s)."""
+    absolute-deadline grid); returns (frames sent, wall-clock time before the first was sent
+    and once its send returned, s)."""
     import can
 
     from ..bus import open_bus
@@ -103,7 +107,7 @@ def send_rogue(case: str, seconds: float, bus_cfg: BusConfig) -> tuple[int, floa
     c = CASES[case]
     msg = can.Message(arbitration_id=c.can_id, data=c.data, dlc=len(c.data), is_extended_id=False)
     bus = open_bus(bus_cfg)
-    n, first = 0, 0.0
+    n, first, delivered = 0, 0.0, 0.0
     try:
         period = 1.0 / ROGUE_RATE_HZ
         nxt = time.monotonic()
@@ -112,12 +116,14 @@ def send_rogue(case: str, seconds: float, bus_cfg: BusConfig) -> tuple[int, floa
             if n == 0:
                 first = time.time()
             bus.send(msg)
+            if n == 0:
+                delivered = time.time()
             n += 1
             nxt += period
             time.sleep(max(0.0, nxt - time.monotonic()))
     finally:
         bus.shutdown()
-    return n, first
+    return n, first, delivered
 
 
 @dataclass
@@ -126,7 +132,9 @@ class RogueCanopenResult:
 
     case: str
     sent: int = 0
+    #: wall-clock time (s) before the rogue's first frame was sent, and once its send returned
     first_s: float = 0.0
+    delivered_s: float = 0.0
     controller: dict[str, Any] = field(default_factory=dict)
     emulator: dict[str, Any] = field(default_factory=dict)
     #: the largest |x − x_d| (m) over the run and the samples, from PLANT_TRUTH ("truth") or
@@ -134,7 +142,8 @@ class RogueCanopenResult:
     max_deviation_m: float = float("nan")
     samples: int = 0
     source: str = ""
-    #: the controller's RPDOs from the rogue's first frame to the first asking for DISABLED
+    #: the controller's RPDOs from its receipt of the rogue's first frame to the first asking
+    #: for DISABLED
     failsafe_cycles: int | None = None
     #: the master asked for DISABLED before the rogue's first frame (its own fault came first)
     preempted: bool = False
@@ -218,14 +227,31 @@ def _disabled_before(log: Path, first_s: float) -> bool:
     return last is not None and last[1] != ACTIVE_WORD
 
 
-def _failsafe_cycles(log: Path, first_s: float, rogue: bytes) -> int | None:
-    """The controller's RPDOs (its log: timestamps of its sends) from ``first_s`` up to and
+def _receipt(log: Path, res: RogueCanopenResult) -> float:
+    """When the rogue's first frame reached the controller (s, wall clock): its receive time in
+    the controller's log (the bus's receive stamp) for the first frame of the case at or after
+    the rogue's send; for a frame the controller sends itself (``own``), or none logged, the
+    time the rogue's send returned. A loaded host may hold the rogue between its clock and its
+    send for many of the controller's cycles: counted from the rogue's clock, those cycles
+    would be the host's, not the controller's."""
+    from ..canlog import BadLines, read_log
+
+    c = CASES[res.case]
+    if not c.own:
+        for msg in read_log(log, bad=BadLines()):
+            if msg.arbitration_id == c.can_id and bytes(msg.data) == c.data and msg.timestamp >= res.first_s:
+                return float(msg.timestamp)
+    return res.delivered_s
+
+
+def _failsafe_cycles(log: Path, since_s: float, rogue: bytes) -> int | None:
+    """The controller's RPDOs (its log: timestamps of its sends) from ``since_s`` up to and
     including the first asking for DISABLED; the rogue's own RPDOs (``rogue`` data) left out."""
     from ..canlog import BadLines, read_log
 
     n = 0
     for msg in read_log(log, bad=BadLines()):
-        if msg.arbitration_id != cobid.RPDO1 + VALVE or msg.timestamp < first_s or len(msg.data) != 4:
+        if msg.arbitration_id != cobid.RPDO1 + VALVE or msg.timestamp < since_s or len(msg.data) != 4:
             continue
         if bytes(msg.data) == rogue:
             continue
@@ -281,9 +307,10 @@ def rogue_cia408_trial(
         rogue.wait(STARTUP_LIMIT_S + rogue_s)
         try:
             words = rogue.text().split()
-            res.sent, res.first_s = (
+            res.sent, res.first_s, res.delivered_s = (
                 int(words[words.index("sent") + 1]),
                 float(words[words.index("first") + 1]),
+                float(words[words.index("delivered") + 1]),
             )
         except (ValueError, IndexError):
             res.error = f"rogue: {rogue.text()[-200:]}"
@@ -297,7 +324,8 @@ def rogue_cia408_trial(
     res.controller = read_json_object(out / "controller.json")
     res.emulator = read_json_object(out / "emulator.json")
     res.max_deviation_m, res.samples, res.source = _piston(out / "emulator.log")
-    res.failsafe_cycles = _failsafe_cycles(out / "controller.log", res.first_s, CASES[case].data)
+    receipt = _receipt(out / "controller.log", res)
+    res.failsafe_cycles = _failsafe_cycles(out / "controller.log", receipt, CASES[case].data)
     res.preempted = _disabled_before(out / "controller.log", res.first_s)
     return res
 
@@ -326,7 +354,7 @@ def cia408_rogue_rows(results: list[RogueCanopenResult], s: Summary) -> list[Row
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m ehpss_hil.reliability.rogue_cia408``: be the rogue (print ``sent N first
-    T``), or with ``--trial DIR`` run one whole trial and print its figures."""
+    T delivered T``), or with ``--trial DIR`` run one whole trial and print its figures."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--case", choices=sorted(CASES), required=True)
     p.add_argument("--seconds", type=float, default=1.0)
@@ -346,8 +374,8 @@ def main(argv: list[str] | None = None) -> int:
         print("PASS" if res.ok else "FAIL")
         return 0 if res.ok else 1
     bus = BusConfig(interface=a.interface, channel=a.channel, port=a.port)
-    n, first = send_rogue(a.case, a.seconds, bus)
-    print(f"sent {n} first {first!r}", flush=True)
+    n, first, delivered = send_rogue(a.case, a.seconds, bus)
+    print(f"sent {n} first {first!r} delivered {delivered!r}", flush=True)
     return 0
 
 
