@@ -12,6 +12,7 @@ STAMP := $(VENV)/.installed
 LOCK := requirements/dev.lock
 BASE_LOCK := requirements/base.lock
 EXTRAS := test plot monitor campaign identify mf4 fmu
+TEST_WORKERS ?= 2
 UV_VERSION := 0.13.9
 UV_VENV := .venv-uv
 LOCK_PYTHON := 3.11
@@ -51,9 +52,12 @@ lock-add:
 demo: $(STAMP)
 	$(VENV)/bin/ehpss-hil demo
 
-## the test suite (host); SocketCAN tests skip here unless AF_CAN works
+## the test suite (host); SocketCAN tests skip here unless AF_CAN works. On TEST_WORKERS
+## pytest-xdist workers (2: the cores of the CI host; more would put more real-time processes on
+## the host than the tests that time them judge; `make test TEST_WORKERS=0` runs it in one
+## process); xdist_group marks keep the browser tests on one worker, one at a time
 test: $(STAMP)
-	$(VPY) -m pytest -q
+	$(VPY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup
 
 ## lint, format and types (CI runs these after make test)
 lint: $(STAMP)

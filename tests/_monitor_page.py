@@ -43,8 +43,14 @@ def skip_reason() -> str | None:
     return None
 
 
-#: the marks of every test on this bench
-PAGE_MARKS = [pytest.mark.netns, pytest.mark.skipif(skip_reason() is not None, reason=str(skip_reason()))]
+#: the marks of every test on this bench: one at a time under pytest-xdist (one Chromium and
+#: one bench on the host: the page's rendering is what the loops compete with), started first
+PAGE_MARKS = [
+    pytest.mark.netns,
+    pytest.mark.slow,
+    pytest.mark.xdist_group("browser"),
+    pytest.mark.skipif(skip_reason() is not None, reason=str(skip_reason())),
+]
 
 CTL_YAML = """\
 bus: {{interface: udp_multicast, channel: 239.74.163.2}}
