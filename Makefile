@@ -55,9 +55,9 @@ demo: $(STAMP)
 ## the test suite (host); SocketCAN tests skip here unless AF_CAN works. On TEST_WORKERS
 ## pytest-xdist workers (2: the cores of the CI host; more would put more real-time processes on
 ## the host than the tests that time them judge; `make test TEST_WORKERS=0` runs it in one
-## process); xdist_group marks keep the browser tests on one worker, one at a time
+## process); the browser tests take one bench at a time (tests/_monitor_page.py)
 test: $(STAMP)
-	$(VPY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup
+	$(VPY) -m pytest -q -n $(TEST_WORKERS)
 
 ## lint, format and types (CI runs these after make test)
 lint: $(STAMP)
