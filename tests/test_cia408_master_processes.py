@@ -97,6 +97,7 @@ def _tracking_rms_m(log: Path) -> tuple[float, int]:
     return math.sqrt(sum(e * e for e in err) / len(err)), len(err)
 
 
+@pytest.mark.alone
 def test_realtime_cia408_master_starts_the_nodes_tracks_and_stops(tmp_path: Path) -> None:
     out, ctl, emu = _run(tmp_path, _scenario(tmp_path / "cia408-ff.yaml", 1.5, "[]"))
     assert "first sensor data: ACTIVE" in (out / "controller.out").read_text()
@@ -135,6 +136,7 @@ def _active_setpoint(m: can.Message) -> bool:
     return word == 0x0007 and setpoint != 0
 
 
+@pytest.mark.alone
 def test_realtime_emcy_puts_the_controller_into_failsafe_with_its_reason(tmp_path: Path) -> None:
     sc = _scenario(tmp_path / "cia408-emcy.yaml", 2.0, "[{t_s: 1.5, device_fault: 0x5000}]")
     out, ctl, _ = _run(tmp_path, sc)

@@ -142,6 +142,7 @@ def test_the_valve_latches_an_internal_fault_a_reset_cannot_clear(failing_fmu: P
     assert s["periods"] > FAIL_AT_S * 1000  # the nodes ran on after the plant stopped
 
 
+@pytest.mark.alone
 @pytest.mark.netns
 @pytest.mark.skipif(NETNS_SKIP is not None, reason=f"cross-process test: {NETNS_SKIP}")
 def test_realtime_the_controller_fails_safe_when_the_emulated_plant_fails(
@@ -188,6 +189,7 @@ def test_realtime_the_controller_fails_safe_when_the_emulated_plant_fails(
     assert n <= FAILSAFE_CYCLES, n
 
 
+@pytest.mark.alone
 @pytest.mark.netns
 @pytest.mark.skipif(NETNS_SKIP is not None, reason=f"cross-process test: {NETNS_SKIP}")
 def test_realtime_a_plant_failed_at_power_on_outlasts_the_masters_fault_resets(tmp_path: Path) -> None:

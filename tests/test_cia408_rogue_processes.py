@@ -23,7 +23,7 @@ from ehpss_hil.reliability.rogue_cia408 import (
 )
 
 SKIP = skip_reason()
-pytestmark = [pytest.mark.netns, pytest.mark.skipif(SKIP is not None, reason=SKIP or "")]
+pytestmark = [pytest.mark.netns, pytest.mark.alone, pytest.mark.skipif(SKIP is not None, reason=SKIP or "")]
 
 
 @pytest.mark.parametrize("case", sorted(CASES))

@@ -31,6 +31,7 @@ VENDOR_IDS = {"0C8", "0D2", "0D3"}
 NATIVE_VALVE_IDS = {"110", "111", "120"}
 
 
+@pytest.mark.alone
 def test_realtime_vendor_profile_reaches_active_and_tracks(tmp_path: Path) -> None:
     scenario = tmp_path / "short-loe.yaml"
     scenario.write_text(short_scenario_yaml("short-loe", 0.8, "{t_s: 0.3, k_loe: 0.5}"))

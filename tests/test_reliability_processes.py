@@ -53,6 +53,7 @@ def test_sigterm_zero_current_exit_0_and_flushed_logs(tmp_path: Path) -> None:
     assert r.ok
 
 
+@pytest.mark.alone
 def test_duplicates_reordering_bursts_counted_and_never_acted_on_twice(tmp_path: Path) -> None:
     r = dup_trial(tmp_path, samples=500, seed=4)
     assert not r.error, r.error

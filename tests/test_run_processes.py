@@ -69,6 +69,7 @@ def test_lockstep_run_gives_the_simulation_commands_and_metrics(scenario: Path, 
     assert ctl.has_reference and ctl.result.ts_s == 1e-3 and ctl.result.controller == "mmac"
 
 
+@pytest.mark.alone
 @pytest.mark.parametrize(("mode", "bound_m", "above"), [("mmac", 15e-6, False), ("nrc", 100e-6, True)])
 def test_realtime_drift_run(scenario: Path, tmp_path: Path, mode: str, bound_m: float, above: bool) -> None:
     """Sensor gain 0.5 at 0.3 s: ``mmac`` stays within 15 µm RMS on the real-time bus (0.67–2.9
