@@ -8,6 +8,7 @@ import queue
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -65,14 +66,16 @@ class Proc:
         self._q.put((tag, ""))
 
     def wait_for(self, text: str, limit_s: float = 30.0) -> bool:
-        """Block until a line containing ``text`` appears (False on EOF/limit)."""
+        """Block until a line containing ``text`` appears (False on EOF, or once ``limit_s`` has
+        passed in all: a child that keeps printing other lines does not hold the wait open)."""
         for line in self.out + self.err:
             if text in line:
                 return True
         eof = 0
-        while True:
+        deadline = time.monotonic() + limit_s
+        while (left := deadline - time.monotonic()) > 0.0:
             try:
-                _, line = self._q.get(timeout=limit_s)
+                _, line = self._q.get(timeout=left)
             except queue.Empty:
                 return False
             if line == "":
@@ -81,6 +84,7 @@ class Proc:
                     return False
             elif text in line:
                 return True
+        return False
 
     def wait(self, limit_s: float = 60.0) -> int:
         """Exit code (kills the child if it does not end within ``limit_s``)."""
