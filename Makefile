@@ -4,7 +4,7 @@ VENV ?= .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-socketcan lint venv lock lock-add clean
+.PHONY: demo test test-socketcan socketcan-tests lint venv lock lock-add clean
 
 #: the lock files: exact versions with hashes, resolved by uv for Python 3.11 on Linux x86_64
 #: (CI's platform). dev.lock: the base + every extra make and CI install; base.lock: the daemon
@@ -52,12 +52,16 @@ lock-add:
 demo: $(STAMP)
 	$(VENV)/bin/ehpss-hil demo
 
-## the test suite (host); SocketCAN tests skip here unless AF_CAN works. On TEST_WORKERS
-## pytest-xdist workers (2: the cores of the CI host; more would put more real-time processes on
-## the host than the tests that time them judge; `make test TEST_WORKERS=0` runs it in one
-## process); the browser tests take one bench at a time (tests/_monitor_page.py)
+## the test suite (host); SocketCAN tests skip here unless AF_CAN works. Two passes: every test
+## not marked `alone` on TEST_WORKERS pytest-xdist workers (2: the cores of the CI host; more would
+## put more real-time processes on the host than the tests that time them judge; TEST_WORKERS=0
+## runs them in one process), then the `alone` ones one after the other on an otherwise idle host
+## (only their files are collected). Within one pass the browser tests take one bench at a time
+## (tests/_monitor_page.py).
+ALONE_TESTS := $(shell grep -l "pytest.mark.alone" tests/test_*.py)
 test: $(STAMP)
-	$(VPY) -m pytest -q -n $(TEST_WORKERS)
+	$(VPY) -m pytest -q -n $(TEST_WORKERS) -m "not alone"
+	$(VPY) -m pytest -q -m alone $(ALONE_TESTS)
 
 ## lint, format and types (CI runs these after make test)
 lint: $(STAMP)
@@ -70,6 +74,10 @@ lint: $(STAMP)
 SOCKETCAN_TESTS := $(shell grep -l "pytest.mark.socketcan" tests/*.py)
 test-socketcan: $(STAMP)
 	$(VPY) -m pytest -q -m socketcan --durations=10 $(SOCKETCAN_TESTS)
+
+## print the SocketCAN suite's files (.ci/run runs them inside the VM)
+socketcan-tests:
+	@echo $(SOCKETCAN_TESTS)
 
 clean:
 	rm -rf $(VENV) $(UV_VENV) out runs .pytest_cache

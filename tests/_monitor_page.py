@@ -6,18 +6,19 @@ only; nothing is timed)."""
 
 from __future__ import annotations
 
-import fcntl
 import math
 import re
 import shutil
 import tempfile
 import time
+import warnings
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from _host_share import host_share
 from _proc import EHPSS_HIL, EMU_CFG_PATH, FIRMWARE_SIM, ROOT, Proc
 
 from ehpss_hil.bus.netns import PrivateNetns, netns_unavailable_reason
@@ -53,10 +54,14 @@ PAGE_MARKS = [
 ]
 #: one bench on the host at a time, whatever runs the tests (pytest-xdist workers, two suites):
 #: the page's rendering is what the loops compete with, and two Chromiums beside four 1 kHz
-#: loops on two cores is a load no bench has. An exclusive flock on this file (released when its
-#: holder exits, however it ends); pytest-xdist's ``xdist_group`` does not group with pytest 9.2
-#: (its node ids no longer take the group suffix xdist 3.8 writes)
+#: loops on two cores is a load no bench has. Held exclusively (:func:`_host_share.host_share`
+#: on this pair of files, released when its holder exits, however it ends); pytest-xdist's
+#: ``xdist_group`` does not group with pytest 9.2 (its node ids no longer take the group suffix
+#: xdist 3.8 writes)
 BENCH_LOCK = Path(tempfile.gettempdir()) / "ehpss-hil-monitor-bench.lock"
+BENCH_GATE = Path(tempfile.gettempdir()) / "ehpss-hil-monitor-bench-gate.lock"
+#: how long a bench waits for another to end before it runs anyway, with a warning (s)
+BENCH_WAIT_S = 600.0
 
 CTL_YAML = """\
 bus: {{interface: udp_multicast, channel: 239.74.163.2}}
@@ -94,9 +99,11 @@ class Monitored:
 @contextmanager
 def monitored_bench(tmp_path: Path) -> Iterator[Monitored]:
     """Emulator + controller in a namespace and the monitor attached (stopped on exit); waits
-    for any other bench on the host to end first (:data:`BENCH_LOCK`)."""
-    with BENCH_LOCK.open("a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+    for any other bench on the host to end first (:data:`BENCH_LOCK`, at most
+    :data:`BENCH_WAIT_S`)."""
+    with host_share(True, BENCH_LOCK, BENCH_GATE, BENCH_WAIT_S) as had:
+        if not had:
+            warnings.warn(f"another monitor bench still ran after {BENCH_WAIT_S:g} s", stacklevel=1)
         with _bench(tmp_path) as m:
             yield m
 
@@ -165,11 +172,15 @@ def browser(downloads: Path | None = None) -> object:
     return webdriver.Chrome(service=Service(executable_path=str(CHROMEDRIVER)), options=opts)
 
 
-def until(what: str, check: Callable[[], bool]) -> None:
+def until(what: str, check: Callable[[], bool], give_up: Callable[[], bool] | None = None) -> bool:
+    """Poll ``check`` until it holds (True) or :data:`WAIT_S` has passed (AssertionError); a
+    ``give_up`` that holds first ends the wait with False."""
     end = time.monotonic() + WAIT_S
     while time.monotonic() < end:
         if check():
-            return
+            return True
+        if give_up is not None and give_up():
+            return False
         time.sleep(0.2)
     raise AssertionError(f"the page never showed {what} within {WAIT_S:g} s")
 
@@ -186,13 +197,9 @@ def until_controlling(
     the controller has overrun :data:`STARVED_OVERRUNS` periods since ``overruns0``."""
     if math.isnan(overruns0):  # not shown yet when the step began
         overruns0 = 0.0
-    end = time.monotonic() + WAIT_S
-    while time.monotonic() < end:
-        if check():
+    with suppress(AssertionError):  # not shown in time: starved or a failure, told apart below
+        if until(what, check, lambda: number(text("overruns")) - overruns0 > STARVED_OVERRUNS):
             return
-        if number(text("overruns")) - overruns0 > STARVED_OVERRUNS:
-            break
-        time.sleep(0.2)
     state, reason, overruns = text("state"), text("failsafe-reason"), number(text("overruns"))
     starved = overruns > overruns0 or (state == "FAULT" and reason in STARVED_FAILSAFES)
     if starved:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ehpss_hil.codec import FrameCodec
+from ehpss_hil.protocol.failsafe import FailsafeReason
 from ehpss_hil.reliability.logcheck import (
     Cycle,
     LogFile,
@@ -16,6 +17,7 @@ from ehpss_hil.reliability.logcheck import (
     emulator_safe,
     read_candump,
 )
+from ehpss_hil.runtime.lifecycle import State
 
 CODEC = FrameCodec()
 
@@ -80,7 +82,11 @@ def test_watchdog_audit_counts_skipped_periods() -> None:
     assert audit_watchdog(cyc, 3, stopped=False).missed == 0
 
 
-def _controller_log(tmp: Path, fresh: list[bool], enable: list[bool]) -> LogFile:
+def _controller_log(
+    tmp: Path, fresh: list[bool], enable: list[bool], status: dict[int, FailsafeReason] | None = None
+) -> LogFile:
+    """A controller's log: cycle i consumed a SENSOR_POS if ``fresh[i]``, sent VALVE_CMD with
+    ``enable[i]``, then CTRL_STATUS (state FAULT) with ``status[i]`` where given."""
     tx, rx = FrameCodec(), FrameCodec()
     lines = []
     for i, (f, en) in enumerate(zip(fresh, enable, strict=True)):
@@ -91,6 +97,9 @@ def _controller_log(tmp: Path, fresh: list[bool], enable: list[bool]) -> LogFile
             "VALVE_CMD", {"CurrentSetpoint": 1e-4 if en else 0.0, "Enable": int(en), "CycleCount": i}
         ).data
         lines.append(_line(CODEC.can_id("VALVE_CMD"), bytes(cmd)))
+        if status and i in status:
+            st = rx.encode("CTRL_STATUS", {"State": State.FAULT, "FailsafeReason": status[i]}).data
+            lines.append(_line(CODEC.can_id("CTRL_STATUS"), bytes(st)))
     p = tmp / "ctl.log"
     p.write_text("".join(lines))
     return read_candump(p)
@@ -107,6 +116,23 @@ def test_controller_cycles_from_a_log(tmp_path: Path) -> None:
     cyc = controller_cycles(_controller_log(tmp_path, fresh, [True] * 9))
     assert [c.fresh for c in cyc] == [True, True] + [False] * 6 + [True]
     assert cyc[7].e2e_bad == 1
+
+
+def test_a_trip_on_fresh_data_is_starved_only_when_the_controller_says_loop_overrun(tmp_path: Path) -> None:
+    """Enable drops at cycle 4 with every sample fresh (no timeout the log shows): spurious,
+    unless the first CTRL_STATUS while disabled gives LOOP_OVERRUN (the loop starved); a
+    status sent after enabling again says nothing about that trip."""
+    fresh = [True] * 12
+    enable = [True] * 4 + [False] * 4 + [True] * 4
+    for status, want in (
+        ({5: FailsafeReason.LOOP_OVERRUN}, (0, 1)),
+        ({5: FailsafeReason.SENSOR_TIMEOUT, 6: FailsafeReason.LOOP_OVERRUN}, (1, 0)),
+        ({9: FailsafeReason.LOOP_OVERRUN}, (1, 0)),  # after Enable 1 again
+        ({}, (1, 0)),
+    ):
+        cyc = controller_cycles(_controller_log(tmp_path, fresh, enable, status))
+        a = audit_watchdog(cyc, 3, stopped=False)
+        assert (a.trips, a.real_timeouts, (a.spurious, a.starved)) == (1, 0, want), status
 
 
 def test_emulator_timeout_and_zero_current_from_a_log(tmp_path: Path) -> None:

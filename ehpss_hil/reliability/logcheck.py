@@ -19,6 +19,7 @@ import can
 
 from ..codec import FrameCodec, Verdict
 from ..control.sampleclock import RESYNC_SAMPLES
+from ..protocol.failsafe import FailsafeReason
 
 #: one classic-CAN ``candump -L`` line (our logs hold no remote or FD frames)
 _LINE = re.compile(rb"\(\d{10}\.\d{6}\) \S+ ([0-9A-F]{3}|[0-9A-F]{8})#((?:[0-9A-F]{2}){0,8})")
@@ -115,12 +116,16 @@ class Cycle:
     e2e_bad: int
     #: grid periods skipped before it (the CycleCount gap): cycles without data
     skipped: int = 0
+    #: the FailsafeReason of a CTRL_STATUS sent after this cycle's VALVE_CMD (None: none sent)
+    status_reason: FailsafeReason | None = None
 
 
 def controller_cycles(log: LogFile, codec: FrameCodec | None = None) -> list[Cycle]:
     """The controller's executed cycles from its own log (verdicts re-derived in log order)."""
     codec = codec or FrameCodec()
-    pos, aux, cmd = (codec.can_id(n) for n in ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD"))
+    pos, aux, cmd, status = (
+        codec.can_id(n) for n in ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD", "CTRL_STATUS")
+    )
     out: list[Cycle] = []
     fresh, bad = False, 0
     last: int | None = None
@@ -136,6 +141,8 @@ def controller_cycles(log: LogFile, codec: FrameCodec | None = None) -> list[Cyc
             last = cc
             out.append(Cycle(bool(vals["Enable"]), float(vals["CurrentSetpoint"]), fresh, bad, skipped))
             fresh, bad = False, 0
+        elif f[0] == status and out:
+            out[-1].status_reason = FailsafeReason(int(decode_own(codec, "CTRL_STATUS", f)["FailsafeReason"]))
     return out
 
 
@@ -158,7 +165,9 @@ def cycles_to_safe(cycles: list[Cycle]) -> int | None:
 class WatchdogAudit:
     """Trips seen in a controller log (Enable 1 → 0) against real timeouts: ``timeout_cycles``
     executed cycles in a row without a usable SENSOR_POS (or ``max_e2e_errors`` E2E failures).
-    ``at_end``: trips after which no usable sensor frame came any more (the peer had stopped)."""
+    ``at_end``: trips after which no usable sensor frame came any more (the peer had stopped);
+    ``starved``: trips with no timeout in the log that the controller reported as LOOP_OVERRUN
+    (its own loop starved: due, but not from the data; not counted in ``spurious``)."""
 
     cycles: int
     trips: int
@@ -166,6 +175,7 @@ class WatchdogAudit:
     spurious: int
     missed: int
     at_end: int = 0
+    starved: int = 0
 
 
 def audit_watchdog(
@@ -174,10 +184,11 @@ def audit_watchdog(
     """Every trip must follow a real timeout and every real timeout while active must trip.
     Periods skipped by an overrun (CycleCount gaps) count as cycles without data; more than
     ``RESYNC_SAMPLES`` at once is due (LOOP_OVERRUN). Stale frames and starvation cannot be
-    told from the log (they depend on the moment of each drain): such a trip shows as spurious.
-    ``stopped``: the last VALVE_CMD is the shutdown command (not a trip)."""
+    told from the log (they depend on the moment of each drain): such a trip shows as spurious,
+    unless the first CTRL_STATUS the controller sent while disabled gives LOOP_OVERRUN
+    (``starved``). ``stopped``: the last VALVE_CMD is the shutdown command (not a trip)."""
     cyc = cycles[:-1] if stopped and cycles else cycles
-    stale = errors = real = spurious = missed = 0
+    stale = errors = real = spurious = missed = starved = 0
     trips: list[int] = []
     for i, c in enumerate(cyc):
         stale += c.skipped  # an overrun's skipped periods are cycles without data
@@ -191,11 +202,27 @@ def audit_watchdog(
         real += due
         if not c.enable:
             trips.append(i)
-            spurious += not due
+            if not due:
+                if _reported_reason(cyc, i) is FailsafeReason.LOOP_OVERRUN:
+                    starved += 1
+                else:
+                    spurious += 1
         elif due:
             missed += 1
     last_fresh = max((i for i, c in enumerate(cyc) if c.fresh), default=-1)
-    return WatchdogAudit(len(cyc), len(trips), real, spurious, missed, sum(t > last_fresh for t in trips))
+    at_end = sum(t > last_fresh for t in trips)
+    return WatchdogAudit(len(cyc), len(trips), real, spurious, missed, at_end, starved)
+
+
+def _reported_reason(cycles: list[Cycle], trip: int) -> FailsafeReason | None:
+    """The FailsafeReason of the first CTRL_STATUS sent from cycle ``trip`` on while the
+    controller stayed disabled (None: it sent none before enabling again)."""
+    for c in cycles[trip:]:
+        if c.enable:
+            return None
+        if c.status_reason is not None:
+            return c.status_reason
+    return None
 
 
 def last_status(

@@ -132,7 +132,9 @@ def loss_rows(rows: list[LossRow], s: Summary) -> list[Row]:
             end = f" + {a.at_end} after the emulator ended" if a.at_end else ""
             measured += (
                 f"; watchdog trips {a.trips - a.at_end}{end} (real timeouts "
-                f"{a.real_timeouts}, spurious {a.spurious}, missed {a.missed})"
+                f"{a.real_timeouts}, spurious {a.spurious}, missed {a.missed}"
+                + (f", starved loop {a.starved}" if a.starved else "")
+                + ")"
             )
             target = "trips only on real timeouts, every one trips"
             if not r.exit_ok:
