@@ -130,9 +130,11 @@ def test_an_unreachable_scheduler_leaves_nothing_and_the_plain_rerun_works(
 ) -> None:
     f, _one = reference
     out = tmp_path / "o"
-    gone = cli("campaign", str(f), "--scheduler", f"tcp://127.0.0.1:{_closed_port()}", "--out", str(out))
+    address = f"tcp://127.0.0.1:{_closed_port()}"
+    gone = cli("campaign", str(f), "--scheduler", address, "--connect-timeout", "2", "--out", str(out))
     assert gone.returncode == 3, gone.stderr
     assert "cannot reach the Dask scheduler" in gone.stderr and "Traceback" not in gone.stderr
+    assert "after 2 s" in gone.stderr, gone.stderr  # the timeout given, not the default 30 s
     assert not (out / JOURNAL_NAME).exists()
     tiny(f.parent / "two.yaml", samples=2)
     again = cli("campaign", str(f.parent / "two.yaml"), "--workers", "1", "--out", str(out), "--no-figures")
@@ -147,6 +149,8 @@ def test_an_unreachable_scheduler_leaves_nothing_and_the_plain_rerun_works(
         (["--scheduler", "local:two"], "--scheduler"),
         (["--scheduler", "local:100000"], "--scheduler"),
         (["--retries", "101"], "--retries"),
+        (["--scheduler", "tcp://127.0.0.1:8786", "--connect-timeout", "0"], "--connect-timeout"),
+        (["--scheduler", "tcp://127.0.0.1:8786", "--connect-timeout", "nan"], "--connect-timeout"),
         (["--scheduler", "local:1", "--retries", "-1"], "--retries"),
     ],
 )

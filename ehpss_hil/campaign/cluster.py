@@ -26,14 +26,12 @@ from distributed import WorkerPlugin
 
 from ..errors import ClusterError, ConfigError, EhpssError
 from .runs import RunTask, execute
-from .workers import OnResult, Tally, default_workers
+from .workers import CONNECT_TIMEOUT_S, OnResult, Tally, default_workers
 
 #: ``--scheduler`` value that starts a LocalCluster here (``local`` or ``local:N``)
 LOCAL = "local"
 #: most worker processes of a LocalCluster per core (one thread each: more only share the cores)
 MAX_LOCAL_PER_CORE = 4
-#: how long to wait for the Dask scheduler to answer (s)
-CONNECT_TIMEOUT_S = 30.0
 #: where the local cluster serves its dashboard (Dask's default; another free port when taken)
 DASHBOARD_ADDRESS = ":8787"
 #: the scheduler's event topic that carries ``remove-worker``
@@ -156,8 +154,13 @@ class DaskExecutor:
     """``with DaskExecutor("local:2") as ex: ex.run(tasks, on_result, tally)``; ``ex.client`` is
     the ``distributed.Client``, ``ex.dashboard`` the link Dask gives for its dashboard."""
 
-    def __init__(self, scheduler: str, retries: int = 0) -> None:
+    def __init__(
+        self, scheduler: str, retries: int = 0, connect_timeout_s: float = CONNECT_TIMEOUT_S
+    ) -> None:
+        """``connect_timeout_s``: how long a scheduler address may take to answer (s; a closed
+        port is retried until then)."""
         self.scheduler, self.retries = scheduler, retries
+        self.connect_timeout_s = connect_timeout_s
         self.local_workers = parse_local(scheduler)
         self.cluster: Any = None
         self.client: Any = None
@@ -200,7 +203,7 @@ class DaskExecutor:
                 f"scheduler {self.cluster.scheduler_address})"
             )
         try:
-            self.client = Client(target, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
+            self.client = Client(target, timeout=self.connect_timeout_s, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as exc:
             raise ClusterError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from exc
         if self.cluster is not None:

@@ -15,7 +15,7 @@ from typing import Protocol
 
 from .localpool import LocalPool
 from .runs import RunTask
-from .workers import OnResult, Tally
+from .workers import CONNECT_TIMEOUT_S, OnResult, Tally
 
 
 class Executor(Protocol):
@@ -33,14 +33,18 @@ class Executor(Protocol):
 
 
 @contextmanager
-def open_executor(workers: int = 1, scheduler: str | None = None, retries: int = 0) -> Iterator[Executor]:
+def open_executor(
+    workers: int = 1, scheduler: str | None = None, retries: int = 0, connect_timeout_s: float | None = None
+) -> Iterator[Executor]:
     """The executor of ``--workers``/``--scheduler`` (Dask connected, or its LocalCluster up,
     on entry: ClusterError when it cannot be); closed on exit. A run that fails is submitted
-    again up to ``retries`` times."""
+    again up to ``retries`` times; ``connect_timeout_s``: how long the scheduler may take to
+    answer (s; None: :data:`.workers.CONNECT_TIMEOUT_S`)."""
     if not scheduler:
         yield LocalPool(workers, retries)
         return
     from .cluster import DaskExecutor
 
-    with DaskExecutor(scheduler, retries) as ex:
+    timeout = CONNECT_TIMEOUT_S if connect_timeout_s is None else connect_timeout_s
+    with DaskExecutor(scheduler, retries, timeout) as ex:
         yield ex

@@ -1,5 +1,6 @@
 """What every campaign executor shares: the callback each finished run goes to, the default
-number of local workers, and the :class:`Tally` of the workers lost and the runs retried.
+number of local workers, how long a Dask scheduler may take to answer, and the :class:`Tally`
+of the workers lost and the runs retried.
 
 The local pool (:mod:`.localpool`) and Dask (:mod:`.cluster`) both import it; neither imports
 the other, nor :mod:`.executors`, which picks one of them.
@@ -14,6 +15,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 OnResult = Callable[[dict[str, Any]], None]
+
+#: how long to wait for a Dask scheduler to answer (s; ``campaign --connect-timeout``): a closed
+#: port is retried until then
+CONNECT_TIMEOUT_S = 30.0
+#: the range ``--connect-timeout`` accepts (s)
+CONNECT_TIMEOUT_RANGE_S = (0.1, 3600.0)
 
 
 def default_workers() -> int:

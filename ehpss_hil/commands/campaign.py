@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..campaign.spec import load_campaign
-from ..campaign.workers import default_workers
+from ..campaign.workers import CONNECT_TIMEOUT_RANGE_S, CONNECT_TIMEOUT_S, default_workers
 from ..errors import ConfigError, WorkerLostError
 from ..extras import EXTRAS, require
 from ..interrupt import INTERRUPTED_EXIT
@@ -35,6 +35,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="ADDRESS",
         help="run on Dask: the cluster of this scheduler (tcp://host:8786), or local[:N] for a "
         "distributed.LocalCluster of N worker processes here (default N: all cores)",
+    )
+    p.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=CONNECT_TIMEOUT_S,
+        metavar="S",
+        help=f"with a scheduler address: how long it may take to answer, in seconds (default "
+        f"{CONNECT_TIMEOUT_S:g}; a closed port is retried until then)",
     )
     p.add_argument(
         "--retries",
@@ -68,6 +76,11 @@ def run(args: argparse.Namespace) -> int:
     require("campaign", "ehpss-hil campaign", EXTRAS["campaign"] if args.scheduler else LOCAL_MODULES)
     if not 0 <= args.retries <= MAX_RETRIES:
         raise ConfigError("", "--retries", f"expected 0 … {MAX_RETRIES}, got {args.retries}")
+    lo, hi = CONNECT_TIMEOUT_RANGE_S
+    if not lo <= args.connect_timeout <= hi:  # also NaN
+        raise ConfigError(
+            "", "--connect-timeout", f"expected {lo:g} … {hi:g} s, got {args.connect_timeout:g}"
+        )
     from ..campaign.executors import open_executor
     from ..campaign.session import run_campaign
 
@@ -75,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("runs") / f"campaign-{camp.spec.name}"
     t0 = time.perf_counter()
     try:
-        with open_executor(max(1, args.workers), args.scheduler, args.retries) as ex:
+        with open_executor(max(1, args.workers), args.scheduler, args.retries, args.connect_timeout) as ex:
             spec = camp.spec
             runs = f"{spec.samples} runs × {len(spec.modes)} modes"
             print(f"campaign {spec.name}: {runs} on {ex.description} → {out}")
