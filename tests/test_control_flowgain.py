@@ -72,9 +72,10 @@ def test_evidence_is_kept_while_the_product_converges() -> None:
 def test_evidence_taken_before_k_loe_was_identified_counts_with_the_identified_value() -> None:
     """The window holds k̂_LOE-free sums: samples taken while k̂_LOE was still 1 (a power-on LOE
     of 0.8 not identified yet) are weighed with 0.8 once it is known — the same Λ as a monitor
-    that knew 0.8 from the start."""
+    that knew 0.8 from the start. A drift of 0.6, beyond the velocity-gain uncertainty (0.3): one
+    inside it is not decided before the plant's pressure gain is learned (``fault_possible``)."""
     plant = PlantStepper(PARAMS, TS)
-    plant.set_faults(FaultState(k_loe=0.8, k_q=1.0, k_dft=0.7))
+    plant.set_faults(FaultState(k_loe=0.8, k_q=1.0, k_dft=0.6))
     late = PressureTest(PARAMS.plant, TS)
     known = PressureTest(PARAMS.plant, TS)
     rng = np.random.default_rng(3)
@@ -82,9 +83,9 @@ def test_evidence_taken_before_k_loe_was_identified_counts_with_the_identified_v
     llr_late, llr_known = [], []
     for k in range(60):
         p = plant.load_pressure_pa + 1e4 * rng.standard_normal()
-        # the position bank's model at the sensor's gain, as a drift of 0.7 makes it
-        late.update(current, p, theta_l=1.0 if k < 25 else 0.8, theta_pos=0.7, theta_level=0.7)
-        known.update(current, p, theta_l=0.8, theta_pos=0.7, theta_level=0.7)
+        # the position bank's model at the sensor's gain, as a drift of 0.6 makes it
+        late.update(current, p, theta_l=1.0 if k < 25 else 0.8, theta_pos=0.6, theta_level=0.6)
+        known.update(current, p, theta_l=0.8, theta_pos=0.6, theta_level=0.6)
         llr_late.append(late.llr)
         llr_known.append(known.llr)
         current = 1e-4 * rng.standard_normal()

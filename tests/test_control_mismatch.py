@@ -185,3 +185,25 @@ def test_a_bias_under_noise_is_withdrawn_without_a_settled_product() -> None:
     mm, nrc = _run("me-kc096-bias-kq", "mmac"), _run("me-kc096-bias-kq", "nrc")
     assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
     assert mm.rms_error_m <= nrc.rms_error_m
+
+
+def test_a_flow_gain_ramp_through_the_models_gain_is_not_decided_a_drift() -> None:
+    """A plant whose velocity gain is 1.34 of the model's and a k_Q ramp to 0.61 from 0.04 s: the
+    product passed through 1 on its way down and the plant counted as seen at the model's flow
+    gain; one sample of θ_pos at 0.70 then let the pressure test, judging against the model's
+    pressure gain, decide H_D, and the loop read a sound sensor through 0.78 (150.9 µm against
+    nrc's 7.3). H_D within the velocity-gain uncertainty waits for the plant's learned pressure
+    gain and is judged on the averaged product (evidence/plantgain.py
+    ``fault_possible``)."""
+    mm, nrc = _run("kq061-ramp-stiff080", "mmac"), _run("kq061-ramp-stiff080", "nrc")
+    assert not does_harm(mm, nrc), (mm, harm_limits(nrc))
+
+
+def test_a_valve_overlap_that_takes_the_product_towards_zero_at_reversals_is_no_drift() -> None:
+    """A 0.2 mm spool overlap: at each reversal the spool crosses its dead band and no oil
+    flows, so θ_prod dips towards 0 for a few tens of ms. Decided as H_D on such a dip (0.22),
+    the loop read the sensor through 0.26 (448 µm against nrc's 2.7): H_D needs the sample's
+    product to agree with its average (evidence/pressure.py ``_decide``)."""
+    sc = load_scenario(PROJECT_ROOT / "scenarios" / "plant" / "nonlinear-overlap.yaml")
+    mm, nrc = (compute_metrics(run_scenario(sc, m, PARAMS)) for m in ("mmac", "nrc"))
+    assert not does_harm(mm, nrc), (mm, harm_limits(nrc))

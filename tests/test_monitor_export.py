@@ -16,7 +16,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _monitor_page import PAGE_MARKS, Monitored, browser, monitored_bench, number, until, until_controlling
+from _monitor_page import (
+    PAGE_MARKS,
+    STARVED_FAILSAFES,
+    Monitored,
+    browser,
+    monitored_bench,
+    number,
+    until,
+    until_controlling,
+)
 from _proc import ROOT
 
 from ehpss_hil.canlog import decode_log
@@ -45,8 +54,6 @@ MIN_CHECKED_ROWS = 100
 #: triggered captures the test arms before one is fired by its own injection: on a loaded host
 #: a fail-safe (LOOP_OVERRUN) is an event too and may fire one first
 CAPTURE_ATTEMPTS = 3
-#: the fail-safe reasons of a loop the host starved (the loop late, or its sensor frames)
-STARVED_REASONS = ("LOOP_OVERRUN", "SENSOR_TIMEOUT")
 
 
 def _csv_rows(csv_text: str) -> list[dict[str, str]]:
@@ -221,12 +228,12 @@ def test_refusal_failsafe_shading_and_csv_export(monitored: Monitored, tmp_path:
             if f"k_q_true {k_prev} → {k_q}" in fired:
                 break
             assert "fail-safe (FAULT)" in fired or "nominal fallback" in fired, fired
-            starved += "fail-safe (FAULT)" in fired and text("failsafe-reason") in STARVED_REASONS
+            starved += "fail-safe (FAULT)" in fired and text("failsafe-reason") in STARVED_FAILSAFES
         else:
             if starved < CAPTURE_ATTEMPTS:
                 raise AssertionError(f"{CAPTURE_ATTEMPTS} captures fired by other events; the last: {fired}")
             capture_not_judged = (
-                f"every capture was fired by a fail-safe of a starved loop ({STARVED_REASONS}) before "
+                f"every capture was fired by a fail-safe of a starved loop ({STARVED_FAILSAFES}) before "
                 f"the injected k_Q reached the page; the last: {fired}"
             )
     finally:

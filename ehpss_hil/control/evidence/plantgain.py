@@ -118,14 +118,16 @@ class PlantGain:
         return False
 
     def fault_possible(self, theta: float) -> bool:
-        """Whether H_D may be decided for a product at ``theta``: the load pressure tells a
-        sensor gain from a flow gain, but not from a plant whose velocity gain is off the model
-        through its stiffness (ω_h², which moves the product and leaves the pressure's high
-        band alone). So while the plant's pressure gain is uncertain
-        (``pressure_gain_uncertainty`` > 0, the uncertainty ω_h is in) and before the plant has
-        shown its own flow gain (:attr:`known`), a deviation within ``velocity_gain_uncertainty``
-        of 1 is left undecided (and adopted as the plant's when it stays so); one beyond it is
-        a fault."""
-        if self._band == 0.0 or self.known:
+        """Whether H_D may be decided for an averaged product at ``theta``: the load pressure
+        tells a sensor gain from a flow gain only against the plant's own pressure gain, which
+        the model error moves (ω_h² moves the product and leaves the pressure's high band
+        alone; the window's ratio depends on the frequencies the loop excites). So while that
+        gain is uncertain (``pressure_gain_uncertainty`` > 0) and not learned
+        (:attr:`baseline`), a deviation within ``velocity_gain_uncertainty`` of the plant's flow
+        gain :attr:`k_base` is left undecided (and adopted as the plant's when it stays so, while
+        the plant is not :attr:`known`); one beyond it is a fault. Having seen the product at the
+        model's gain is not enough: a flow-gain ramp from a plant off the model passes through 1
+        on its way."""
+        if self._band == 0.0 or self.baseline.learned:
             return True
-        return abs(theta - 1.0) > self._vband
+        return abs(theta - self.k_base) > self._vband

@@ -8,8 +8,9 @@ the noise-driven valve activity gives P_L enough model-predictable content that 
 ratio over an exponentially weighted window (:class:`.PressureWindow`) decides within tens of
 milliseconds between H_D (k_Q = k_base, k_DFT = θ_pos/k_base) and H_Q (k_Q = θ_pos, sensor at
 its gain; either sign). H_Q is entered at Λ > ``flow_gain_threshold`` and left at the opposite;
-H_D, whose error costs more, is decided only at Λ < −``flow_gain_sensor_threshold``, and before
-the plant has shown its own flow gain only beyond ``velocity_gain_uncertainty``
+H_D, whose error costs more, is decided only at Λ < −``flow_gain_sensor_threshold``, on a product
+that agrees with its average, and before the plant's pressure gain is learned only for an
+averaged product beyond ``velocity_gain_uncertainty`` of the plant's flow gain
 (:meth:`.PlantGain.fault_possible`). A decision ends only when neither θ_pos nor the position
 bank's level model deviates. The compensation always uses θ_pos; only its split between the
 sensor and the flow gain comes from the pressure, so the pressure noise never enters the loop.
@@ -373,7 +374,11 @@ class PressureTest:
     def _decide(self, theta: float) -> None:
         """Enter H_Q on strong evidence and a real deviation; leave it on strong counter-evidence
         (or a product below ``sensor_failed_below``: a failed sensor is never a flow-gain
-        loss)."""
+        loss). Decide H_D on strong evidence for it only where this sample's product agrees with
+        the averaged one within ``min_deviation`` and :meth:`.PlantGain.fault_possible` allows
+        the average: a product still moving (a valve's overlap takes it towards 0 at each
+        reversal, where the spool moves and no oil flows) is no sensor gain yet, and reading a
+        sound sensor through it costs more than waiting."""
         if theta < self._failed_below:
             self.flow_fault = False
             return
@@ -389,7 +394,11 @@ class PressureTest:
                 self._s = beside
         if self.flow_fault:
             self.sensor_decided = False
-        elif self.llr < -self._on_d and self.plant.fault_possible(theta):
+        elif (
+            self.llr < -self._on_d
+            and abs(theta - self._avg.mean) < self._min_dev * self.k_base
+            and self.plant.fault_possible(self._avg.mean)
+        ):
             self.sensor_decided = self.sensor_current = True
             self._s = self._avg.mean / self.k_base  # the averaged product: one θ_pos wanders
             self._s_held = False
