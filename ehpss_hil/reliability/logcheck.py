@@ -142,8 +142,16 @@ def controller_cycles(log: LogFile, codec: FrameCodec | None = None) -> list[Cyc
             out.append(Cycle(bool(vals["Enable"]), float(vals["CurrentSetpoint"]), fresh, bad, skipped))
             fresh, bad = False, 0
         elif f[0] == status and out:
-            out[-1].status_reason = FailsafeReason(int(decode_own(codec, "CTRL_STATUS", f)["FailsafeReason"]))
+            out[-1].status_reason = _reason(int(decode_own(codec, "CTRL_STATUS", f)["FailsafeReason"]))
     return out
+
+
+def _reason(value: int) -> FailsafeReason | None:
+    """The FailsafeReason of a CTRL_STATUS value (None: a value the DBC does not name)."""
+    try:
+        return FailsafeReason(value)
+    except ValueError:
+        return None
 
 
 def cycles_to_safe(cycles: list[Cycle]) -> int | None:
