@@ -118,6 +118,24 @@ def test_controller_cycles_from_a_log(tmp_path: Path) -> None:
     assert cyc[7].e2e_bad == 1
 
 
+def test_rejections_before_the_first_command_are_not_the_first_cycles(tmp_path: Path) -> None:
+    """A loop that started late drains a backlog in cycles that send no command yet (here 11
+    repeated SENSOR_POS frames, REPEATED): the log cannot tell which cycle drained them, so the
+    first command's cycle is not given them — 11 ≥ ``max_e2e_errors`` would make the next
+    stale cycle a timeout the controller "missed" (a CI run under load, kill -9 of the emulator)."""
+    tx, rx = FrameCodec(), FrameCodec()
+    pos = bytes(tx.encode("SENSOR_POS", {"Position": 1e-4, "Spool": 0.0}).data)
+    lines = [_line(CODEC.can_id("SENSOR_POS"), pos) for _ in range(12)]
+    for i in range(2):
+        cmd = rx.encode("VALVE_CMD", {"CurrentSetpoint": 1e-4, "Enable": 1, "CycleCount": i}).data
+        lines.append(_line(CODEC.can_id("VALVE_CMD"), bytes(cmd)))
+    p = tmp_path / "ctl.log"
+    p.write_text("".join(lines))
+    cyc = controller_cycles(read_candump(p))
+    assert [(c.fresh, c.e2e_bad) for c in cyc] == [(True, 0), (False, 0)]
+    assert audit_watchdog(cyc, 3, stopped=False).missed == 0
+
+
 def test_a_trip_on_fresh_data_is_starved_only_when_the_controller_says_loop_overrun(tmp_path: Path) -> None:
     """Enable drops at cycle 4 with every sample fresh (no timeout the log shows): spurious,
     unless the first CTRL_STATUS while disabled gives LOOP_OVERRUN (the loop starved); a

@@ -20,6 +20,7 @@ SKIP = skip_reason()
 pytestmark = pytest.mark.skipif(SKIP is not None, reason=str(SKIP))
 
 
+@pytest.mark.alone  # counts the survivor's cycles to its safe state and audits its watchdog
 @pytest.mark.parametrize("victim", ["emulator", "controller"])
 def test_kill9_survivor_reaches_safe_state_and_keeps_a_complete_log(tmp_path: Path, victim: str) -> None:
     r = kill_trial(tmp_path, 0, victim, random.Random(7 if victim == "emulator" else 8))

@@ -121,7 +121,9 @@ class Cycle:
 
 
 def controller_cycles(log: LogFile, codec: FrameCodec | None = None) -> list[Cycle]:
-    """The controller's executed cycles from its own log (verdicts re-derived in log order)."""
+    """The controller's executed cycles from its own log (verdicts re-derived in log order);
+    E2E rejections logged before its first VALVE_CMD are not counted (cycles that sent no
+    command drained them)."""
     codec = codec or FrameCodec()
     pos, aux, cmd, status = (
         codec.can_id(n) for n in ("SENSOR_POS", "SENSOR_AUX", "VALVE_CMD", "CTRL_STATUS")
@@ -138,6 +140,11 @@ def controller_cycles(log: LogFile, codec: FrameCodec | None = None) -> list[Cyc
             vals = decode_own(codec, "VALVE_CMD", f)
             cc = int(vals["CycleCount"])
             skipped = 0 if last is None else (cc - last - 1) % 65536
+            if last is None:
+                # the loop's cycles before its first command (waiting for sensor data) send none:
+                # which of them drained a rejected frame the log cannot tell, and each counted
+                # its own, so none is given to the first command's cycle
+                bad = 0
             last = cc
             out.append(Cycle(bool(vals["Enable"]), float(vals["CurrentSetpoint"]), fresh, bad, skipped))
             fresh, bad = False, 0
