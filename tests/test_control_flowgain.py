@@ -316,3 +316,24 @@ def test_pressure_window_fits_and_ratio_match_the_weighted_sums() -> None:
     assert win.llr(1.0, 0.7, 0.0, 0.0) > 50.0  # H_Q at 0.7 explains the data, H_D at 1 does not
     assert win.llr(0.7, 1.0, 0.0, 0.0) < -50.0
     assert win.llr(0.8, 0.6, 0.0, 0.2) == 0.0  # 0.7 lies within both bands: no evidence
+
+
+@pytest.mark.parametrize("wander", [0.0, 0.15])
+def test_a_product_whose_wander_reaches_the_failed_sensor_bound_is_no_flow_loss(wander: float) -> None:
+    """The pressure says the flow gain fell to a quarter. With a clean product at 0.25 that is
+    H_Q; with the same product wandering ±0.15 a sample (a dead reading under 15–20 µm of
+    position noise gives products of 0.15–0.4) it is not: its average stands within
+    ``product_spread`` mean steps of ``sensor_failed_below``, and a current divided by it drove
+    a nonlinear campaign draw's piston from stop to stop (2.1 mm RMS)."""
+    plant = PlantStepper(PARAMS, TS)
+    plant.set_faults(FaultState(k_loe=0.8, k_q=0.25))
+    mon = PressureTest(PARAMS.plant, TS)
+    rng = np.random.default_rng(3)
+    current, entered = 0.0, False
+    for _ in range(400):
+        theta = 0.25 + wander * rng.uniform(-1.0, 1.0)
+        mon.update(current, plant.load_pressure_pa + 1e4 * rng.standard_normal(), 0.8, theta)
+        entered |= mon.flow_fault
+        current = 1e-4 * rng.standard_normal()
+        plant.step(current)
+    assert entered == (wander == 0.0)

@@ -34,17 +34,19 @@ class Executor(Protocol):
 
 @contextmanager
 def open_executor(
-    workers: int = 1, scheduler: str | None = None, retries: int = 0, connect_timeout_s: float | None = None
+    workers: int = 1,
+    scheduler: str | None = None,
+    retries: int = 0,
+    connect_timeout_s: float = CONNECT_TIMEOUT_S,
 ) -> Iterator[Executor]:
     """The executor of ``--workers``/``--scheduler`` (Dask connected, or its LocalCluster up,
     on entry: ClusterError when it cannot be); closed on exit. A run that fails is submitted
     again up to ``retries`` times; ``connect_timeout_s``: how long the scheduler may take to
-    answer (s; None: :data:`.workers.CONNECT_TIMEOUT_S`)."""
+    answer (s)."""
     if not scheduler:
         yield LocalPool(workers, retries)
         return
     from .cluster import DaskExecutor
 
-    timeout = CONNECT_TIMEOUT_S if connect_timeout_s is None else connect_timeout_s
-    with DaskExecutor(scheduler, retries, timeout) as ex:
+    with DaskExecutor(scheduler, retries, connect_timeout_s) as ex:
         yield ex

@@ -267,7 +267,9 @@ class EvidenceLayer:
             inc.product_updated,
         )
         if pt.flow_fault:
-            est.enter_flow(position_m, prod, k_loe, pt.sensor_gain)
+            # under position noise the averaged product (compensated_product): a current
+            # divided by one noisy θ_pos carries the noise into the loop
+            est.enter_flow(position_m, pt.compensated_product(prod), k_loe, pt.sensor_gain)
             self._in_flow = True
         elif self._in_flow:  # back to H_D: the product is the sensor's gain (≈ 1 when it vanished)
             self._in_flow = False

@@ -280,14 +280,22 @@ class PressureTest:
     ) -> bool:
         """Whether there is no deviation to test (H_D whatever the evidence). With the bank's
         model at the plant's gain too the episode is over (the window starts afresh when a
-        deviation appears), and a healthy sample teaches the pressure baseline."""
+        deviation appears). A healthy sample with nothing attributed, the bank's model and the
+        *averaged* product at the plant's gain (one θ_pos wanders with the position noise)
+        teaches the pressure baseline."""
         kb = self.k_base
         dev = self._min_dev * kb
+        level_at_base = abs(theta_level - kb) < dev
+        if (
+            healthy
+            and level_at_base
+            and beside == 1.0
+            and not (self.flow_fault or self.sensor_decided)
+            and abs(self._avg.mean - kb) < dev
+        ):
+            self.plant.baseline.learn(theta_l * kb * self._pa * self.model.acceleration_m_s2, pressure_pa)
         if self.flow_fault or beside != 1.0 or abs(theta_pos - kb) >= dev:
             return False
-        level_at_base = abs(theta_level - kb) < dev
-        if healthy and level_at_base and not self.sensor_decided:
-            self.plant.baseline.learn(theta_l * kb * self._pa * self.model.acceleration_m_s2, pressure_pa)
         if level_at_base and (self.window.w > 0.0 or self.sensor_decided):
             self._end_episode()
         return True
@@ -353,6 +361,15 @@ class PressureTest:
         """The plant's pressure gain was learned (``baseline_min_s`` of healthy operation)."""
         return self.plant.baseline.learned
 
+    def compensated_product(self, theta_pos: float) -> float:
+        """The product H_Q compensates with: this sample's θ_pos, or its average over about M
+        excited increments where the product wanders by ``min_deviation`` or more
+        (``product_spread`` mean steps: 10–20 µm of position noise) — a current divided by one
+        noisy θ_pos carries that noise into the loop, while a clean product follows what moves
+        it at once (a single-rod cylinder's gain changing with the direction of travel)."""
+        avg = self._avg
+        return avg.mean if self._spread * avg.wander >= self._min_dev * self.k_base else theta_pos
+
     @property
     def pressure_gain(self) -> float:
         """The plant's load pressure over the model's, learned while nothing deviated (both
@@ -372,10 +389,12 @@ class PressureTest:
         return self.flow_fault or self.sensor_decided
 
     def _decide(self, theta: float) -> None:
-        """Enter H_Q on strong evidence and a real deviation; leave it on strong counter-evidence
-        (or a product below ``sensor_failed_below``: a failed sensor is never a flow-gain
-        loss). Decide H_D on strong evidence for it only where this sample's product agrees with
-        the averaged one within ``min_deviation`` and :meth:`.PlantGain.fault_possible` allows
+        """Enter H_Q on strong evidence and a real deviation whose averaged product stands
+        ``product_spread`` mean steps above ``sensor_failed_below`` (a dead reading's product
+        wanders up to 0.3–0.4 under position noise); leave it on strong counter-evidence (or a
+        product below ``sensor_failed_below``: a failed sensor is never a flow-gain loss).
+        Decide H_D on strong evidence for it only where this sample's product agrees with the
+        averaged one within ``min_deviation`` and :meth:`.PlantGain.fault_possible` allows
         the average: a product still moving (a valve's overlap takes it towards 0 at each
         reversal, where the spool moves and no oil flows) is no sensor gain yet, and reading a
         sound sensor through it costs more than waiting."""
@@ -389,7 +408,12 @@ class PressureTest:
             self.flow_fault = self.llr > -self._on
         else:
             kb, beside = self.k_base, self._beside
-            self.flow_fault = self.llr > self._on and abs(theta / beside - kb) >= self._min_dev * kb
+            avg = self._avg
+            self.flow_fault = (
+                self.llr > self._on
+                and abs(theta / beside - kb) >= self._min_dev * kb
+                and avg.mean - self._spread * avg.wander >= self._failed_below
+            )
             if self.flow_fault:  # H_Q beside the sensor gain H_D stood at (1: the deviation's own)
                 self._s = beside
         if self.flow_fault:
