@@ -21,11 +21,13 @@ class ProductAverage:
     """θ_pos averaged over about M excited updates (the gain H_Q is judged with: one θ_pos
     wanders with the position noise) and the mean step between updates (that wander)."""
 
-    __slots__ = ("_m", "_prev", "mean", "wander")
+    __slots__ = ("_m", "_prev", "_spread", "mean", "wander")
 
-    def __init__(self, m: int) -> None:
-        """``m``: the number of excited updates averaged over (``increment_window``)."""
+    def __init__(self, m: int, spread: float) -> None:
+        """``m``: the number of excited updates averaged over (``increment_window``);
+        ``spread``: the mean steps the product's own wander may take it (``product_spread``)."""
         self._m = m
+        self._spread = spread
         self.reset()
 
     def reset(self) -> None:
@@ -43,6 +45,11 @@ class ProductAverage:
         self.wander += (abs(theta_pos - self._prev) - self.wander) / m
         self._prev = theta_pos
 
+    @property
+    def reach(self) -> float:
+        """How far the product's own wander may take it: ``product_spread`` mean steps."""
+        return self._spread * self.wander
+
 
 class PlantGain:
     """The plant's own flow gain :attr:`k_base`, whether the plant was seen at the model's
@@ -55,7 +62,6 @@ class PlantGain:
         "_failed_below",
         "_min_dev",
         "_seen_n",
-        "_spread",
         "_vband",
         "baseline",
         "k_base",
@@ -70,7 +76,6 @@ class PlantGain:
         self.baseline = PressureBaseline(ts_s, t)
         self._band = t.pressure_gain_uncertainty
         self._vband = t.velocity_gain_uncertainty
-        self._spread = t.product_spread
         self._min_dev = t.flow_gain_min_deviation
         self._failed_below = t.sensor_failed_below
         self._seen_n = max(1, round(t.plant_seen_s / ts_s))
@@ -111,7 +116,7 @@ class PlantGain:
         if self.known:
             return False
         dev = abs(avg.mean - 1.0)
-        inside = self._spread * avg.wander < dev <= self._vband and dev >= self._min_dev
+        inside = avg.reach < dev <= self._vband and dev >= self._min_dev
         if inside and theta >= self._failed_below:
             self.k_base = avg.mean
             return True

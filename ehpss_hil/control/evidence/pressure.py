@@ -50,7 +50,6 @@ class PressureTest:
         "_pa",
         "_s",
         "_s_held",
-        "_spread",
         "_theta_ref",
         "_tl_ref",
         "_tq_ref",
@@ -80,9 +79,8 @@ class PressureTest:
         #: the plant's own flow gain and pressure gain (kept across :meth:`reset`)
         self.plant = PlantGain(ts_s, t)
         self._band = t.pressure_gain_uncertainty
-        self._spread = t.product_spread
         self._undecided = t.undecided_evidence * self._min_evidence
-        self._avg = ProductAverage(t.increment_window)
+        self._avg = ProductAverage(t.increment_window, t.product_spread)
         self.reset()
 
     def forget_plant(self) -> None:
@@ -325,7 +323,7 @@ class PressureTest:
         g = self.pressure_gain * theta_l
         band = 0.0 if self.plant.baseline.learned else self._band
         # H_Q: the flow gain is the product less the sensor gain it is judged beside
-        spread = self._spread * self._avg.wander * g / beside
+        spread = self._avg.reach * g / beside
         self.llr = win.llr(g * self.k_base, g * self._avg.mean / beside, spread, band)
 
     def _end_episode(self) -> None:
@@ -368,7 +366,7 @@ class PressureTest:
         noisy θ_pos carries that noise into the loop, while a clean product follows what moves
         it at once (a single-rod cylinder's gain changing with the direction of travel)."""
         avg = self._avg
-        return avg.mean if self._spread * avg.wander >= self._min_dev * self.k_base else theta_pos
+        return avg.mean if avg.reach >= self._min_dev * self.k_base else theta_pos
 
     @property
     def pressure_gain(self) -> float:
@@ -412,7 +410,7 @@ class PressureTest:
             self.flow_fault = (
                 self.llr > self._on
                 and abs(theta / beside - kb) >= self._min_dev * kb
-                and avg.mean - self._spread * avg.wander >= self._failed_below
+                and avg.mean - avg.reach >= self._failed_below
             )
             if self.flow_fault:  # H_Q beside the sensor gain H_D stood at (1: the deviation's own)
                 self._s = beside
