@@ -9,6 +9,7 @@ import pytest
 from ehpss_hil.control.evidence.baseline import PressureBaseline
 from ehpss_hil.control.evidence.increments import Increments
 from ehpss_hil.control.evidence.likelihood import PressureWindow
+from ehpss_hil.control.evidence.loadpressure import LoadPressure
 from ehpss_hil.control.evidence.pressure import PressureTest
 from ehpss_hil.control.tuning import ControlTuning
 from ehpss_hil.physics.faults import FaultState
@@ -128,6 +129,38 @@ def test_hold_off_takes_no_evidence_and_keeps_the_decision() -> None:
         assert (mon.window.w, mon.llr, mon.flow_fault) == (w, llr, fault)
     mon.update(1e-4, 0.0, 1.0, 0.5)
     assert mon.window.w != w
+
+
+def test_the_load_pressure_evidence_counts_its_hold_off_and_drops_evidence_about_another_plant() -> None:
+    """``LoadPressure``: a hold-off of n samples is n held samples; k̂_LOE is followed from the
+    first healthy sample and a move beyond ``flow_gain_min_deviation`` of it is reported once;
+    the window's product is the averaged product at its first sample, and a move off it counts
+    only once the window held ``undecided_evidence`` times the minimum evidence."""
+    t = ControlTuning()
+    ev = LoadPressure(PARAMS.plant, TS, t)
+    ev.hold_off(3)
+    ev.hold_off(2)  # the longer hold-off stands
+    assert [ev.held() for _ in range(4)] == [True, True, True, False]
+    dev = t.flow_gain_min_deviation
+    assert not ev.loe_moved(0.5, healthy=False)  # not settled: nothing to move from
+    assert not ev.loe_moved(0.8, healthy=True)  # settles at 0.8
+    assert not ev.loe_moved(0.8 * (1 + 0.9 * dev), healthy=True)
+    assert ev.loe_moved(0.8 * (1 + 1.1 * dev), healthy=True)
+    assert not ev.loe_moved(0.8 * (1 + 1.1 * dev), healthy=True)  # the new value is the reference
+    n_undecided = t.undecided_evidence * t.flow_gain_min_evidence_s / TS
+    ev.model.propagate(1e-3)
+    ev.add(1e4, 0.7)  # the window is about a product at 0.7 from its first sample on
+    for _ in range(int(n_undecided) - 1):  # the window's weight (samples) grows slower than one a sample
+        ev.model.propagate(1e-3)
+        ev.add(1e4, 0.9)
+    assert not ev.undecided and not ev.moved_off(5.0)
+    for _ in range(400):
+        ev.model.propagate(1e-3)
+        ev.add(1e4, 0.9)
+    assert ev.undecided and ev.window.w >= n_undecided
+    assert ev.moved_off(0.7 + 1.5 * dev) and not ev.moved_off(0.7 + 0.5 * dev)
+    ev.restart()
+    assert ev.window.w == 0.0 and not ev.undecided and not ev.moved_off(5.0)
 
 
 def test_pressure_test_and_product_take_their_constants_from_the_tuning() -> None:

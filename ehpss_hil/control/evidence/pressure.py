@@ -3,9 +3,9 @@
 With the piston position and the spool LVDT alone only ``k_DFT·k_Q`` is identifiable: a flow-gain
 loss looks exactly like a position-sensor drift to the position channel. The load pressure does
 not go through the position sensor: ``P_L = k_LOE·k_Q·(m/A_h)·ẍ₁``, ẍ₁ the acceleration of a
-unit-gain model driven by the applied-current echo (:class:`.UnitPlantPredictor`). In closed loop
-the noise-driven valve activity gives P_L enough model-predictable content that a likelihood
-ratio over an exponentially weighted window (:class:`.PressureWindow`) decides within tens of
+unit-gain model driven by the applied-current echo. In closed loop the noise-driven valve
+activity gives P_L enough model-predictable content that a likelihood ratio over an
+exponentially weighted window (the evidence, :class:`.LoadPressure`) decides within tens of
 milliseconds between H_D (k_Q = k_base, k_DFT = θ_pos/k_base) and H_Q (k_Q = θ_pos, sensor at
 its gain; either sign). H_Q is entered at Λ > ``flow_gain_threshold`` and left at the opposite;
 H_D, whose error costs more, is decided only at Λ < −``flow_gain_sensor_threshold``, on a product
@@ -19,22 +19,21 @@ docs/control.md §5 gives the derivation, the window's rules and the figures.
 
 from __future__ import annotations
 
-import math
-
 from ...physics.params import PlantParams
 from ..predictors import UnitPlantPredictor
 from ..tuning import ControlTuning
 from .likelihood import PressureWindow
+from .loadpressure import LoadPressure
 from .plantgain import PlantGain, ProductAverage
 
 
 class PressureTest:
     """Decides H_D / H_Q each sample; :attr:`k_q` is 1.0 (H_D) or the estimated product (H_Q).
-    The product θ_pos comes from :class:`.Increments`; this class holds the plant's flow gain,
-    the sensor gain a deviation is judged beside and the decision; the unit-gain P_L model is
-    :attr:`model` (a :class:`.UnitPlantPredictor`, stepped by the sample clock between updates),
-    the evidence :attr:`window` a :class:`.PressureWindow`, what is known of the plant's own
-    flow and pressure gains :attr:`plant` (a :class:`.PlantGain`)."""
+    The product θ_pos comes from :class:`.Increments`; this class holds the sensor gain a
+    deviation is judged beside and the decision. The evidence — the unit-gain P_L model
+    :attr:`model` (stepped by the sample clock between updates) and the window of P_L against it
+    :attr:`window` — is :attr:`evidence` (a :class:`.LoadPressure`); what is known of the plant's
+    own flow and pressure gains :attr:`plant` (a :class:`.PlantGain`)."""
 
     __slots__ = (
         "_avg",
@@ -42,18 +41,14 @@ class PressureTest:
         "_beside",
         "_by_test",
         "_failed_below",
-        "_hold",
         "_min_dev",
         "_min_evidence",
         "_on",
         "_on_d",
-        "_pa",
         "_s",
         "_s_held",
         "_theta_ref",
-        "_tl_ref",
-        "_tq_ref",
-        "_undecided",
+        "evidence",
         "flow_fault",
         "k_q",
         "llr",
@@ -66,20 +61,20 @@ class PressureTest:
 
     def __init__(self, plant: PlantParams, ts_s: float, tuning: ControlTuning | None = None) -> None:
         t = tuning if tuning is not None else ControlTuning()
+        #: the evidence: the unit-gain P_L model and the window of P_L against it
+        self.evidence = LoadPressure(plant, ts_s, t)
         #: the valve + cylinder at unit gains, stepped on the current echo by the sample clock
-        self.model = UnitPlantPredictor(plant, ts_s)
-        #: the evidence: P_L against the unit-gain prediction, over ``flow_gain_window_s``
-        self.window = PressureWindow(math.exp(-ts_s / t.flow_gain_window_s))
+        self.model: UnitPlantPredictor = self.evidence.model
+        #: P_L against the unit-gain prediction, over ``flow_gain_window_s``
+        self.window: PressureWindow = self.evidence.window
         self._on = t.flow_gain_threshold
         self._on_d = t.flow_gain_sensor_threshold
         self._min_dev = t.flow_gain_min_deviation
         self._min_evidence = t.flow_gain_min_evidence_s / ts_s
         self._failed_below = t.sensor_failed_below
-        self._pa = plant.load_mass_kg / plant.piston_area_m2
         #: the plant's own flow gain and pressure gain (kept across :meth:`reset`)
         self.plant = PlantGain(ts_s, t)
         self._band = t.pressure_gain_uncertainty
-        self._undecided = t.undecided_evidence * self._min_evidence
         self._avg = ProductAverage(t.increment_window, t.product_spread)
         self.reset()
 
@@ -102,14 +97,12 @@ class PressureTest:
         """At rest, hypothesis H_D (k_Q = 1 · k_base), empty window; what is known of the plant
         (its flow gain, whether it was seen at the model's, the pressure baseline) is kept: a
         fail-safe recovery does not change the plant (:meth:`forget_plant` forgets it)."""
-        self.model.reset()
+        self.evidence.reset()
         self.k_q = self.k_base
         self.flow_fault = False
         self.llr = 0.0
         self._theta_ref = self.k_base
-        self._tl_ref = math.nan  # the settled k̂_LOE a move is measured from (NaN: not settled yet)
         self._avg.reset()  # θ_pos averaged over about M excited updates: H_Q's gain in the test
-        self._hold = 0
         self.sensor_decided = False
         #: the sensor's gain (relative to the plant's, θ_prod/k_base) H_D stands at: once the
         #: reading's level shows it, a later change of the product is judged beside it
@@ -120,7 +113,6 @@ class PressureTest:
         #: H_D decided on this sample (Λ < −``flow_gain_sensor_threshold`` on enough evidence) or
         #: by :meth:`decide_sensor` since the last :meth:`update`
         self.sensor_current = False
-        self.restart()
 
     @property
     def min_deviation(self) -> float:
@@ -160,15 +152,12 @@ class PressureTest:
     def restart(self) -> None:
         """Empty the evidence window (the hypotheses or the pressure model changed); the
         decision stands until new evidence overturns it."""
-        self.window.empty()
-        self._tq_ref = 1.0  # the product the window's evidence is about (set by its first sample)
+        self.evidence.restart()
 
     def hold_off(self, samples: int) -> None:
-        """Take no evidence for the next ``samples`` updates (the decision stands): after
-        samples the model was stepped through without their data, its P_L prediction is off until
-        the valve and cylinder dynamics forget the error, and a prediction error favours the
-        hypothesis with the smaller gain — a false H_Q."""
-        self._hold = max(self._hold, samples)
+        """Take no evidence for the next ``samples`` updates (the decision stands; see
+        :meth:`.LoadPressure.hold_off`)."""
+        self.evidence.hold_off(samples)
 
     def update(
         self,
@@ -199,12 +188,14 @@ class PressureTest:
             # stale (k̂_Q = θ_pos ≈ 0 would divide the position by nothing)
             self.flow_fault = False
             self.k_q = self.k_base
-        if self._hold > 0:  # no evidence now (hold_off): the decision stands
-            self._hold -= 1
+        ev = self.evidence
+        if ev.held():  # no evidence now (hold_off): the decision stands
             return self.k_q
         if not fresh:  # θ_pos is stale (no excited increment): nothing to test
             return self.k_q
-        self._follow_loe(theta_l, healthy)
+        if ev.loe_moved(theta_l, healthy) and (self.flow_fault or self.sensor_decided):
+            # a decision taken stands on the evidence gathered since the LOE moved
+            ev.restart()
         beside = self._judged_beside(theta_pos, theta_level)
         if self._unseen_gain_over(theta_pos, theta_level) or self._no_deviation(
             theta_pos, theta_level, beside, theta_l, pressure_pa, healthy
@@ -224,20 +215,6 @@ class PressureTest:
         (:attr:`plant_seen`)."""
         self._avg.add(theta_pos)
         self.plant.observe(self._avg.mean)
-
-    def _follow_loe(self, theta_l: float, healthy: bool) -> None:
-        """The settled k̂_LOE moves are measured from: set once the spool channel is healthy;
-        a move beyond ``min_deviation`` off it is a change of the LOE, and the window's samples
-        from before it are about another plant (its k̂_LOE-free sums would weigh them with the
-        new k̂_LOE): a decision taken stands on the evidence gathered since."""
-        tl_ref = self._tl_ref
-        if tl_ref != tl_ref:  # NaN: k̂_LOE not yet settled since the reset (being identified)
-            if healthy:
-                self._tl_ref = theta_l
-        elif abs(theta_l - tl_ref) > self._min_dev * tl_ref:
-            self._tl_ref = theta_l
-            if self.flow_fault or self.sensor_decided:
-                self.restart()
 
     def _judged_beside(self, theta_pos: float, theta_level: float) -> float:
         """The sensor gain a change of the product is judged beside on this sample (1: none).
@@ -291,7 +268,7 @@ class PressureTest:
             and not (self.flow_fault or self.sensor_decided)
             and abs(self._avg.mean - kb) < dev
         ):
-            self.plant.baseline.learn(theta_l * kb * self._pa * self.model.acceleration_m_s2, pressure_pa)
+            self.evidence.teach(self.plant.baseline, theta_l * kb, pressure_pa)
         if self.flow_fault or beside != 1.0 or abs(theta_pos - kb) >= dev:
             return False
         if level_at_base and (self.window.w > 0.0 or self.sensor_decided):
@@ -304,27 +281,25 @@ class PressureTest:
         gain is learned each hypothesis' gain is known within ``pressure_gain_uncertainty``;
         H_Q's only as well as the product: ± ``product_spread`` times its mean step between
         excited increments (the wander the position noise gives it)."""
-        win = self.window
+        ev = self.evidence
         if self.flow_fault or self.sensor_decided:
             if abs(theta_pos - self._theta_ref) > self._min_dev:
                 # an attributed deviation moved: gather evidence afresh (the attribution stands
                 # until the new evidence overturns it)
                 self._theta_ref = theta_pos
-                self.restart()
-        elif win.w >= self._undecided and not abs(self._avg.mean - self._tq_ref) <= self._min_dev:
+                ev.restart()
+        elif ev.moved_off(self._avg.mean):
             # the product moved off a deviation the window held without deciding (a plant the
             # uncertainty leaves ambiguous): that evidence is about the plant, not the new
             # change; while unattributed and undecided the product is still converging on the
             # one deviation and the evidence is kept
-            self.restart()
-        if win.w == 0.0:
-            self._tq_ref = self._avg.mean
-        win.add(self._pa * self.model.acceleration_m_s2, pressure_pa)
+            ev.restart()
+        ev.add(pressure_pa, self._avg.mean)
         g = self.pressure_gain * theta_l
         band = 0.0 if self.plant.baseline.learned else self._band
         # H_Q: the flow gain is the product less the sensor gain it is judged beside
         spread = self._avg.reach * g / beside
-        self.llr = win.llr(g * self.k_base, g * self._avg.mean / beside, spread, band)
+        self.llr = ev.window.llr(g * self.k_base, g * self._avg.mean / beside, spread, band)
 
     def _end_episode(self) -> None:
         """The deviation is over: H_D no longer decided, no sensor gain carried, the window
@@ -338,7 +313,7 @@ class PressureTest:
         """A deviation the window held undecided for ``undecided_evidence`` becomes the plant's
         flow gain when :meth:`.PlantGain.adopt` takes it (inside the velocity-gain uncertainty,
         before the plant has shown its own); the window starts afresh."""
-        if self.flow_fault or self.sensor_decided or self.window.w < self._undecided:
+        if self.flow_fault or self.sensor_decided or not self.evidence.undecided:
             return
         if self.plant.adopt(self._avg, theta):
             self._theta_ref = self.plant.k_base
