@@ -133,8 +133,7 @@ class MmacController(LoopBase):
             if alive and self.position_nominal and td != pt.k_base:
                 # a model the loop does not read the sensor through moves x̂ only as far as a
                 # returning sensor may stand off it: x̂ takes the loop if the sensor fails
-                x_after = est.xhat.x + est.y0 / td - est.x0
-                rebase = abs(meas.position_m - est.k_q * x_after) <= self._return_gap_m
+                rebase = abs(meas.position_m - est.k_q * est.rebased_x(td)) <= self._return_gap_m
             est.set_channels(tl, td, rebase, pt.k_base)
             if est.y0 != 0.0 and alive and not pt.flow_fault and self._pivot_model(td):
                 # the nominal model in use, or the gain a verified jump of the reading went to:

@@ -109,6 +109,10 @@ class Estimates:
         if self.x0 == self.y0 / theta:
             self.y0 = self.x0 = 0.0
 
+    def rebased_x(self, theta: float) -> float:
+        """x̂ (m) as a re-base on the gain ``theta`` would place it, without re-basing."""
+        return self.xhat.x + self.y0 / theta - self.x0
+
     def rebase(self, theta: float, trusted: bool) -> None:
         """Keep x0 = y0/θ with θ = θ̂_D·k̂_Q in use: x̂ moves with x0 (x̂ − x0 is unchanged), so
         it stays the absolute position while the sensor gain estimate changes. Not while the
