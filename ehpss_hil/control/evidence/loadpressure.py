@@ -66,11 +66,6 @@ class LoadPressure:
             return True
         return False
 
-    @property
-    def held_off(self) -> int:
-        """Samples still held off."""
-        return self._hold
-
     def loe_moved(self, theta_l: float, healthy: bool) -> bool:
         """Follow the settled k̂_LOE ``theta_l``: set once the spool channel is ``healthy``;
         returns whether it moved beyond ``flow_gain_min_deviation`` off it since (a change of the
@@ -94,7 +89,7 @@ class LoadPressure:
     def moved_off(self, mean: float) -> bool:
         """The averaged product ``mean`` moved beyond ``flow_gain_min_deviation`` off the one the
         window's evidence is about, after the window held it :attr:`undecided`."""
-        return self.window.w >= self._undecided and not abs(mean - self._tq_ref) <= self._min_dev
+        return self.undecided and not abs(mean - self._tq_ref) <= self._min_dev
 
     def add(self, pressure_pa: float, mean: float) -> None:
         """One sample of evidence: the measured P_L (Pa) against the model's prediction; the
