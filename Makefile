@@ -4,7 +4,7 @@ VENV ?= .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-socketcan socketcan-tests lint venv lock lock-add clean
+.PHONY: demo test test-socketcan socketcan-tests lint venv native lock lock-add clean
 
 #: the lock files: exact versions with hashes, resolved by uv for Python 3.11 on Linux x86_64
 #: (CI's platform). dev.lock: the base + every extra make and CI install; base.lock: the daemon
@@ -22,9 +22,16 @@ $(STAMP): pyproject.toml $(LOCK)
 	$(VPY) -m pip install --quiet --require-hashes --no-deps -r $(LOCK)
 	$(VPY) -m pip install --quiet --no-deps --no-build-isolation -e .
 	$(VPY) -m pip check
+	$(VPY) -m ehpss_hil.nativebuild
 	touch $(STAMP)
 
 venv: $(STAMP)
+
+## compile the per-sample code (ehpss_hil/control/, the nonlinear plant) with mypyc again: after
+## editing one of those modules they run from source (slower, and stderr says so) until this
+## runs; `$(VPY) -m ehpss_hil.nativebuild status|clean` shows or removes the build
+native: $(STAMP)
+	$(VPY) -m ehpss_hil.nativebuild
 
 ## refresh the lock files to the newest releases pyproject.toml allows, rebuild .venv from them
 ## and run the test suite on them: how a new numpy/scipy/cantools enters (commit the locks only
@@ -84,4 +91,5 @@ socketcan-tests:
 	@test -z "$(SOCKETCAN_TESTS)" || echo $(SOCKETCAN_PYTEST) $(SOCKETCAN_TESTS)
 
 clean:
+	test ! -x $(VPY) || $(VPY) -m ehpss_hil.nativebuild clean
 	rm -rf $(VENV) $(UV_VENV) out runs .pytest_cache

@@ -11,7 +11,9 @@ guard_startup()  # first: a Ctrl-C while a program starts exits 130 (ehpss_hil/i
 
 from pathlib import Path  # noqa: E402
 
-from . import _mf4import  # noqa: E402
+from . import _mf4import, native  # noqa: E402
+
+native.guard()  # before any compiled module is imported: a stale native build is not used
 
 __version__ = "0.1.0"
 

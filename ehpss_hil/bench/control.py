@@ -11,7 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .. import PROJECT_ROOT
+from .. import PROJECT_ROOT, native
 from ..control.registry import MODES
 from ..control.tuning import ControlTuning
 from ..report.metrics import COMPENSATED_RMS_M, RunMetrics, does_harm, harm_limits
@@ -186,9 +186,10 @@ def _kq(t: Table) -> list[Verdict]:
 def _speed(t: Table) -> list[Verdict]:
     sp = sorted(m.speed for (sc, mode), m in t.items() if mode == "mmac" and m.speed > 0)
     med = sp[len(sp) // 2] if sp else 0.0
+    how = "compiled" if native.compiled() else "from source"
     return [
         Verdict(
-            "mmac sim speed (median run, loop CPU time on one core)",
+            f"mmac sim speed (median run, loop CPU time on one core, controller {how})",
             f"{med:.0f}× real time",
             f"≥ {SPEED_TARGET:.0f}×",
             med >= SPEED_TARGET,

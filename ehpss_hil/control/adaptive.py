@@ -28,8 +28,7 @@ class MmacController(LoopBase):
     mode = "mmac"
     warmup_tracks_sensor = False
 
-    # the mode's own attributes as slots too (LoopBase); the evidence's bound questions
-    # (_position_guarded, …) shadow LoopBase's methods from the instance dict
+    # the mode's own attributes as slots too (LoopBase)
     __slots__ = (
         "_flow_on",
         "_inv_s_pos",
@@ -74,14 +73,6 @@ class MmacController(LoopBase):
         self._pressure = self.evidence.pressure
         if t.flow_gain_test:  # the sample clock steps the pressure model too
             self.clock.pressure = self._pressure.model
-        # the loop's questions go straight to the evidence (no forwarding call per cycle)
-        ev = self.evidence
-        self._position_guarded = ev.position_guarded  # type: ignore[method-assign]
-        self._guarded_gain = ev.guarded_gain  # type: ignore[method-assign]
-        self._jumped_under_guard = ev.jumped_under_guard  # type: ignore[method-assign]
-        self._sensor_live = ev.sensor_live  # type: ignore[method-assign]
-        self._sensor_dead = ev.sensor_dead  # type: ignore[method-assign]
-        self._sensor_follows_spool = ev.sensor_follows_spool  # type: ignore[method-assign]
         self._flow_on = t.flow_gain_test
         self._stop_hold = max(1, round(t.spool_stop_hold_s / ts))
         self._inv_s_spool = 1.0 / self.scale_spool_m
@@ -214,6 +205,25 @@ class MmacController(LoopBase):
         """A sample superseded within this cycle: the sample clock steps the predictors on it."""
         if self.clock.observe(meas, self.est.k_loe / self.est.k_q).gap:
             self.evidence.gap()
+
+    # ---- the loop's questions, answered by the evidence ----------------------------------
+    def _position_guarded(self) -> bool:
+        return self.evidence.position_guarded()
+
+    def _guarded_gain(self) -> float | None:
+        return self.evidence.guarded_gain()
+
+    def _jumped_under_guard(self) -> bool:
+        return self.evidence.jumped_under_guard()
+
+    def _sensor_live(self) -> bool:
+        return self.evidence.sensor_live()
+
+    def _sensor_dead(self) -> bool:
+        return self.evidence.sensor_dead()
+
+    def _sensor_follows_spool(self) -> bool:
+        return self.evidence.sensor_follows_spool()
 
     def _bridge_gain(self) -> float | None:
         """θ̂_D when the position sensor may place x̂ across a redone span: trusted (not guarded,

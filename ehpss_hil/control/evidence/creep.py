@@ -46,7 +46,7 @@ class CreepEstimator:
         "_min_n",
         "_n",
         "_n_avg",
-        "_null",
+        "_null_speed_m_s",
         "_on",
         "_out2",
         "_se_max",
@@ -60,7 +60,7 @@ class CreepEstimator:
         """``full_flow_m_s``: the piston velocity at the full spool stroke, nominal flow gain
         (m/s); ``tuning``: the ``creep_*`` gates."""
         t = tuning if tuning is not None else ControlTuning()
-        self._null = t.creep_null_share * full_flow_m_s
+        self._null_speed_m_s = t.creep_null_share * full_flow_m_s
         self._on = t.creep_min_share * full_flow_m_s
         self._n_avg = t.creep_samples
         self._min_n = t.creep_min_samples
@@ -89,7 +89,7 @@ class CreepEstimator:
     def update(self, dy_m: float, phi_m: float, tau_s: float, theta: float) -> float:
         """One increment: position increment Δy (m), spool-integral increment φ (m, nominal flow
         gain), the time it spans τ (s), the gain θ_prod. Returns the creep in use (m/s)."""
-        if tau_s <= 0.0 or abs(phi_m) > self._null * tau_s:
+        if tau_s <= 0.0 or abs(phi_m) > self._null_speed_m_s * tau_s:
             return self.rate_m_s
         v = (dy_m - theta * phi_m) / tau_s
         n, m, var = self._n, self.mean_m_s, self._var
@@ -164,7 +164,7 @@ class CreepEstimator:
     @property
     def null_m_s(self) -> float:
         """The velocity (m/s, nominal flow gain) below which a spool counts as near null."""
-        return self._null
+        return self._null_speed_m_s
 
     @property
     def judged(self) -> bool:
