@@ -21,12 +21,10 @@ Only the standard library is imported here: this runs before anything else in th
 
 from __future__ import annotations
 
-import hashlib
 import importlib.abc
 import importlib.machinery
 import importlib.util
 import json
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -40,6 +38,12 @@ MANIFEST = PACKAGE_DIR / "_native.json"
 GROUP = "ehpss_hil._native"
 #: what is compiled: packages (every module below them) and modules, by dotted name
 COMPILED: tuple[str, ...] = ("ehpss_hil.control", "ehpss_hil.physics.hydraulics")
+#: modules below :data:`COMPILED` that stay source, read once per controller, not per sample:
+#: the tuning (a compiled frozen dataclass could not be unpickled on a campaign's workers, nor
+#: read by the config schema through its annotations) and the controller contract (the ABC
+#: every custom law subclasses: compiled, a subclass's ``mode`` and a missing abstract method
+#: would go unseen)
+SOURCE_ONLY: frozenset[str] = frozenset({"ehpss_hil.control.base", "ehpss_hil.control.tuning"})
 
 _EXT_SUFFIXES = tuple(importlib.machinery.EXTENSION_SUFFIXES)
 
@@ -51,10 +55,8 @@ def source(name: str) -> Path:
     return pkg / "__init__.py" if pkg.is_dir() else pkg.with_suffix(".py")
 
 
-def modules() -> list[str]:
-    """Every module compiled, by dotted name, sorted: the modules below the packages of
-    :data:`COMPILED` and the plain modules named there. A package's ``__init__`` stays source
-    (mypyc gives a compiled package in a named group a wrong ``__path__``)."""
+def candidates() -> set[str]:
+    """Every module :data:`COMPILED` names or holds, :data:`SOURCE_ONLY` included."""
     out: set[str] = set()
     for name in COMPILED:
         src = source(name)
@@ -64,7 +66,15 @@ def modules() -> list[str]:
         for py in src.parent.rglob("*.py"):
             if py.name != "__init__.py":
                 out.add(".".join(("ehpss_hil", *py.relative_to(PACKAGE_DIR).with_suffix("").parts)))
-    return sorted(out)
+    return out
+
+
+def modules() -> list[str]:
+    """Every module compiled, by dotted name, sorted: the modules below the packages of
+    :data:`COMPILED` and the plain modules named there, less :data:`SOURCE_ONLY`. A package's
+    ``__init__`` stays source (mypyc gives a compiled package in a named group a wrong
+    ``__path__``)."""
+    return sorted(candidates() - SOURCE_ONLY)
 
 
 def extension(name: str) -> Path | None:
@@ -78,6 +88,9 @@ def extension(name: str) -> Path | None:
 
 
 def _digest(path: Path) -> str:
+    """SHA-256 of the file (hashlib loads OpenSSL: only when a size or mtime differs)."""
+    import hashlib
+
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
@@ -89,16 +102,17 @@ def record(path: Path) -> dict[str, object]:
 
 def stale() -> list[str]:
     """The compiled modules that must not be imported as built: their source changed since the
-    build, their extension is missing, or extensions lie about without a manifest. Empty when
-    nothing is compiled, or the build matches the sources."""
+    build, their extension is missing, extensions lie about without a manifest, or one was
+    built of a module that is to stay source. Empty when nothing is compiled, or the build
+    matches the sources."""
     try:
         data = json.loads(MANIFEST.read_text(encoding="utf-8"))
         recs: dict[str, dict[str, object]] = data["modules"]
     except FileNotFoundError:
-        return [m for m in modules() if extension(m) is not None]
+        return [m for m in sorted(candidates()) if extension(m) is not None]
     except (OSError, ValueError, KeyError, TypeError):
         return modules()
-    out = []
+    out = sorted(m for m in SOURCE_ONLY & candidates() if extension(m) is not None)
     for name in modules():
         rec = recs.get(name)
         src = source(name)
@@ -140,13 +154,12 @@ def guard() -> None:
     changed = stale()
     if not changed:
         return
-    sys.meta_path.insert(0, _SourceFirst(modules()))
-    if not os.environ.get("EHPSS_HIL_QUIET_NATIVE"):
-        sys.stderr.write(
-            f"ehpss-hil: {len(changed)} compiled module(s) changed since the native build "
-            f"(e.g. {changed[0]}): running every compiled module from source; "
-            "`make native` rebuilds them\n"
-        )
+    sys.meta_path.insert(0, _SourceFirst(sorted(candidates())))
+    sys.stderr.write(
+        f"ehpss-hil: {len(changed)} compiled module(s) changed since the native build "
+        f"(e.g. {changed[0]}): running every compiled module from source; "
+        "`make native` rebuilds them\n"
+    )
 
 
 def status() -> str:

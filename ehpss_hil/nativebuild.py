@@ -14,10 +14,11 @@ import os
 import shutil
 import subprocess
 import sys
+import sysconfig
 from collections.abc import Sequence
 from pathlib import Path
 
-from .native import GROUP, MANIFEST, PACKAGE_DIR, extension, modules, record, source, status
+from .native import GROUP, MANIFEST, PACKAGE_DIR, candidates, extension, modules, record, source, status
 
 #: where the build puts mypyc's generated C, the objects and its log (below the repository)
 BUILD_DIR = Path("build") / "native"
@@ -33,7 +34,7 @@ def clean(root: Path) -> int:
 def _remove_products() -> int:
     """Remove the extensions, the group's shared library and the manifest; how many files."""
     n = 0
-    for name in modules():
+    for name in candidates():
         while (ext := extension(name)) is not None:
             ext.unlink()
             n += 1
@@ -60,13 +61,17 @@ setup(
 
 def build(root: Path) -> int:
     """Compile :func:`modules` in place (run from the repository ``root``) and write the
-    manifest. Returns 0 when built, 0 with a one-line reason when the build is not possible
-    here (no mypyc, no C compiler: everything then runs from source), 1 when it failed."""
+    manifest. Returns 0: built, or one line on why not (no mypyc, no C compiler or Python
+    headers, a failed compile with its log kept) — everything then runs from source, which is
+    never wrong, only slower (``status`` says which; CI requires the build)."""
     if importlib.util.find_spec("mypyc") is None or importlib.util.find_spec("setuptools") is None:
         print("native build skipped: mypyc (mypy) and setuptools are not installed; running from source")
         return 0
     if shutil.which(os.environ.get("CC", "cc")) is None:
         print("native build skipped: no C compiler (cc); running from source")
+        return 0
+    if not (Path(sysconfig.get_paths()["include"]) / "Python.h").exists():
+        print("native build skipped: no Python headers (Python.h; python3-dev); running from source")
         return 0
     clean(root)
     out = root / BUILD_DIR
@@ -86,7 +91,7 @@ def build(root: Path) -> int:
             f"native build failed (exit {proc.returncode}, {len(missing)} extension(s) missing; "
             f"log: {log.relative_to(root)}); {clean_n} file(s) removed, running from source"
         )
-        return 1
+        return 0
     manifest = {"python": sys.version, "modules": {m: record(source(m)) for m in names}}
     MANIFEST.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="utf-8")
     print(f"native build: {len(names)} modules compiled with mypyc (log: {log.relative_to(root)})")

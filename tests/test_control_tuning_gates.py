@@ -99,14 +99,16 @@ def test_a_gate_set_in_the_config_is_loaded_and_an_unknown_key_refused(tmp_path:
 
 def _fingerprint(obj: object, seen: set[int] | None = None, depth: int = 0) -> list[object]:
     """Every number a configured controller holds (its objects walked through ``__dict__`` and
-    ``__slots__``), the tuning and the params themselves left out."""
+    ``__slots__``, or mypyc's ``__mypyc_attrs__`` when compiled), the tuning and the params
+    themselves left out."""
     seen = set() if seen is None else seen
     if id(obj) in seen or depth > 6:
         return []
     seen.add(id(obj))
     names = list(getattr(obj, "__dict__", {}))
     for klass in type(obj).__mro__:
-        slots = klass.__dict__.get("__slots__", ())
+        # a class compiled by mypyc (ehpss_hil/native.py) lists its attributes in __mypyc_attrs__
+        slots = klass.__dict__.get("__slots__", ()) or klass.__dict__.get("__mypyc_attrs__", ())
         names += [slots] if isinstance(slots, str) else list(slots)
     out: list[object] = []
     for name in sorted(set(names)):
@@ -119,7 +121,7 @@ def _fingerprint(obj: object, seen: set[int] | None = None, depth: int = 0) -> l
             out.append((name, v))
         elif isinstance(v, tuple | list) and all(isinstance(x, int | float) for x in v):
             out.append((name, tuple(v)))
-        elif hasattr(v, "__dict__") or hasattr(type(v), "__slots__"):
+        elif hasattr(v, "__dict__") or hasattr(type(v), "__slots__") or hasattr(type(v), "__mypyc_attrs__"):
             out += _fingerprint(v, seen, depth + 1)
     return out
 

@@ -51,8 +51,7 @@ def _copy(tmp_path: Path) -> Path:
 
 
 def _run(tree: Path, code: str, *args: str) -> subprocess.CompletedProcess[str]:
-    env = {k: v for k, v in os.environ.items() if k != "EHPSS_HIL_QUIET_NATIVE"}
-    env["PYTHONPATH"] = str(tree)
+    env = {**os.environ, "PYTHONPATH": str(tree)}
     return subprocess.run(
         [sys.executable, "-c", code, *args], cwd=tree, env=env, capture_output=True, text=True, timeout=300
     )
