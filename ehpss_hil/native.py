@@ -25,6 +25,7 @@ import importlib.abc
 import importlib.machinery
 import importlib.util
 import json
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -87,6 +88,24 @@ def extension(name: str) -> Path | None:
     return None
 
 
+def on_disk() -> dict[str, Path]:
+    """Every extension module under the package by dotted name (the group's shared library
+    aside): what a build left, whether or not it is in the build now."""
+    out: dict[str, Path] = {}
+    lib = GROUP + "__mypyc"
+    for root, dirs, files in os.walk(PACKAGE_DIR):
+        dirs[:] = [d for d in dirs if d != "__pycache__"]
+        for f in files:
+            suffix = next((x for x in _EXT_SUFFIXES if f.endswith(x)), None)
+            if suffix is None:
+                continue
+            parts = Path(root, f[: -len(suffix)]).relative_to(PACKAGE_DIR).parts
+            name = ".".join(("ehpss_hil", *parts))
+            if name != lib:
+                out[name] = Path(root, f)
+    return out
+
+
 def _digest(path: Path) -> str:
     """SHA-256 of the file (hashlib loads OpenSSL: only when a size or mtime differs)."""
     import hashlib
@@ -101,28 +120,28 @@ def record(path: Path) -> dict[str, object]:
 
 
 def stale() -> list[str]:
-    """The compiled modules that must not be imported as built: their source changed since the
-    build, their extension is missing, extensions lie about without a manifest, or one was
-    built of a module that is to stay source. Empty when nothing is compiled, or the build
-    matches the sources."""
+    """The extension modules that must not be imported as built: their source changed since
+    the build, one the build made is missing, an extension lies about that the manifest does
+    not list (a module that left the build, one that is to stay source), or extensions without
+    a manifest. Empty when nothing is compiled, or the build matches the sources."""
+    found = on_disk()
     try:
         data = json.loads(MANIFEST.read_text(encoding="utf-8"))
         recs: dict[str, dict[str, object]] = data["modules"]
     except FileNotFoundError:
-        return [m for m in sorted(candidates()) if extension(m) is not None]
+        return sorted(found)
     except (OSError, ValueError, KeyError, TypeError):
-        return modules()
-    out = sorted(m for m in SOURCE_ONLY & candidates() if extension(m) is not None)
+        return sorted(set(found) | set(modules()))
+    out = sorted(set(found) - set(recs))
     for name in modules():
         rec = recs.get(name)
-        src = source(name)
-        if rec is None or extension(name) is None:
+        if rec is None or name not in found:
             out.append(name)
             continue
-        st = src.stat()
+        st = source(name).stat()
         if st.st_size == rec.get("size") and st.st_mtime_ns == rec.get("mtime_ns"):
             continue
-        if _digest(src) != rec.get("sha256"):
+        if _digest(source(name)) != rec.get("sha256"):
             out.append(name)
     return out
 
@@ -154,9 +173,9 @@ def guard() -> None:
     changed = stale()
     if not changed:
         return
-    sys.meta_path.insert(0, _SourceFirst(sorted(candidates())))
+    sys.meta_path.insert(0, _SourceFirst(sorted(candidates() | set(on_disk()))))
     sys.stderr.write(
-        f"ehpss-hil: {len(changed)} compiled module(s) changed since the native build "
+        f"ehpss-hil: {len(changed)} compiled module(s) do not match their source "
         f"(e.g. {changed[0]}): running every compiled module from source; "
         "`make native` rebuilds them\n"
     )
@@ -168,5 +187,5 @@ def status() -> str:
         return "not built: every module runs from source"
     changed = stale()
     if changed:
-        return f"stale: {len(changed)} compiled module(s) changed since the build; running from source"
+        return f"stale: {len(changed)} compiled module(s) do not match their source; running from source"
     return f"compiled: {len(modules())} modules"

@@ -18,7 +18,7 @@ import sysconfig
 from collections.abc import Sequence
 from pathlib import Path
 
-from .native import GROUP, MANIFEST, PACKAGE_DIR, candidates, extension, modules, record, source, status
+from .native import GROUP, MANIFEST, PACKAGE_DIR, extension, modules, on_disk, record, source, status
 
 #: where the build puts mypyc's generated C, the objects and its log (below the repository)
 BUILD_DIR = Path("build") / "native"
@@ -34,10 +34,9 @@ def clean(root: Path) -> int:
 def _remove_products() -> int:
     """Remove the extensions, the group's shared library and the manifest; how many files."""
     n = 0
-    for name in candidates():
-        while (ext := extension(name)) is not None:
-            ext.unlink()
-            n += 1
+    for ext in on_disk().values():
+        ext.unlink()
+        n += 1
     for lib in PACKAGE_DIR.glob("_native__mypyc*"):
         lib.unlink()
         n += 1

@@ -90,6 +90,23 @@ def test_an_edited_source_is_imported_from_source_with_one_line_on_stderr(tmp_pa
     assert len(lines) == 1 and "ehpss_hil.control.estimates" in lines[0] and "make native" in lines[0]
 
 
+def test_an_extension_the_build_did_not_make_is_not_imported(tmp_path: Path) -> None:
+    """A module that left the build keeps its old extension on disk (its shim points into a
+    shared library that no longer holds it: imported, an AttributeError)."""
+    if not _built():
+        pytest.skip(f"no native build in this checkout ({native.status()})")
+    tree = _copy(tmp_path)
+    bank = native.extension("ehpss_hil.control.bank")
+    assert bank is not None
+    left = tree / "ehpss_hil" / "sim" / bank.name.replace("bank", "lockstep", 1)
+    shutil.copy2(tree / "ehpss_hil" / "control" / bank.name, left)
+    out = _run(tree, _PROBE + "import ehpss_hil.sim.lockstep as ls; print(ls.__file__)\n")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.splitlines()[-1].endswith("lockstep.py")
+    lines = out.stderr.splitlines()
+    assert len(lines) == 1 and "ehpss_hil.sim.lockstep" in lines[0]
+
+
 def test_extensions_without_a_manifest_are_not_imported(tmp_path: Path) -> None:
     if not _built():
         pytest.skip(f"no native build in this checkout ({native.status()})")
