@@ -1,20 +1,21 @@
 """The per-sample code compiled to C with mypyc, and the guard that keeps a stale build out.
 
-The controller (:mod:`ehpss_hil.control`, every module) and the nonlinear plant
-(:mod:`ehpss_hil.physics.hydraulics`) run once per sample, thousands of times per simulated
-second. :mod:`.nativebuild` compiles exactly these sources, unchanged, with mypyc (shipped with
-mypy, in the dev lock) into C extensions beside them; ``make`` runs it when it sets up
-``.venv``. Python then imports the extension instead of the source: the same
-arithmetic in the same order (double precision both ways), 3–4× faster (``ehpss-hil bench
+The controller (:mod:`ehpss_hil.control`: every module but :data:`SOURCE_ONLY`) and the
+nonlinear plant (:mod:`ehpss_hil.physics.hydraulics`) run once per sample, thousands of times
+per simulated second. :mod:`.nativebuild` compiles exactly these sources, unchanged, with mypyc
+(shipped with mypy, in the dev lock) into C extensions beside them; ``make`` runs it when it
+sets up ``.venv``. Python then imports the extension instead of the source: the same
+arithmetic in the same order (double precision both ways), 2–5× faster (``ehpss-hil bench
 control`` prints the speed and whether it ran compiled).
 
 The build writes a manifest (:data:`MANIFEST`: each source's size, mtime and SHA-256). A source
 changed since the build (an edit, a checkout) would be shadowed by its old extension, so
 importing :mod:`ehpss_hil` checks the manifest first (:func:`guard`) and, if any compiled
-source changed or an extension is missing, imports every compiled module from its source (the
-whole group: compiled modules call each other's classes natively, so a mix of old and new would
-run two versions of a class), with one line on stderr that says so. Without a build (no mypy,
-no C compiler: the base lock of a bench PC) everything runs from source, as it always can.
+source changed, an extension the build made is missing or one lies about that it did not make,
+imports every compiled module from its source (the whole group: compiled modules call each
+other's classes natively, so a mix of old and new would run two versions of a class), with
+one line on stderr that says so. Without a build (no mypy, no C compiler: the base lock of a
+bench PC) everything runs from source, as it always can.
 
 Only the standard library is imported here: this runs before anything else in the package.
 """
