@@ -36,8 +36,10 @@ from types import ModuleType
 PACKAGE_DIR = Path(__file__).resolve().parent
 #: the manifest of the build, beside the package's sources
 MANIFEST = PACKAGE_DIR / "_native.json"
-#: mypyc's group: its shared library is the module ``ehpss_hil._native__mypyc``
+#: mypyc's group of the compiled modules
 GROUP = "ehpss_hil._native"
+#: the group's shared library, a module beside the package's (mypyc names it after the group)
+SHARED_LIB = GROUP + "__mypyc"
 #: what is compiled: packages (every module below them) and modules, by dotted name
 COMPILED: tuple[str, ...] = ("ehpss_hil.control", "ehpss_hil.physics.hydraulics")
 #: modules below :data:`COMPILED` that stay source, read once per controller, not per sample:
@@ -93,7 +95,6 @@ def on_disk() -> dict[str, Path]:
     """Every extension module under the package by dotted name (the group's shared library
     aside): what a build left, whether or not it is in the build now."""
     out: dict[str, Path] = {}
-    lib = GROUP + "__mypyc"
     for root, dirs, files in os.walk(PACKAGE_DIR):
         dirs[:] = [d for d in dirs if d != "__pycache__"]
         for f in files:
@@ -102,7 +103,7 @@ def on_disk() -> dict[str, Path]:
                 continue
             parts = Path(root, f[: -len(suffix)]).relative_to(PACKAGE_DIR).parts
             name = ".".join(("ehpss_hil", *parts))
-            if name != lib:
+            if name != SHARED_LIB:
                 out[name] = Path(root, f)
     return out
 

@@ -18,7 +18,18 @@ import sysconfig
 from collections.abc import Sequence
 from pathlib import Path
 
-from .native import GROUP, MANIFEST, PACKAGE_DIR, extension, modules, on_disk, record, source, status
+from .native import (
+    GROUP,
+    MANIFEST,
+    PACKAGE_DIR,
+    SHARED_LIB,
+    extension,
+    modules,
+    on_disk,
+    record,
+    source,
+    status,
+)
 
 #: where the build puts mypyc's generated C, the objects and its log (below the repository)
 BUILD_DIR = Path("build") / "native"
@@ -37,7 +48,7 @@ def _remove_products() -> int:
     for ext in on_disk().values():
         ext.unlink()
         n += 1
-    for lib in PACKAGE_DIR.glob("_native__mypyc*"):
+    for lib in PACKAGE_DIR.glob(SHARED_LIB.rsplit(".", 1)[1] + ".*"):
         lib.unlink()
         n += 1
     if MANIFEST.exists():

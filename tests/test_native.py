@@ -57,10 +57,6 @@ def _run(tree: Path, code: str, *args: str) -> subprocess.CompletedProcess[str]:
     )
 
 
-def _built() -> bool:
-    return native.MANIFEST.exists() and not native.stale()
-
-
 def test_every_compiled_module_is_listed_once_with_its_source() -> None:
     mods = native.modules()
     assert len(mods) == len(set(mods))
@@ -69,7 +65,7 @@ def test_every_compiled_module_is_listed_once_with_its_source() -> None:
 
 
 def test_an_edited_source_is_imported_from_source_with_one_line_on_stderr(tmp_path: Path) -> None:
-    if not _built():
+    if not native.compiled():
         pytest.skip(f"no native build in this checkout ({native.status()})")
     tree = _copy(tmp_path)
     fresh = _run(tree, _PROBE)
@@ -93,7 +89,7 @@ def test_an_edited_source_is_imported_from_source_with_one_line_on_stderr(tmp_pa
 def test_an_extension_the_build_did_not_make_is_not_imported(tmp_path: Path) -> None:
     """A module that left the build keeps its old extension on disk (its shim points into a
     shared library that no longer holds it: imported, an AttributeError)."""
-    if not _built():
+    if not native.compiled():
         pytest.skip(f"no native build in this checkout ({native.status()})")
     tree = _copy(tmp_path)
     bank = native.extension("ehpss_hil.control.bank")
@@ -108,7 +104,7 @@ def test_an_extension_the_build_did_not_make_is_not_imported(tmp_path: Path) -> 
 
 
 def test_extensions_without_a_manifest_are_not_imported(tmp_path: Path) -> None:
-    if not _built():
+    if not native.compiled():
         pytest.skip(f"no native build in this checkout ({native.status()})")
     tree = _copy(tmp_path)
     (tree / "ehpss_hil" / "_native.json").unlink()
@@ -119,7 +115,7 @@ def test_extensions_without_a_manifest_are_not_imported(tmp_path: Path) -> None:
 
 
 def test_the_compiled_controller_and_plant_compute_what_their_source_computes(tmp_path: Path) -> None:
-    if not _built():
+    if not native.compiled():
         pytest.skip(f"no native build in this checkout ({native.status()})")
     tree = _copy(tmp_path)
     compiled = _run(tree, _TRACE, str(SCENARIO), str(tmp_path / "compiled.npy"))
