@@ -123,7 +123,9 @@ class LoopBase(Controller):
         self.valve.stop_m = self.stroke_m
         self._stop_level_m = self.tuning.spool_stop_fraction * self.stroke_m
         self._echo_short_a = self.tuning.echo_short_a
-        self.xhat = ModelPosition(params.plant, ts_s, self.tuning.anchor_rate_1_s)
+        self.xhat = ModelPosition(
+            params.plant, ts_s, self.tuning.anchor_rate_1_s, self.tuning.spool_overlap_max_m
+        )
         ref = self.reference
         self.scale_pos_m = ref.amplitude_m if ref.amplitude_m > 0.0 else 1e-3
         self.scale_spool_m = ref.spool_amplitude_m if ref.spool_amplitude_m > 0.0 else 1.52e-3

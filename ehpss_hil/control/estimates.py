@@ -63,6 +63,10 @@ class Estimates:
         """x̂ moves with the creep, in its own units (m/s of x/k̂_Q: the sensor read through θ_prod)."""
         self.xhat.creep_m_s = rate_m_s
 
+    def set_band_gain(self, gain: float) -> None:
+        """x̂ integrates ``gain`` times a spool inside the overlap band (the overlap shown)."""
+        self.xhat.band_gain = gain
+
     def set_channels(self, k_loe: float, k_dft: float, trusted: bool, k_base: float = 1.0) -> None:
         """The banks' estimates in use (spool channel, position channel), k̂_Q back to 1 (to the
         flow gain kept by :meth:`place_dead` while the sensor is dead), and x̂ re-based on the

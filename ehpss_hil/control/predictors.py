@@ -72,45 +72,55 @@ class ModelPosition:
     It carries the loop through a position-sensor failure; K_c = flow_gain/hydraulic_stiffness.
     """
 
-    __slots__ = ("_anchor", "_h", "_mark", "_rate", "_ts", "creep_m_s", "x")
+    __slots__ = ("_anchor", "_band", "_h", "_mark", "_rate", "_raw", "_ts", "band_gain", "creep_m_s", "x")
 
-    def __init__(self, plant: PlantParams, ts_s: float, anchor_rate_1_s: float) -> None:
+    def __init__(self, plant: PlantParams, ts_s: float, anchor_rate_1_s: float, band_m: float = 0.0) -> None:
+        """``band_m``: the spool band (m each side of null) :attr:`band_gain` applies in."""
         self._h = 0.5 * ts_s * plant.velocity_gain_1_s
         self._ts = ts_s
         self._anchor = ts_s * anchor_rate_1_s
+        self._band = band_m
+        #: the share of a spool inside ±band that moves the piston (1: critically lapped; below
+        #: 1 once the plant has shown an overlap, :mod:`.evidence.overlap`)
+        self.band_gain = 1.0
         #: the piston's velocity with the spool at null (m/s in x̂'s units), integrated beside
         #: the spool
         self.creep_m_s = 0.0
         self.x = 0.0
-        self._rate = 0.0
-        self._mark = (0.0, 0.0)
+        self._rate = self._raw = 0.0
+        self._mark = (0.0, 0.0, 0.0)
 
     def reset(self) -> None:
-        """At rest at the origin, no creep."""
+        """At rest at the origin, no creep, no overlap."""
         self.x = 0.0
         self.creep_m_s = 0.0
-        self._rate = 0.0
-        self._mark = (0.0, 0.0)
+        self.band_gain = 1.0
+        self._rate = self._raw = 0.0
+        self._mark = (0.0, 0.0, 0.0)
 
     def mark(self) -> None:
         """Remember x̂ and the last spool (to :meth:`rewind` to them)."""
-        self._mark = (self.x, self._rate)
+        self._mark = (self.x, self._rate, self._raw)
 
     def rewind(self) -> None:
         """Back to x̂ and the spool at the last :meth:`mark`."""
-        self.x, self._rate = self._mark
+        self.x, self._rate, self._raw = self._mark
 
     def integrate(self, spool_m: float) -> float:
-        """Trapezoid step with the actual spool at this sample (m), plus the creep; returns
-        x̂ (m)."""
-        self.x += self._h * (spool_m + self._rate) + self._ts * self.creep_m_s
-        self._rate = spool_m
+        """Trapezoid step with the actual spool at this sample (m) — times :attr:`band_gain`
+        inside the band — plus the creep; returns x̂ (m)."""
+        self._raw = s = spool_m
+        g = self.band_gain
+        if g != 1.0 and -self._band < s < self._band:
+            s = g * s
+        self.x += self._h * (s + self._rate) + self._ts * self.creep_m_s
+        self._rate = s
         return self.x
 
     @property
     def last_spool(self) -> float:
-        """The spool (m) of the last :meth:`integrate` (the sample x̂ stands at)."""
-        return self._rate
+        """The spool (m) of the last :meth:`integrate` (the sample x̂ stands at), as read."""
+        return self._raw
 
     def spool_to_x_m(self, spool_m: float, samples: int) -> float:
         """x̂'s change (m) from a spool of ``spool_m`` (m) held over ``samples`` periods."""

@@ -362,6 +362,32 @@ class ControlTuning:
             origin="docs/control.md §7: the spool held at its stop",
         ),
     )
+    # ---- the spool overlap (evidence/overlap.py) -----------------------------------------
+    #: the uncertainty set's widest spool overlap, each side of null (m of spool): inside it a
+    #: critically lapped valve passes flow and an overlapped one none
+    spool_overlap_max_m: float = field(
+        default=2e-4,
+        metadata=rng(0.0, 0.01, unit="m", origin="the uncertainty set: overlap ≤ 2 % of the stroke"),
+    )
+    #: an in-band stretch is evidence once x̂ travelled this many times the reading's noise in it
+    overlap_evidence_snr: float = field(
+        default=5.0,
+        metadata=rng(0.0, 1e3, lo_open=True, unit="1 (·σ̂)", origin="docs/control.md §9.1 overlap"),
+    )
+    #: … and the overlap is shown once the share, this many standard errors either side of
+    #: it, lies within ±``overlap_shown_below`` of 0 …
+    overlap_confidence: float = field(
+        default=3.0, metadata=rng(0.0, 100.0, unit="1 (standard errors)", origin="one-sided 0.1 %")
+    )
+    #: … after at least this many stretches …
+    overlap_min_stretches: int = field(
+        default=3, metadata=rng(1, 10**6, unit="stretches", origin="docs/control.md §9.1 overlap")
+    )
+    #: … the share of x̂'s in-band travel the piston made: an overlapped valve's is 0, a
+    #: critically lapped one's 1
+    overlap_shown_below: float = field(
+        default=0.5, metadata=rng(0.0, 1.0, unit="1", origin="halfway between overlapped (0) and lapped (1)")
+    )
     #: the actuator is current-saturated when the echo falls short of the command by more than this
     echo_short_a: float = field(
         default=3e-5, metadata=rng(0.0, 1.0, unit="A", origin="DBC: 0.2 µA echo and 10 µA setpoint steps")

@@ -10,12 +10,15 @@ the ones before it concluded on the same sample:
    freshness, settling and the still-sample count; the **creep** learns from its near-null
    increments (a change of the creep in use restarts the position channel: what it concluded
    was reached on increments the creep was read into);
-2. **pressure test** (:class:`.PressureTest`): the healthy baseline, the likelihood ratio and the
+2. **overlap** (:class:`.SpoolOverlap`): whether the plant has shown a spool overlap; once it
+   has, x̂ integrates the in-band spool at the share the piston made of it and the position
+   channel restarts (what it concluded was reached on a model without the overlap);
+3. **pressure test** (:class:`.PressureTest`): the healthy baseline, the likelihood ratio and the
    H_D / H_Q decision; entering or leaving H_Q is applied to the estimates at once
    (:meth:`.Estimates.enter_flow` / :meth:`~.Estimates.leave_flow`);
-3. **do-no-harm monitor** (:class:`.HarmMonitor`): the estimates in use against θ_prod and
+4. **do-no-harm monitor** (:class:`.HarmMonitor`): the estimates in use against θ_prod and
    their clips → the nominal fallback;
-4. **jump attribution** (:class:`.SensorAttribution` with :class:`.LevelJump`): whether the
+5. **jump attribution** (:class:`.SensorAttribution` with :class:`.LevelJump`): whether the
    position model in use may be compensated as the sensor's.
 
 The **still sensor** (:class:`.StillSensor`) is the one piece that runs before the position
@@ -47,8 +50,16 @@ from ..tuning import ControlTuning
 from .attribution import SensorAttribution
 from .increments import Increments
 from .monitor import FallbackReason, HarmMonitor
+from .overlap import SpoolOverlap
 from .pressure import PressureTest
-from .protocols import HarmEvidence, IncrementEvidence, JumpEvidence, PressureEvidence, StillEvidence
+from .protocols import (
+    HarmEvidence,
+    IncrementEvidence,
+    JumpEvidence,
+    OverlapEvidence,
+    PressureEvidence,
+    StillEvidence,
+)
 from .still import StillSensor
 
 
@@ -113,6 +124,7 @@ class EvidenceLayer:
         "est",
         "inc",
         "monitor",
+        "overlap",
         "pos_bank",
         "pos_sup",
         "pressure",
@@ -146,6 +158,7 @@ class EvidenceLayer:
         self.inc: IncrementEvidence = Increments(plant, ts_s, scale_spool_m, t)
         self.pressure: PressureEvidence = PressureTest(plant, ts_s, t)
         self.still: StillEvidence = StillSensor(plant.velocity_gain_1_s, ts_s, t)
+        self.overlap: OverlapEvidence = SpoolOverlap(plant.velocity_gain_1_s, ts_s, t)
         self.attribution: JumpEvidence = SensorAttribution(
             self.inc, self.pressure, ts_s, t.sensor_failed_below, t
         )
@@ -177,6 +190,7 @@ class EvidenceLayer:
         self.pressure.reset()
         self.monitor.reset()
         self.still.reset()
+        self.overlap.reset()
         self.attribution.reset()
         self.record.clear()
         self.dead = False  # the sensor stood still through a stop phase (still.py)
@@ -250,9 +264,22 @@ class EvidenceLayer:
         if (rate != 0.0) != self._creep_on:
             self._creep_on = not self._creep_on
             self._restart_position(position_m)
+        # 2. the overlap: once the plant has shown one, x̂ integrates the band at its gain and
+        # the position channel starts over (what it concluded was reached without it)
+        shows = (
+            trusted
+            and not ps.guarded
+            and ps.active == ps.initial
+            and not pt.flow_fault
+            and not self.dead
+            and self.clock.span == 1
+        )
+        if self.overlap.update(meas.spool_m, position_m, shows, est.theta_d, inc.reading_noise_m):
+            est.set_band_gain(self.overlap.gain)
+            self._restart_position(position_m)
         age = self._spool_age = self._spool_age + 1 if spool_model == self._spool_age_model else 0
         self._spool_age_model = spool_model
-        # 2. the pressure test, and H_Q entered or left in the estimates
+        # 3. the pressure test, and H_Q entered or left in the estimates
         fresh = inc.product_fresh
         healthy = not warm and not ss.guarded and not ps.guarded and age >= self._baseline_settle
         theta_l = self._pressure_theta_l(k_loe, warm) if warm or ss.guarded else k_loe
@@ -277,7 +304,7 @@ class EvidenceLayer:
             self.pos_bank.seed_ria(prod)
             ps.force(self.pos_bank.ria)
             est.set_sensor_gain(self.pos_bank.theta[self.pos_bank.ria], pt.k_base)
-        # 3. the do-no-harm monitor: the position check only where the sensor is read through
+        # 4. the do-no-harm monitor: the position check only where the sensor is read through
         # θ̂_D; under the guard (position_guarded()) the loop runs on x̂ (no model explains the
         # sensor; θ_prod, fitted on the same sensor, neither)
         guarded = ps.guarded and not pt.flow_fault
@@ -287,7 +314,7 @@ class EvidenceLayer:
         mon = self.monitor
         rec.fallback = mon.update(est.k_dft * est.k_q, inc.theta_prod, fresh and not guarded, at_limit)
         rec.reason = mon.reason
-        # 4. the jump attribution
+        # 5. the jump attribution
         att = self.attribution
         sensor = att.update(position_m, est.theta_d, ps.active, ps.guarded, broken, trusted)
         flow = pt.flow_fault

@@ -140,6 +140,18 @@ class StillEvidence(Protocol):
     def update(self, at_stop: bool, spool_m: float, position_m: float, x_hat_m: float) -> float | None: ...
 
 
+class OverlapEvidence(Protocol):
+    """A spool overlap the plant has shown: the share of x̂'s in-band travel the piston makes."""
+
+    gain: float
+
+    def reset(self) -> None: ...
+
+    def update(
+        self, spool_m: float, position_m: float, healthy: bool, theta: float, noise_m: float
+    ) -> bool: ...
+
+
 class HarmEvidence(Protocol):
     """The do-no-harm monitor: the estimates in use against θ_prod and their clips."""
 
