@@ -22,7 +22,7 @@ from ehpss_hil.control.registry import make_controller
 from ehpss_hil.control.tuning import ControlTuning
 from ehpss_hil.physics.load import load_params
 from ehpss_hil.report.metrics import compute_metrics, does_harm, harm_limits
-from ehpss_hil.scenario import load_scenario
+from ehpss_hil.scenario import Scenario, load_scenario
 from ehpss_hil.sim import lockstep, run_scenario
 
 PARAMS = load_params()
@@ -143,20 +143,24 @@ def test_x_hat_integrates_the_band_at_its_gain_and_the_spool_outside_it_in_full(
     assert xh.x == pytest.approx(KC * TS * 2.0 * band * 9.5, rel=1e-12)
 
 
-def _scenario(name: str):
+def _scenario(name: str) -> Scenario:
     return load_scenario(PROJECT_ROOT / "scenarios" / name)
 
 
-def test_a_hold_on_an_overlapped_valve_does_no_harm_and_the_overlap_is_learned(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    made: list[LoopBase] = []
+@pytest.fixture
+def made(monkeypatch: pytest.MonkeyPatch) -> list[LoopBase]:
+    """The controllers the lockstep simulator makes in the test, in order."""
+    out: list[LoopBase] = []
 
     def keep(*args: Any) -> LoopBase:
-        made.append(make_controller(*args))
-        return made[-1]
+        out.append(make_controller(*args))
+        return out[-1]
 
     monkeypatch.setattr(lockstep, "make_controller", keep)
+    return out
+
+
+def test_a_hold_on_an_overlapped_valve_does_no_harm_and_the_overlap_is_learned(made: list[LoopBase]) -> None:
     sc = _scenario("mismatch/nl-overlap-hold.yaml")
     mm = compute_metrics(run_scenario(sc, "mmac", PARAMS))
     nrc = compute_metrics(run_scenario(sc, "nrc", PARAMS))
@@ -174,16 +178,7 @@ def test_a_hold_on_an_overlapped_valve_does_no_harm_and_the_overlap_is_learned(
         "case1-loe.yaml",
     ],
 )
-def test_no_overlap_is_learned_on_a_critically_lapped_plant(
-    name: str, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_no_overlap_is_learned_on_a_critically_lapped_plant(name: str, made: list[LoopBase]) -> None:
     """The linear plant passes flow at any spool: a stuck sensor held still, a drift, an LOE."""
-    made: list[LoopBase] = []
-
-    def keep(*args: Any) -> LoopBase:
-        made.append(make_controller(*args))
-        return made[-1]
-
-    monkeypatch.setattr(lockstep, "make_controller", keep)
     run_scenario(_scenario(name), "mmac", PARAMS)
     assert isinstance(made[0], MmacController) and made[0].xhat.band_gain == 1.0

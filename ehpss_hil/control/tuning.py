@@ -377,7 +377,8 @@ class ControlTuning:
     #: … and the overlap is shown once the share, this many standard errors either side of
     #: it, lies within ±``overlap_shown_below`` of 0 …
     overlap_confidence: float = field(
-        default=3.0, metadata=rng(0.0, 100.0, unit="1 (standard errors)", origin="one-sided 0.1 %")
+        default=3.0,
+        metadata=rng(0.0, 100.0, unit="1 (standard errors)", origin="3 standard errors: 0.27 % two-sided"),
     )
     #: … after at least this many stretches …
     overlap_min_stretches: int = field(
