@@ -168,6 +168,19 @@ def test_a_hold_on_an_overlapped_valve_does_no_harm_and_the_overlap_is_learned(m
     assert isinstance(made[0], MmacController) and made[0].xhat.band_gain < T.overlap_shown_below
 
 
+def test_an_overlap_shown_is_kept_across_a_fail_safe_reset(made: list[LoopBase]) -> None:
+    """Leaving the fail-safe does not change the valve: x̂ goes on integrating the band at the
+    share learned (as the plant's flow gain and pressure baseline are kept)."""
+    run_scenario(_scenario("mismatch/nl-overlap-hold.yaml"), "mmac", PARAMS)
+    c = made[0]
+    assert isinstance(c, MmacController)
+    g = c.xhat.band_gain
+    assert g < T.overlap_shown_below
+    c.reset()
+    assert c.xhat.band_gain == g and c.evidence.overlap.gain == g
+    assert make_controller("mmac", PARAMS, TS).xhat.band_gain == 1.0  # a new controller: none
+
+
 @pytest.mark.parametrize(
     "name",
     [

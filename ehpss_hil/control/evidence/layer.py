@@ -190,7 +190,8 @@ class EvidenceLayer:
         self.pressure.reset()
         self.monitor.reset()
         self.still.reset()
-        self.overlap.reset()
+        self.overlap.reset()  # an overlap shown is the plant's: x̂ (reset by the loop) keeps it
+        self.est.set_band_gain(self.overlap.gain)
         self.attribution.reset()
         self.record.clear()
         self.dead = False  # the sensor stood still through a stop phase (still.py)

@@ -73,14 +73,19 @@ class SpoolOverlap:
         self._min_n = t.overlap_min_stretches
         self._shown_below = t.overlap_shown_below
         self._m = t.increment_window
-        self.reset()
+        self.forget()
 
-    def reset(self) -> None:
-        """No overlap shown (g = 1), no stretch open, nothing learned."""
+    def forget(self) -> None:
+        """Nothing known of the plant (power-on): no overlap shown (g = 1), nothing learned."""
         #: the band gain x̂ integrates the in-band spool with (1: critically lapped, the model)
         self.gain = 1.0
         self._sxx = self._sxr = self._syy = 0.0
         self._n = 0
+        self._close()
+
+    def reset(self) -> None:
+        """No stretch open; what was learned of the plant is kept (a fail-safe recovery does not
+        change the valve; :meth:`forget` forgets it)."""
         self._close()
 
     def _close(self) -> None:

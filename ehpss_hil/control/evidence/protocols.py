@@ -145,6 +145,8 @@ class OverlapEvidence(Protocol):
 
     gain: float
 
+    def forget(self) -> None: ...
+
     def reset(self) -> None: ...
 
     def update(
