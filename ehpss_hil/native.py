@@ -140,10 +140,11 @@ def stale() -> list[str]:
         if rec is None or name not in found:
             out.append(name)
             continue
-        st = source(name).stat()
+        src = source(name)
+        st = src.stat()
         if st.st_size == rec.get("size") and st.st_mtime_ns == rec.get("mtime_ns"):
             continue
-        if _digest(source(name)) != rec.get("sha256"):
+        if _digest(src) != rec.get("sha256"):
             out.append(name)
     return out
 
